@@ -1,0 +1,19 @@
+"""Material Point Method solvers on NVIDIA Warp (no Hydra, no Rerun here).
+
+Build a :class:`Scene`, turn it into a :class:`Model` and initial
+:class:`State` with :func:`build`, and advance it with :class:`Solver`.
+"""
+
+from .kernels import KERNELS, Kernel
+from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
+from .model import Model, SceneError, State, build
+from .scene import WALL_TYPES, Body, Box, Cylinder, Scene, Sphere
+from .schemes import EMPM, SCHEMES
+from .solver import Monitor, Solver, SolverOptions
+from .timestep import cfl_dt
+
+__all__ = [
+    "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
+    "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Cylinder",
+    "Scene", "Sphere", "EMPM", "SCHEMES", "Monitor", "Solver", "SolverOptions", "cfl_dt",
+]

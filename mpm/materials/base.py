@@ -1,0 +1,74 @@
+"""What every material provides to the solver.
+
+A material is a plain dataclass of physical parameters (checked ranges, SI
+units) plus factories of Warp functions specialised for a :class:`Types`:
+
+* ``stress(F, L, params) -> P``: first Piola-Kirchhoff stress [Pa] of the
+  deformation gradient ``F`` (w.r.t. the rest state), given the velocity
+  gradient ``L`` in current coordinates [1/s] (used by viscous models only);
+* ``energy(F, params) -> psi``: stored energy per unit rest volume [J/m^3];
+* ``project(F, params) -> F`` (optional): applied when the reference
+  configuration is updated (every step for the Eulerian scheme), e.g. a fluid
+  keeps only the volume change of ``F``.
+
+``params`` is the per-body vector returned by :meth:`Material.packed`, so
+bodies of one model share compiled code and a parameter sweep never
+recompiles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, ClassVar
+
+from ..params import param
+from ..types import N_MATERIAL_PARAMS, Types
+
+
+def lame(E: float, nu: float) -> tuple[float, float]:
+    """Lamé parameters (mu, lambda) [Pa] from Young's modulus and Poisson's ratio
+    (3D / plane strain)."""
+    mu = E / (2.0 * (1.0 + nu))
+    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    return mu, lam
+
+
+@dataclass
+class Material:
+    """Base class; ``model`` names the constitutive model (the registry key)."""
+
+    model: str = ""
+    rho: float = param(1000.0, "rest density [kg/m^3]", gt=0.0)
+
+    name: ClassVar[str] = ""
+    stress: ClassVar[Callable[[Types], Callable]]
+    energy: ClassVar[Callable[[Types], Callable]]
+    project: ClassVar[Callable[[Types], Callable] | None] = None
+
+    def __post_init__(self):
+        if not self.model:
+            self.model = self.name
+
+    def packed(self) -> tuple[float, ...]:
+        """Per-body parameter vector read by the Warp functions."""
+        raise NotImplementedError
+
+    def packed_padded(self) -> tuple[float, ...]:
+        p = tuple(float(v) for v in self.packed())
+        assert len(p) <= N_MATERIAL_PARAMS
+        return p + (0.0,) * (N_MATERIAL_PARAMS - len(p))
+
+    def wave_speed(self) -> float:
+        """Speed of the fastest small-amplitude wave at rest [m/s] (for the CFL limit)."""
+        raise NotImplementedError
+
+    def kinematic_viscosity(self) -> float:
+        """Kinematic viscosity [m^2/s] (for the diffusive time-step limit)."""
+        return 0.0
+
+
+def elastic_wave_speed(E: float, nu: float, rho: float) -> float:
+    """P-wave speed sqrt((lambda + 2 mu) / rho) [m/s]."""
+    mu, lam = lame(E, nu)
+    return math.sqrt((lam + 2.0 * mu) / rho)

@@ -1,0 +1,65 @@
+"""Fixed corotated elasticity (Stomakhin et al. 2012).
+
+P = 2 mu (F - R) + lambda (J - 1) J F^-T,
+psi = mu |F - R|^2 + lambda/2 (J - 1)^2, with R the rotation of F = R S.
+"""
+
+import functools
+from dataclasses import dataclass
+
+import warp as wp
+
+from ..params import param
+from ..types import Types
+from .base import Material, elastic_wave_speed, lame
+from .polar import make_rotation
+
+
+@functools.cache
+def _stress(t: Types):
+    rotation = make_rotation(t)
+    S = t.scalar
+
+    @wp.func
+    def stress(F: t.mat, L: t.mat, params: t.params):
+        mu = params[0]
+        lam = params[1]
+        R = rotation(F)
+        J = wp.determinant(F)
+        return S(2.0) * mu * (F - R) + lam * (J - S(1.0)) * J * wp.transpose(wp.inverse(F))
+
+    return stress
+
+
+@functools.cache
+def _energy(t: Types):
+    rotation = make_rotation(t)
+    S = t.scalar
+
+    @wp.func
+    def energy(F: t.mat, params: t.params):
+        mu = params[0]
+        lam = params[1]
+        D = F - rotation(F)
+        J = wp.determinant(F)
+        return mu * wp.ddot(D, D) + S(0.5) * lam * (J - S(1.0)) * (J - S(1.0))
+
+    return energy
+
+
+@dataclass
+class FixedCorotated(Material):
+    """Fixed corotated hyperelastic solid."""
+
+    name = "fixed_corotated"
+    stress = staticmethod(_stress)
+    energy = staticmethod(_energy)
+
+    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
+    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
+
+    def packed(self):
+        return lame(self.E, self.nu)
+
+    def wave_speed(self):
+        return elastic_wave_speed(self.E, self.nu, self.rho)

@@ -1,0 +1,87 @@
+"""Weakly compressible fluid with a J-based Tait pressure and optional
+Newtonian viscosity.
+
+p = K (J^-gamma - 1),  sigma = -p I + mu_v (L + L^T),  P = J sigma F^-T,
+psi(J) = K (J^(1-gamma) / (gamma - 1) + J - gamma / (gamma - 1))
+(so that p = -dpsi/dJ and psi(1) = 0; viscosity stores no energy).
+
+The deformation gradient keeps only its volume change: on every update of the
+reference configuration F <- J^(1/d) I, so shear never accumulates.
+"""
+
+import functools
+import math
+from dataclasses import dataclass
+
+import warp as wp
+
+from ..params import param
+from ..types import Types
+from .base import Material
+
+
+@functools.cache
+def _stress(t: Types):
+    S = t.scalar
+
+    @wp.func
+    def stress(F: t.mat, L: t.mat, params: t.params):
+        K = params[0]
+        gamma = params[1]
+        viscosity = params[2]
+        J = wp.determinant(F)
+        p = K * (wp.pow(J, -gamma) - S(1.0))
+        sigma = -p * wp.identity(t.dim, S) + viscosity * (L + wp.transpose(L))
+        return J * sigma * wp.transpose(wp.inverse(F))
+
+    return stress
+
+
+@functools.cache
+def _energy(t: Types):
+    S = t.scalar
+
+    @wp.func
+    def energy(F: t.mat, params: t.params):
+        K = params[0]
+        gamma = params[1]
+        J = wp.determinant(F)
+        return K * (wp.pow(J, S(1.0) - gamma) / (gamma - S(1.0)) + J - gamma / (gamma - S(1.0)))
+
+    return energy
+
+
+@functools.cache
+def _project(t: Types):
+    S = t.scalar
+
+    @wp.func
+    def project(F: t.mat, params: t.params):
+        J = wp.determinant(F)
+        return wp.pow(J, S(1.0 / t.dim)) * wp.identity(t.dim, S)
+
+    return project
+
+
+@dataclass
+class Fluid(Material):
+    """Weakly compressible (Tait-like) fluid."""
+
+    name = "fluid"
+    stress = staticmethod(_stress)
+    energy = staticmethod(_energy)
+    project = staticmethod(_project)
+
+    K: float = param(2.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]", gt=0.0)
+    gamma: float = param(7.0, "Tait exponent gamma [-]", gt=1.0)
+    viscosity: float = param(0.0, "dynamic viscosity mu_v [Pa s]", ge=0.0)
+
+    def packed(self):
+        return (self.K, self.gamma, self.viscosity)
+
+    def wave_speed(self):
+        # bulk modulus at rest: -J dp/dJ = K gamma
+        return math.sqrt(self.K * self.gamma / self.rho)
+
+    def kinematic_viscosity(self):
+        return self.viscosity / self.rho

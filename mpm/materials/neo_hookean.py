@@ -1,0 +1,59 @@
+"""Compressible neo-Hookean elasticity.
+
+P = mu (F - F^-T) + lambda ln(J) F^-T,
+psi = mu/2 (tr(F^T F) - d) - mu ln J + lambda/2 (ln J)^2.
+"""
+
+import functools
+from dataclasses import dataclass
+
+import warp as wp
+
+from ..params import param
+from ..types import Types
+from .base import Material, elastic_wave_speed, lame
+
+
+@functools.cache
+def _stress(t: Types):
+    @wp.func
+    def stress(F: t.mat, L: t.mat, params: t.params):
+        mu = params[0]
+        lam = params[1]
+        FinvT = wp.transpose(wp.inverse(F))
+        return mu * (F - FinvT) + lam * wp.log(wp.determinant(F)) * FinvT
+
+    return stress
+
+
+@functools.cache
+def _energy(t: Types):
+    S = t.scalar
+    d = S(t.dim)
+
+    @wp.func
+    def energy(F: t.mat, params: t.params):
+        mu = params[0]
+        lam = params[1]
+        lnJ = wp.log(wp.determinant(F))
+        return S(0.5) * mu * (wp.ddot(F, F) - d) - mu * lnJ + S(0.5) * lam * lnJ * lnJ
+
+    return energy
+
+
+@dataclass
+class NeoHookean(Material):
+    """Compressible neo-Hookean hyperelastic solid."""
+
+    name = "neo_hookean"
+    stress = staticmethod(_stress)
+    energy = staticmethod(_energy)
+
+    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
+    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
+
+    def packed(self):
+        return lame(self.E, self.nu)
+
+    def wave_speed(self):
+        return elastic_wave_speed(self.E, self.nu, self.rho)

@@ -1,0 +1,238 @@
+"""Model (what does not change during a run) and State (what does).
+
+Particles are stored grouped by material model, then by body, so every
+material's kernels run over one contiguous range and every body is a
+contiguous range too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .kernels import Kernel
+from .materials import Material
+from .params import violations
+from .sampling import sample_shape
+from .scene import WALL_TYPES, Scene
+from .types import Types, make_types
+
+
+class SceneError(ValueError):
+    """A scene that cannot be built; ``key`` names the offending field."""
+
+    def __init__(self, key: str, message: str):
+        super().__init__(f"{key}: {message}")
+        self.key = key
+        self.message = message
+
+
+@dataclass
+class MaterialGroup:
+    """Particles ``[start, start + count)`` share the material model ``cls``."""
+
+    cls: type[Material]
+    start: int
+    count: int
+
+
+@dataclass
+class Model:
+    """Static data: grid geometry, walls, gravity, particle mass and volume,
+    per-body material parameters."""
+
+    scene: Scene
+    types: Types
+    kernel: Kernel
+    device: str
+    dx: float
+    cells: tuple[int, ...]  # cells per axis; nodes = cells + 1
+    n_particles: int
+    mass: wp.array  # m_p [kg]
+    volume: wp.array  # V_p^0 [m^3]
+    body: wp.array  # body index per particle (int32)
+    body_params: wp.array  # packed material parameters per body
+    groups: list[MaterialGroup]
+    body_ranges: list[tuple[int, int]]  # (start, count) per body
+    wall_codes: tuple[tuple[int, ...], tuple[int, ...]]  # (lo, hi) per axis
+
+    @property
+    def dim(self) -> int:
+        return self.types.dim
+
+    @property
+    def nodes(self) -> tuple[int, ...]:
+        return tuple(c + 1 for c in self.cells)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(np.prod(self.nodes))
+
+    @property
+    def strides(self) -> tuple[int, ...]:
+        n = self.nodes
+        return (n[1], 1) if self.dim == 2 else (n[1] * n[2], n[2], 1)
+
+    @property
+    def gravity(self) -> tuple[float, ...]:
+        return tuple(self.scene.gravity)
+
+    @property
+    def domain(self) -> tuple[float, ...]:
+        return tuple(c * self.dx for c in self.cells)
+
+    def wave_speed(self) -> float:
+        """Fastest elastic/acoustic wave speed of all bodies [m/s]."""
+        return max(b.material.wave_speed() for b in self.scene.bodies)
+
+    def kinematic_viscosity(self) -> float:
+        return max(b.material.kinematic_viscosity() for b in self.scene.bodies)
+
+
+@dataclass
+class State:
+    """Time-varying particle data.
+
+    ``X`` are the reference positions (at the last configuration update) and
+    ``F0s`` the deformation gradient at that update; for the Eulerian scheme
+    the reference is updated every step, so ``X`` is the same array as ``x``
+    and ``F0s`` is the full deformation gradient ``F``.
+    """
+
+    x: wp.array  # current positions [m]
+    v: wp.array  # velocities [m/s]
+    C: wp.array  # affine velocity matrices [1/s]
+    F0s: wp.array  # deformation gradient at the last configuration update
+    X: wp.array  # reference positions [m]
+    dJ: wp.array | None = None  # |det F^sn - 1| of the last step, when recorded
+
+    def numpy(self) -> dict[str, np.ndarray]:
+        out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s")}
+        if self.dJ is not None:
+            out["dJ"] = self.dJ.numpy().copy()
+        return out
+
+
+def check_scene(scene: Scene, kernel: Kernel) -> None:
+    """Raise :class:`SceneError` for anything that would make the scene unbuildable."""
+    d = scene.dim
+    if d not in (2, 3):
+        raise SceneError("dim", f"{d} not supported; accepted: 2, 3")
+    if len(scene.domain) != d or any(L <= 0 for L in scene.domain):
+        raise SceneError("domain", f"{list(scene.domain)}; accepted: {d} positive lengths")
+    if scene.resolution < 4:
+        raise SceneError("resolution", f"{scene.resolution}; accepted: an integer >= 4")
+    dx = scene.dx
+    for a, L in enumerate(scene.domain):
+        if abs(L / dx - round(L / dx)) > 1e-9 * L / dx:
+            raise SceneError("domain", f"{L} along axis {a} is not a multiple of dx = {dx:g}")
+    if len(scene.gravity) != d:
+        raise SceneError("gravity", f"{list(scene.gravity)}; accepted: {d} components")
+    if len(scene.walls) != 2 * d or any(w not in WALL_TYPES for w in scene.walls):
+        raise SceneError("walls", f"{list(scene.walls)}; accepted: {2 * d} of {', '.join(WALL_TYPES)}")
+    if scene.ppc < 1:
+        raise SceneError("ppc", f"{scene.ppc}; accepted: an integer >= 1")
+    if not 0.0 <= scene.jitter <= 1.0:
+        raise SceneError("jitter", f"{scene.jitter}; accepted: 0 <= jitter <= 1")
+    if not scene.bodies:
+        raise SceneError("bodies", "empty; accepted: at least one body")
+    lo = scene.wall_cells * dx
+    for i, b in enumerate(scene.bodies):
+        key = f"bodies[{i}]"
+        for name, value, accepted in violations(b.material):
+            raise SceneError(f"{key}.material.{name}", f"{value} out of range; accepted: {accepted}")
+        blo, bhi = (np.asarray(v, float) for v in b.shape.bounds())
+        if len(blo) != d:
+            raise SceneError(f"{key}.shape", f"has {len(blo)} coordinates; accepted: {d}")
+        hi = np.asarray(scene.domain) - lo
+        if np.any(blo < lo - 1e-12) or np.any(bhi > hi + 1e-12):
+            raise SceneError(
+                key, f"particles outside the domain: shape spans {np.round(blo, 4).tolist()}"
+                f" to {np.round(bhi, 4).tolist()}; accepted: within [{lo:g}, "
+                f"{np.round(hi, 4).tolist()}] (domain minus {scene.wall_cells} wall cells)")
+
+
+def _rigid_velocity(body, x, dim):
+    v = np.zeros_like(x)
+    C = np.zeros((len(x), dim, dim))
+    if body.velocity is not None:
+        v += np.asarray(body.velocity, float)
+    w = body.angular_velocity
+    if w is not None:
+        r = x - np.asarray(body.shape.center, float)
+        if dim == 2:
+            W = np.array([[0.0, -float(w)], [float(w), 0.0]])
+        else:
+            wx, wy, wz = (float(c) for c in w)
+            W = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+        v += r @ W.T
+        C[:] = W  # exact velocity gradient of the rigid rotation
+    return v, C
+
+
+def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str = "cpu",
+          seed: int = 0) -> tuple[Model, State]:
+    """Sample the bodies and allocate the model and initial state on ``device``."""
+    check_scene(scene, kernel)
+    t = make_types(scene.dim, precision)
+    d, dx = scene.dim, scene.dx
+    rng = np.random.default_rng(seed)
+
+    # material models in order of first appearance; bodies grouped by model
+    models = list(dict.fromkeys(type(b.material) for b in scene.bodies))
+    order = sorted(range(len(scene.bodies)), key=lambda i: models.index(type(scene.bodies[i].material)))
+    samples = []
+    for i, b in enumerate(scene.bodies):
+        ppc = b.ppc or scene.ppc
+        x = sample_shape(b.shape, d, dx, ppc, scene.jitter, rng)
+        if len(x) == 0:
+            raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
+        samples.append((x, ppc))
+
+    xs, vs, Cs, ms, Vs, ids = [], [], [], [], [], []
+    body_ranges = [None] * len(scene.bodies)
+    groups: list[MaterialGroup] = []
+    start = 0
+    for i in order:
+        b, (x, ppc) = scene.bodies[i], samples[i]
+        n = len(x)
+        vol = dx**d / ppc
+        v, C = _rigid_velocity(b, x, d)
+        xs.append(x), vs.append(v), Cs.append(C)
+        Vs.append(np.full(n, vol)), ms.append(np.full(n, vol * b.material.rho))
+        ids.append(np.full(n, i, np.int32))
+        body_ranges[i] = (start, n)
+        cls = type(b.material)
+        if groups and groups[-1].cls is cls:
+            groups[-1].count += n
+        else:
+            groups.append(MaterialGroup(cls, start, n))
+        start += n
+
+    x = np.concatenate(xs)
+    n = len(x)
+    S = np.float32 if precision == "float32" else np.float64
+    codes = {w: WALL_TYPES.index(w) for w in WALL_TYPES}
+    wall_codes = (tuple(codes[w] for w in scene.walls[0::2]), tuple(codes[w] for w in scene.walls[1::2]))
+    with wp.ScopedDevice(device):
+        model = Model(
+            scene=scene, types=t, kernel=kernel, device=device, dx=dx, cells=scene.cells,
+            n_particles=n,
+            mass=wp.array(np.concatenate(ms).astype(S), dtype=t.scalar),
+            volume=wp.array(np.concatenate(Vs).astype(S), dtype=t.scalar),
+            body=wp.array(np.concatenate(ids), dtype=wp.int32),
+            body_params=wp.array(np.array([b.material.packed_padded() for b in scene.bodies], S),
+                                 dtype=t.params),
+            groups=groups, body_ranges=body_ranges, wall_codes=wall_codes,
+        )
+        xw = wp.array(x.astype(S), dtype=t.vec)
+        state = State(
+            x=xw,
+            v=wp.array(np.concatenate(vs).astype(S), dtype=t.vec),
+            C=wp.array(np.concatenate(Cs).astype(S), dtype=t.mat),
+            F0s=wp.array(np.tile(np.eye(d, dtype=S), (n, 1, 1)), dtype=t.mat),
+            X=xw,
+        )
+    return model, state

@@ -1,0 +1,60 @@
+"""Declared parameter ranges for plain dataclasses.
+
+A field made with :func:`param` carries its unit, its doc and its accepted
+range; :func:`violations` lists the fields whose values fall outside. The
+solver calls it before allocating anything, the pipeline turns each violation
+into a one-line message naming the configuration key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Iterator
+
+
+def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None):
+    """A dataclass field with a documented, checked range (bounds may be None)."""
+    return dataclasses.field(
+        default=default, metadata={"doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le}
+    )
+
+
+def accepted_range(name: str, meta: dict) -> str:
+    """Human-readable range, e.g. ``-1 < nu < 0.5``."""
+    lo = f"{meta['gt']} < " if meta.get("gt") is not None else (
+        f"{meta['ge']} <= " if meta.get("ge") is not None else "")
+    hi = f" < {meta['lt']}" if meta.get("lt") is not None else (
+        f" <= {meta['le']}" if meta.get("le") is not None else "")
+    return f"{lo}{name}{hi}" if (lo or hi) else f"{name} finite"
+
+
+def in_range(value: float, meta: dict) -> bool:
+    if value is None or not math.isfinite(value):
+        return False
+    if meta.get("gt") is not None and not value > meta["gt"]:
+        return False
+    if meta.get("ge") is not None and not value >= meta["ge"]:
+        return False
+    if meta.get("lt") is not None and not value < meta["lt"]:
+        return False
+    if meta.get("le") is not None and not value <= meta["le"]:
+        return False
+    return True
+
+
+def violations(obj: Any) -> Iterator[tuple[str, Any, str]]:
+    """Yield ``(field, value, accepted)`` for every ranged field out of range."""
+    for f in dataclasses.fields(obj):
+        meta = f.metadata
+        if "doc" not in meta:
+            continue
+        if not any(meta.get(k) is not None for k in ("gt", "ge", "lt", "le")):
+            continue
+        value = getattr(obj, f.name)
+        try:
+            ok = in_range(float(value), meta)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            yield f.name, value, accepted_range(f.name, meta)

@@ -1,0 +1,118 @@
+"""Plain description of a scene: domain, walls, gravity and bodies.
+
+Coordinates are in metres; the domain is the box [0, domain[d]] per axis,
+covered by a regular grid of spacing ``dx = domain[0] / resolution``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence, Union
+
+import numpy as np
+
+from .materials import Material
+
+WALL_TYPES = ("sticky", "slip", "open")
+"""sticky: grid velocity set to zero; slip: the velocity component into the
+wall is removed (tangential motion and separation are free); open: no wall."""
+
+
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box (a rectangle in 2D)."""
+
+    center: tuple[float, ...]
+    half_size: tuple[float, ...]
+
+    def bounds(self):
+        c, h = np.asarray(self.center, float), np.asarray(self.half_size, float)
+        return c - h, c + h
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds()
+        return np.all((x >= lo) & (x <= hi), axis=1)
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Ball (a disc in 2D)."""
+
+    center: tuple[float, ...]
+    radius: float
+
+    def bounds(self):
+        c = np.asarray(self.center, float)
+        return c - self.radius, c + self.radius
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        return np.sum((x - np.asarray(self.center)) ** 2, axis=1) <= self.radius**2
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Solid circular cylinder along coordinate axis ``axis`` (3D only)."""
+
+    center: tuple[float, ...]
+    radius: float
+    half_height: float
+    axis: int = 1
+
+    def bounds(self):
+        c = np.asarray(self.center, float)
+        h = np.full(3, self.radius)
+        h[self.axis] = self.half_height
+        return c - h, c + h
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        d = x - np.asarray(self.center)
+        along = d[:, self.axis]
+        radial2 = np.sum(d**2, axis=1) - along**2
+        return (np.abs(along) <= self.half_height) & (radial2 <= self.radius**2)
+
+
+Shape = Union[Box, Sphere, Cylinder]
+
+
+@dataclass
+class Body:
+    """One object: a shape filled with particles of one material.
+
+    ``velocity`` [m/s] and ``angular_velocity`` [rad/s] (a scalar in 2D, a
+    vector in 3D, about the shape's centre) set the initial rigid motion.
+    """
+
+    shape: Shape
+    material: Material
+    name: str = ""
+    velocity: Sequence[float] | None = None
+    angular_velocity: float | Sequence[float] | None = None
+    ppc: int | None = None
+
+
+@dataclass
+class Scene:
+    """Domain, grid, walls, gravity and bodies of a run."""
+
+    dim: int
+    domain: tuple[float, ...]
+    resolution: int
+    bodies: list[Body]
+    gravity: tuple[float, ...] = (0.0, -9.81)
+    walls: tuple[str, ...] = ("slip", "slip", "slip", "slip")
+    """wall type per face: (x_lo, x_hi, y_lo, y_hi[, z_lo, z_hi])"""
+    wall_cells: int = 3
+    """wall thickness [cells]: nodes this close to a face obey its wall"""
+    ppc: int = 4
+    """particles per cell (total, not per axis); a perfect d-th power samples a
+    regular sub-lattice, anything else uniform random points per cell"""
+    jitter: float = 0.0
+    """random displacement of lattice samples, as a fraction of their spacing"""
+
+    @property
+    def dx(self) -> float:
+        return self.domain[0] / self.resolution
+
+    @property
+    def cells(self) -> tuple[int, ...]:
+        return tuple(int(round(L / self.dx)) for L in self.domain)

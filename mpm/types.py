@@ -1,0 +1,51 @@
+"""Warp scalar, vector and matrix types for one (dimension, precision) pair.
+
+Every kernel factory takes a :class:`Types` so that one body of code serves
+2D and 3D, float32 and float64, each combination compiled on its own.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import warp as wp
+
+PRECISIONS = ("float32", "float64")
+
+# Length of the per-body material parameter vector (see mpm.materials).
+N_MATERIAL_PARAMS = 8
+
+
+@dataclass(frozen=True, eq=False)
+class Types:
+    """Warp types of one specialisation; obtain with :func:`make_types`."""
+
+    dim: int
+    precision: str
+    scalar: type
+    vec: type  # position, velocity [m, m/s]
+    mat: type  # F, C, stress
+    ivec: type  # grid indices
+    params: type  # per-body material parameters
+
+    def __repr__(self) -> str:
+        return f"Types({self.dim}D, {self.precision})"
+
+
+@functools.cache
+def make_types(dim: int, precision: str) -> Types:
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3, got {dim}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+    scalar = wp.float32 if precision == "float32" else wp.float64
+    return Types(
+        dim=dim,
+        precision=precision,
+        scalar=scalar,
+        vec=wp.types.vector(dim, scalar),
+        mat=wp.types.matrix((dim, dim), scalar),
+        ivec=wp.types.vector(dim, wp.int32),
+        params=wp.types.vector(N_MATERIAL_PARAMS, scalar),
+    )
