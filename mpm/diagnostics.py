@@ -29,6 +29,7 @@ def diagnostic_names(dim: int) -> list[str]:
 @functools.cache
 def make_measure(t: Types, material):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim = t.dim
     f64 = wp.float64
     energy = material.energy(t)
@@ -63,7 +64,7 @@ def make_measure(t: Types, material):
             L = m * (xp[0] * vp[1] - xp[1] * vp[0]) + m * D * (Cp[1, 0] - Cp[0, 1])
             wp.atomic_add(out, iL, f64(L))
         else:
-            L3 = m * wp.cross(xp, vp) + m * D * t.vec(
+            L3 = m * wp.cross(xp, vp) + m * D * vec(
                 Cp[2, 1] - Cp[1, 2], Cp[0, 2] - Cp[2, 0], Cp[1, 0] - Cp[0, 1])
             for d in range(3):
                 wp.atomic_add(out, iL + d, f64(L3[d]))

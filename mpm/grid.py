@@ -20,11 +20,12 @@ SLIP = WALL_TYPES.index("slip")
 @functools.cache
 def make_wall(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
 
     @wp.func
     def wall(v: t.vec, d: int, outward: S, kind: int):
         if kind == STICKY:
-            return t.vec()
+            return vec()
         if kind == SLIP and v[d] * outward > S(0.0):
             v[d] = S(0.0)
         return v
@@ -35,6 +36,7 @@ def make_wall(t: Types):
 @functools.cache
 def make_grid_update(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim = t.dim
     wall = make_wall(t)
 

@@ -148,10 +148,10 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
             raise SceneError(f"{key}.shape", f"has {len(blo)} coordinates; accepted: {d}")
         hi = np.asarray(scene.domain) - lo
         if np.any(blo < lo - 1e-12) or np.any(bhi > hi + 1e-12):
+            box = lambda a, b: " x ".join(f"[{x:.4g}, {y:.4g}]" for x, y in zip(a, b))  # noqa: E731
             raise SceneError(
-                key, f"particles outside the domain: shape spans {np.round(blo, 4).tolist()}"
-                f" to {np.round(bhi, 4).tolist()}; accepted: within [{lo:g}, "
-                f"{np.round(hi, 4).tolist()}] (domain minus {scene.wall_cells} wall cells)")
+                key, f"particles outside the domain: the shape spans {box(blo, bhi)}; accepted: "
+                f"within {box([lo] * d, hi)} (the domain minus {scene.wall_cells} wall cells)")
 
 
 def _rigid_velocity(body, x, dim):

@@ -29,6 +29,7 @@ def make_locate(t: Types, kernel: Kernel):
     The base node is clamped to the grid so that a runaway particle never
     addresses memory outside it (G2P flags such particles)."""
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     Wm = weight_matrix_type(t, kernel)
     weights = kernel.weights(t)
     last = kernel.support - 1
@@ -38,7 +39,7 @@ def make_locate(t: Types, kernel: Kernel):
     @wp.func
     def locate(X: t.vec, inv_dx: S, cells: t.ivec, strides: t.ivec):
         g = X * inv_dx
-        fx = t.vec()
+        fx = vec()
         W = Wm()
         flat = int(0)
         for d in range(wp.static(t.dim)):
@@ -57,17 +58,18 @@ def make_locate(t: Types, kernel: Kernel):
 def make_node(t: Types, kernel: Kernel):
     """``node(a, b, c, flat, fx, W, strides, dx) -> (w, r, i)``; c is ignored in 2D."""
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     Wm = weight_matrix_type(t, kernel)
 
     @wp.func
     def node(a: int, b: int, c: int, flat: int, fx: t.vec, W: Wm, strides: t.ivec, dx: S):
         if wp.static(t.dim == 2):
             w = W[0, a] * W[1, b]
-            r = (t.vec(S(a), S(b)) - fx) * dx
+            r = (vec(S(a), S(b)) - fx) * dx
             i = flat + a * strides[0] + b
         else:
             w = W[0, a] * W[1, b] * W[2, c]
-            r = (t.vec(S(a), S(b), S(c)) - fx) * dx
+            r = (vec(S(a), S(b), S(c)) - fx) * dx
             i = flat + a * strides[0] + b * strides[1] + c
         return w, r, i
 

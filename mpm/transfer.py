@@ -33,6 +33,7 @@ from .types import Types
 def make_p2g(t: Types, kernel: Kernel, material):
     """P2G for the particles of one material model (``material`` is its class)."""
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim, Ks = t.dim, kernel.support
     locate = make_locate(t, kernel)
     node = make_node(t, kernel)
@@ -91,6 +92,7 @@ def make_g2p(t: Types, kernel: Kernel, project, record_dJ: bool):
     ``monitor`` accumulates [max |v_p|^2, non-finite count, outside count].
     """
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim, Ks = t.dim, kernel.support
     locate = make_locate(t, kernel)
     node = make_node(t, kernel)
@@ -123,8 +125,8 @@ def make_g2p(t: Types, kernel: Kernel, project, record_dJ: bool):
         xp = x[p]
         flat, fx, W = locate(xp, inv_dx, cells, strides)
         dx = S(1.0) / inv_dx
-        vp = t.vec()
-        B = t.mat()
+        vp = vec()
+        B = mat()
         for a in range(Ks):
             for b in range(Ks):
                 for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -134,7 +136,7 @@ def make_g2p(t: Types, kernel: Kernel, project, record_dJ: bool):
                     B += wp.outer(wv, r)
         Cp = B * K
         xp = xp + dt * vp
-        Fsn = wp.identity(dim, S) + dt * Cp
+        Fsn = wp.identity(n=dim, dtype=S) + dt * Cp
         F = Fsn * F0s[p]
         if wp.static(proj is not None):
             F = proj(F, body_params[body[p]])

@@ -23,6 +23,7 @@ from .base import Material
 @functools.cache
 def _stress(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
 
     @wp.func
     def stress(F: t.mat, L: t.mat, params: t.params):
@@ -31,7 +32,7 @@ def _stress(t: Types):
         viscosity = params[2]
         J = wp.determinant(F)
         p = K * (wp.pow(J, -gamma) - S(1.0))
-        sigma = -p * wp.identity(t.dim, S) + viscosity * (L + wp.transpose(L))
+        sigma = -p * wp.identity(n=dim, dtype=S) + viscosity * (L + wp.transpose(L))
         return J * sigma * wp.transpose(wp.inverse(F))
 
     return stress
@@ -40,6 +41,7 @@ def _stress(t: Types):
 @functools.cache
 def _energy(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
 
     @wp.func
     def energy(F: t.mat, params: t.params):
@@ -54,11 +56,14 @@ def _energy(t: Types):
 @functools.cache
 def _project(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+
+    inv_dim = 1.0 / t.dim
 
     @wp.func
     def project(F: t.mat, params: t.params):
         J = wp.determinant(F)
-        return wp.pow(J, S(1.0 / t.dim)) * wp.identity(t.dim, S)
+        return wp.pow(J, S(inv_dim)) * wp.identity(n=dim, dtype=S)
 
     return project
 

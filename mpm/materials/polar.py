@@ -10,6 +10,7 @@ from ..types import Types
 @functools.cache
 def make_rotation(t: Types):
     S = t.scalar
+    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
 
     if t.dim == 2:
 
@@ -24,21 +25,21 @@ def make_rotation(t: Types):
             if r > S(0.0):
                 c = a / r
                 s = b / r
-            return t.mat(c, -s, s, c)
+            return mat(c, -s, s, c)
 
         return rotation
 
     @wp.func
     def rotation(F: t.mat):
-        U = t.mat()
-        sig = t.vec()
-        V = t.mat()
+        U = mat()
+        sig = vec()
+        V = mat()
         wp.svd3(F, U, sig, V)
         # keep R a proper rotation: flip the weakest direction if needed
         if wp.determinant(U) < S(0.0):
-            U = U * wp.diag(t.vec(S(1.0), S(1.0), S(-1.0)))
+            U = U * wp.diag(vec(S(1.0), S(1.0), S(-1.0)))
         if wp.determinant(V) < S(0.0):
-            V = V * wp.diag(t.vec(S(1.0), S(1.0), S(-1.0)))
+            V = V * wp.diag(vec(S(1.0), S(1.0), S(-1.0)))
         return U * wp.transpose(V)
 
     return rotation

@@ -1,0 +1,118 @@
+"""Constitutive models: the stress is the derivative of the stored energy,
+vanishes at rest, and is objective. Each Warp function is run through a tiny
+test kernel."""
+
+import functools
+
+import numpy as np
+import pytest
+import warp as wp
+
+import mpm
+from mpm.types import make_types
+from reference_mpm import stress as reference_stress
+
+SOLIDS = [mpm.FixedCorotated(E=1e5, nu=0.3), mpm.NeoHookean(E=1e5, nu=0.3)]
+ALL = SOLIDS + [mpm.Fluid(K=1e5, gamma=7.0, viscosity=0.0)]
+
+
+@functools.cache
+def evaluator(t, cls):
+    stress, energy = cls.stress(t), cls.energy(t)
+
+    @wp.kernel(module="unique")
+    def evaluate(F: wp.array(dtype=t.mat), L: wp.array(dtype=t.mat), prm: t.params,
+                 P: wp.array(dtype=t.mat), psi: wp.array(dtype=t.scalar)):
+        i = wp.tid()
+        P[i] = stress(F[i], L[i], prm)
+        psi[i] = energy(F[i], prm)
+
+    return evaluate
+
+
+def evaluate(material, F, L=None, dim=None):
+    dim = F.shape[-1]
+    t = make_types(dim, "float64")
+    L = np.zeros_like(F) if L is None else L
+    P = wp.zeros(len(F), dtype=t.mat)
+    psi = wp.zeros(len(F), dtype=t.scalar)
+    wp.launch(evaluator(t, type(material)), len(F),
+              inputs=[wp.array(F, dtype=t.mat), wp.array(L, dtype=t.mat),
+                      t.params(*material.packed_padded()), P, psi])
+    return P.numpy(), psi.numpy()
+
+
+def random_F(dim, n, rng, spread=0.3):
+    F = np.eye(dim) + spread * rng.standard_normal((n, dim, dim))
+    return F[np.linalg.det(F) > 0.3]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("material", ALL, ids=lambda m: m.name)
+def test_stress_is_energy_derivative(material, dim):
+    """P_ab = d psi / d F_ab, checked by centred differences (float64,
+    h = 1e-6: truncation O(h^2 |psi'''|), round-off O(eps |psi| / h))."""
+    rng = np.random.default_rng(1)
+    F = random_F(dim, 20, rng)
+    P, _ = evaluate(material, F)
+    h = 1e-6
+    for a in range(dim):
+        for b in range(dim):
+            Fp, Fm = F.copy(), F.copy()
+            Fp[:, a, b] += h
+            Fm[:, a, b] -= h
+            dpsi = (evaluate(material, Fp)[1] - evaluate(material, Fm)[1]) / (2 * h)
+            np.testing.assert_allclose(P[:, a, b], dpsi, rtol=1e-5, atol=1e-4 * material.packed()[0])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("material", ALL, ids=lambda m: m.name)
+def test_rest_state_and_objectivity(material, dim):
+    rng = np.random.default_rng(2)
+    I = np.eye(dim)[None]
+    P0, psi0 = evaluate(material, I)
+    np.testing.assert_allclose(P0, 0.0, atol=1e-9)
+    np.testing.assert_allclose(psi0, 0.0, atol=1e-9)
+    # P(R F) = R P(F), psi(R F) = psi(F) for a proper rotation R
+    F = random_F(dim, 10, rng)
+    Q, _ = np.linalg.qr(rng.standard_normal((dim, dim)))
+    R = Q.copy()
+    if np.linalg.det(R) < 0:
+        R[:, 0] *= -1
+    P, psi = evaluate(material, F)
+    PR, psiR = evaluate(material, R @ F)
+    np.testing.assert_allclose(PR, R @ P, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(psiR, psi, rtol=1e-9, atol=1e-6)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("material", ALL + [mpm.Fluid(K=1e4, viscosity=2.0)], ids=lambda m: m.name)
+def test_stress_matches_reference_formula(material, dim):
+    """Against the NumPy formulas of the reference solver (viscous term included)."""
+    rng = np.random.default_rng(3)
+    F = random_F(dim, 10, rng)
+    L = rng.standard_normal((len(F), dim, dim))
+    P, _ = evaluate(material, F, L)
+    ref = np.array([reference_stress(material.name, f, l, material.packed()) for f, l in zip(F, L)])
+    np.testing.assert_allclose(P, ref, rtol=1e-10, atol=1e-8)
+
+
+def test_fluid_projection_keeps_volume_change():
+    t = make_types(3, "float64")
+    project = mpm.Fluid.project(t)
+
+    @wp.kernel(module="unique")
+    def run(F: wp.array(dtype=t.mat), out: wp.array(dtype=t.mat)):
+        i = wp.tid()
+        out[i] = project(F[i], t.params())
+
+    F = random_F(3, 10, np.random.default_rng(4))
+    out = wp.zeros(len(F), dtype=t.mat)
+    wp.launch(run, len(F), inputs=[wp.array(F, dtype=t.mat), out])
+    J = np.linalg.det(F)
+    np.testing.assert_allclose(out.numpy(), J[:, None, None] ** (1 / 3) * np.eye(3), rtol=1e-12)
+
+
+def test_lame_parameters():
+    mu, lam = mpm.materials.lame(1e5, 0.25)
+    assert mu == pytest.approx(4e4) and lam == pytest.approx(4e4)
