@@ -10,6 +10,8 @@ Measured quantities (names from :func:`diagnostic_names`):
   kinetic_energy  sum 1/2 m_p |v_p|^2 [J]
   elastic_energy  sum V_p^0 psi(F_p) [J]
   potential_energy  -sum m_p g . x_p [J] (zero at the origin)
+  momentum_scale  sum m_p |v_p|: the scale of relative momentum drifts
+  angular_momentum_scale  sum m_p (|x_p| |v_p| + D |C_p|): same for angular
 """
 
 import functools
@@ -23,7 +25,8 @@ def diagnostic_names(dim: int) -> list[str]:
     axes = "xyz"[:dim]
     L = ["angular_momentum"] if dim == 2 else [f"angular_momentum_{a}" for a in axes]
     return (["mass"] + [f"momentum_{a}" for a in axes] + L
-            + ["kinetic_energy", "elastic_energy", "potential_energy"])
+            + ["kinetic_energy", "elastic_energy", "potential_energy",
+               "momentum_scale", "angular_momentum_scale"])
 
 
 @functools.cache
@@ -71,5 +74,8 @@ def make_measure(t: Types, material):
         wp.atomic_add(out, iE, f64(S(0.5) * m * wp.dot(vp, vp)))
         wp.atomic_add(out, iE + 1, f64(volume[p] * energy(F0s[p], body_params[body[p]])))
         wp.atomic_add(out, iE + 2, f64(-m * wp.dot(gravity, xp)))
+        speed = wp.length(vp)
+        wp.atomic_add(out, iE + 3, f64(m * speed))
+        wp.atomic_add(out, iE + 4, f64(m * (wp.length(xp) * speed + D * wp.sqrt(wp.ddot(Cp, Cp)))))
 
     return measure

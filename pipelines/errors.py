@@ -1,0 +1,62 @@
+"""One-line messages for configuration errors (exit code 2, no traceback)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+from hydra.errors import MissingConfigException, OverrideParseException
+from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, OmegaConfBaseException,
+                              ValidationError)
+
+from .validate import ConfigError
+
+EXIT_CONFIG = 2
+
+
+def _first_line(text: str) -> str:
+    return next((ln.strip() for ln in str(text).splitlines() if ln.strip()), str(text))
+
+
+def _accepted_keys(object_type) -> str:
+    if object_type is not None and dataclasses.is_dataclass(object_type):
+        return ", ".join(f.name for f in dataclasses.fields(object_type))
+    return ""
+
+
+def describe(exc: BaseException) -> str | None:
+    """A one-line description of a configuration error, or None if ``exc`` is
+    not one."""
+    if isinstance(exc, ConfigError):
+        return str(exc)
+    if isinstance(exc, MissingConfigException):
+        missing = exc.missing_cfg_file or ""
+        if "/" in missing and exc.options is not None:
+            group, option = missing.rsplit("/", 1)
+            options = sorted(o for o in exc.options if not o.endswith("_schema"))
+            return f"{group}={option}: unknown option; accepted: {', '.join(options)}"
+        return _first_line(exc)
+    if isinstance(exc, OverrideParseException):
+        return f"cannot parse the command line: {_first_line(exc)}"
+    cause = exc.__cause__ if exc.__cause__ is not None else exc
+    if isinstance(cause, (ConfigKeyError, ConfigAttributeError)):
+        key = cause.full_key or getattr(cause, "key", "")
+        accepted = _accepted_keys(cause.object_type)
+        return f"{key}: unknown key" + (f"; accepted: {accepted}" if accepted else "")
+    if isinstance(cause, ValidationError):
+        key = cause.full_key or ""
+        msg = _first_line(cause.msg if hasattr(cause, "msg") else cause)
+        m = re.match(r"Value '(.*)' of type '.*' could not be converted to (\w+)", msg)
+        if m:
+            kind = {"Float": "a number", "Integer": "an integer", "Boolean": "true or false"}
+            return f"{key}: {m.group(1)!r} is not {kind.get(m.group(2), m.group(2))}"
+        return f"{key}: {msg}"
+    if isinstance(cause, OmegaConfBaseException):
+        return _first_line(cause)
+    if type(exc).__module__.startswith("hydra"):
+        msg = _first_line(exc)
+        m = re.match(r"Could not override '([^']+)'", msg)
+        if m:
+            return f"{m.group(1)}: unknown key"
+        return msg
+    return None

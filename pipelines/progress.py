@@ -1,0 +1,40 @@
+"""A one-line progress bar on a terminal (stderr), shown once a run has taken
+more than a couple of seconds."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+class Progress:
+    def __init__(self, steps: int | None, duration: float | None, enabled: bool | None = None,
+                 delay: float = 2.0, every: float = 0.25):
+        self.steps, self.duration = steps, duration
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.start = time.perf_counter()
+        self.delay, self.every = delay, every
+        self._last = 0.0
+        self._shown = False
+
+    def update(self, step: int, t: float, ms_per_step: float) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.start < self.delay or now - self._last < self.every:
+            return
+        self._last = now
+        frac = step / self.steps if self.steps else t / self.duration
+        frac = min(max(frac, 0.0), 1.0)
+        elapsed = now - self.start
+        eta = elapsed * (1 - frac) / frac if frac > 0 else float("nan")
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}% step {step} t={t:.4g}s "
+                         f"{ms_per_step:.2f} ms/step eta {eta:.0f}s ")
+        sys.stderr.flush()
+        self._shown = True
+
+    def close(self) -> None:
+        if self._shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()

@@ -1,0 +1,102 @@
+"""Command-line entry: ``python -m pipelines.run [overrides]``.
+
+Hydra composes the config from ``conf/`` (groups scheme, kernel, material,
+scene; settings run and log), the run is validated before anything is
+compiled or allocated, and :func:`pipelines.runner.execute` writes
+``recording.rrd`` and ``metrics.json`` into the Hydra run directory.
+
+Exit codes: 0 completed, 1 failed (exception), 2 bad configuration,
+3 unstable, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, OmegaConf
+
+from . import provenance, schema
+from .errors import EXIT_CONFIG, describe
+from .runner import EXIT_CODES, execute
+from .validate import ConfigError, resolve
+
+schema.register()
+_last_status: list[str] = []
+_config_errors: list[str] = []
+
+
+def recording_properties(cfg: DictConfig, spec, overrides: list[str], choices: dict) -> dict:
+    prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
+    packages = prov.pop("packages")
+    return {
+        "config": {"yaml": OmegaConf.to_yaml(cfg, resolve=True),
+                   "overrides": overrides or [""],
+                   "choices": [f"{k}={v}" for k, v in sorted(choices.items()) if v is not None]},
+        "provenance": {k: (v if not isinstance(v, list) else (v or [""])) for k, v in prov.items()},
+        "packages": packages,
+    }
+
+
+def run(cfg: DictConfig) -> dict:
+    """Validate, run and return the metrics of one composed config."""
+    hc = HydraConfig.get()
+    try:
+        spec = resolve(cfg)
+    except ConfigError as e:  # reported on one line by main()
+        _config_errors.append(str(e))
+        _remove_if_empty(Path(hc.runtime.output_dir))
+        return {"status": "invalid", "reason": str(e)}
+    overrides = list(hc.overrides.task)
+    choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
+    out_dir = Path(hc.runtime.output_dir)
+    props = recording_properties(cfg, spec, overrides, choices)
+    metrics = execute(spec, out_dir, props)
+    _last_status.append(metrics["status"])
+    summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
+               f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
+    print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
+    return metrics
+
+
+def _remove_if_empty(run_dir: Path) -> None:
+    """Drop the run directory Hydra made for a run that never started."""
+    if run_dir.is_dir() and all(p.name in (".hydra", "run.log") for p in run_dir.iterdir()):
+        shutil.rmtree(run_dir, ignore_errors=True)
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+def _main(cfg: DictConfig):
+    return run(cfg)
+
+
+def main() -> None:
+    """Hydra's own error reports are multi-line; ask it to raise instead and
+    print configuration errors on one line with exit code 2."""
+    os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_ERROR
+    try:
+        _main()
+    except KeyboardInterrupt:
+        sys.exit(EXIT_CODES["interrupted"])
+    except Exception as e:  # noqa: BLE001 - classified below
+        message = describe(e)
+        if message is None:
+            raise
+        _config_errors.append(message)
+    if _config_errors:
+        for message in _config_errors:
+            print(f"error: {message}", file=sys.stderr)
+        sys.exit(EXIT_CONFIG)
+    if _last_status and len(_last_status) == 1:
+        sys.exit(EXIT_CODES.get(_last_status[0], 1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,121 @@
+"""Structured configs: the schema of every config group, registered with
+Hydra's ConfigStore so that a misspelt key fails at composition.
+
+Materials and schemes use the solver's own dataclasses (``mpm.materials``,
+``mpm.schemes``) as their schemas; the scene, run and log settings are
+defined here because they describe a run, not the physics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, List, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+from mpm.materials import MATERIALS
+from mpm.schemes import SCHEMES
+
+PRECISIONS = ("float32", "float64")
+DEVICES = ("cpu", "cuda")
+SHAPES = ("box", "sphere", "cylinder")
+
+
+@dataclass
+class KernelConfig:
+    """Interpolation kernel."""
+
+    name: str = "quadratic"
+
+
+@dataclass
+class ShapeConfig:
+    """A primitive: ``box`` (center, half_size), ``sphere`` (center, radius; a
+    disc in 2D) or ``cylinder`` (3D: center, radius, half_height, axis)."""
+
+    type: str = "box"
+    center: List[float] = MISSING  # [m]
+    half_size: Optional[List[float]] = None  # [m]
+    radius: Optional[float] = None  # [m]
+    half_height: Optional[float] = None  # [m]
+    axis: Optional[int] = None  # 0, 1 or 2 (default 1: along y)
+
+
+@dataclass
+class BodyConfig:
+    """One body. ``material: null`` takes the ``material`` config group; a
+    mapping with a ``model`` key gives the body its own material."""
+
+    name: str = ""
+    shape: ShapeConfig = field(default_factory=ShapeConfig)
+    material: Optional[Any] = None
+    velocity: Optional[List[float]] = None  # [m/s]
+    angular_velocity: Optional[Any] = None  # [rad/s]: scalar (2D) or 3-vector (3D)
+    ppc: Optional[int] = None  # particles per cell, overrides the scene's
+
+
+@dataclass
+class SceneConfig:
+    """Domain [0, domain[d]] per axis, a grid of ``resolution`` cells along x."""
+
+    name: str = MISSING
+    dim: int = 2
+    domain: List[float] = field(default_factory=lambda: [1.0, 1.0])  # [m]
+    resolution: int = 64  # grid cells along x
+    duration: float = 1.0  # default simulated time [s]
+    gravity: List[float] = field(default_factory=lambda: [0.0, -9.81])  # [m/s^2]
+    walls: Any = "slip"  # one of sticky|slip|open, or one per face (x_lo, x_hi, y_lo, ...)
+    wall_cells: int = 3  # wall thickness [cells]
+    ppc: int = 4  # particles per cell
+    jitter: float = 0.0  # random displacement of lattice samples [fraction of spacing]
+    log_every: int = 1  # particle logging cadence when log.every is null
+    bodies: List[BodyConfig] = field(default_factory=list)
+
+
+@dataclass
+class RunConfig:
+    """How long and how to step."""
+
+    steps: Optional[int] = None  # number of steps (exclusive with duration)
+    duration: Optional[float] = None  # simulated time [s]; null: the scene's
+    dt: Optional[float] = None  # fixed time step [s]; null: CFL every step
+    cfl: float = 0.4  # CFL number of the adaptive step
+    dt_max: float = 1.0e-3  # largest adaptive step [s]
+    precision: str = "float32"  # float32 | float64
+    device: str = "cpu"  # cpu | cuda
+
+
+@dataclass
+class LogConfig:
+    """What goes into the recording."""
+
+    every: Optional[int] = None  # particles every N steps; 0: none; null: the scene's
+    dJ: bool = True  # the per-particle dJ field with the particles
+    scalars: bool = True  # physics scalars every step
+    flush_every: int = 500  # steps between batched scalar sends
+    progress: Optional[bool] = None  # progress bar; null: on a terminal
+    recording: str = "recording.rrd"  # file name inside the run directory
+
+
+@dataclass
+class Config:
+    scheme: Any = MISSING
+    kernel: KernelConfig = MISSING
+    material: Any = MISSING
+    scene: SceneConfig = MISSING
+    run: RunConfig = field(default_factory=RunConfig)
+    log: LogConfig = field(default_factory=LogConfig)
+    seed: int = 0
+
+
+def register() -> None:
+    """Register the schemas; group files name them in their defaults lists."""
+    cs = ConfigStore.instance()
+    cs.store(name="config_schema", node=Config)
+    cs.store(group="kernel", name="kernel_schema", node=KernelConfig)
+    cs.store(group="scene", name="scene_schema", node=SceneConfig)
+    for name, cls in MATERIALS.items():
+        cs.store(group="material", name=f"{name}_schema", node=cls)
+    for name, cls in SCHEMES.items():
+        cs.store(group="scheme", name=f"{name}_schema", node=cls)

@@ -1,0 +1,51 @@
+"""Where a run's data goes. The runner talks to a :class:`Sink`; the solver
+never does.
+
+A sink receives: static run metadata once (:meth:`Sink.start`), particles
+(positions and the per-particle dJ field) on logged steps, a row of scalars
+every step, and events (text plus machine-readable values).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class RunMeta:
+    """Static description of a run for the recording."""
+
+    name: str
+    dim: int
+    domain: tuple[float, ...]
+    wall_cells: int
+    dx: float
+    body_names: list[str]
+    particle_body: np.ndarray  # body index per particle
+    particle_radius: float  # [m]
+    properties: dict = field(default_factory=dict)  # name -> {key: value}
+    scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
+
+
+class Sink:
+    """Interface (and a sink that drops everything)."""
+
+    def start(self, meta: RunMeta) -> None:
+        pass
+
+    def particles(self, step: int, t: float, x: np.ndarray, dJ: np.ndarray | None) -> None:
+        pass
+
+    def scalars(self, step: int, t: float, values: dict[str, float]) -> None:
+        pass
+
+    def event(self, step: int, t: float, text: str, level: str = "INFO", **values) -> None:
+        pass
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,257 @@
+"""Turn a composed config into the solver's plain dataclasses, checking every
+value on the way. Each problem raises :class:`ConfigError` naming the full
+config key and the accepted values; nothing is compiled or allocated here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+import mpm
+from mpm.materials import MATERIALS, Material
+from mpm.params import violations
+from mpm.scene import WALL_TYPES
+
+from .schema import DEVICES, PRECISIONS, SHAPES
+
+
+class ConfigError(ValueError):
+    """A configuration value that cannot be used; ``key`` is its full path."""
+
+    def __init__(self, key: str, message: str):
+        super().__init__(f"{key}: {message}")
+        self.key = key
+
+
+@dataclass
+class RunSettings:
+    steps: int | None
+    duration: float | None
+    dt: float | None
+    cfl: float
+    dt_max: float
+    precision: str
+    device: str
+
+
+@dataclass
+class LogSettings:
+    every: int  # 0: no particles
+    dJ: bool
+    scalars: bool
+    flush_every: int
+    progress: bool | None
+    recording: str
+
+
+@dataclass
+class RunSpec:
+    """Everything a run needs, validated."""
+
+    scene: mpm.Scene
+    scene_name: str
+    scheme: Any
+    kernel: mpm.Kernel
+    run: RunSettings
+    log: LogSettings
+    seed: int
+
+    @property
+    def end(self) -> tuple[int | None, float | None]:
+        """(steps, duration): exactly one is set."""
+        if self.run.steps is not None:
+            return self.run.steps, None
+        return None, self.run.duration
+
+
+def _plain(node) -> Any:
+    return OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) or \
+        OmegaConf.is_config(node) else node
+
+
+def _number(key: str, value, kind=float, *, gt=None, ge=None, le=None, optional=False):
+    if value is None:
+        if optional:
+            return None
+        raise ConfigError(key, "missing; accepted: a number")
+    try:
+        if kind is int and (isinstance(value, bool) or float(value) != int(value)):
+            raise ValueError
+        v = kind(value)
+    except (TypeError, ValueError):
+        raise ConfigError(key, f"{value!r} is not {'an integer' if kind is int else 'a number'}")
+    bounds = [f"{key} > {gt}" if gt is not None else None, f"{key} >= {ge}" if ge is not None else None,
+              f"{key} <= {le}" if le is not None else None]
+    if (gt is not None and not v > gt) or (ge is not None and not v >= ge) or \
+            (le is not None and not v <= le) or v != v:
+        raise ConfigError(key, f"{value} out of range; accepted: {', '.join(b for b in bounds if b)}")
+    return v
+
+
+def _choice(key: str, value, accepted) -> str:
+    if value not in accepted:
+        raise ConfigError(key, f"{value!r} unknown; accepted: {', '.join(accepted)}")
+    return value
+
+
+def _vector(key: str, value, dim: int) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != dim:
+        raise ConfigError(key, f"{value!r}; accepted: a list of {dim} numbers")
+    return tuple(_number(f"{key}[{i}]", v) for i, v in enumerate(value))
+
+
+# ------------------------------------------------------------------ groups
+def make_material(node, key: str) -> Material:
+    """A material from a ``material`` group node or an inline mapping."""
+    d = _plain(node)
+    if not isinstance(d, dict):
+        raise ConfigError(key, f"{d!r}; accepted: a mapping with a model key, "
+                               f"e.g. {{model: fluid, K: 1.0e5}}")
+    d = dict(d)
+    model = d.get("model")
+    if model not in MATERIALS:
+        raise ConfigError(f"{key}.model", f"{model!r} unknown; accepted: {', '.join(MATERIALS)}")
+    cls = MATERIALS[model]
+    names = [f.name for f in dataclasses.fields(cls)]
+    for k in d:
+        if k not in names:
+            raise ConfigError(f"{key}.{k}", f"not a parameter of {model}; accepted: {', '.join(names)}")
+    values = {k: (v if k == "model" else _number(f"{key}.{k}", v)) for k, v in d.items()}
+    material = cls(**values)
+    for name, value, accepted in violations(material):
+        raise ConfigError(f"{key}.{name}", f"{value} out of range; accepted: {accepted}")
+    return material
+
+
+def make_scheme(node, key: str = "scheme"):
+    d = dict(_plain(node) or {})
+    name = _choice(f"{key}.name", d.get("name"), list(mpm.SCHEMES))
+    cls = mpm.SCHEMES[name]
+    scheme = cls(**d)
+    for fname, value, accepted in violations(scheme):
+        raise ConfigError(f"{key}.{fname}", f"{value} out of range; accepted: {accepted}")
+    return scheme
+
+
+def make_shape(node, key: str, dim: int):
+    d = dict(_plain(node) or {})
+    kind = _choice(f"{key}.type", d.get("type"), SHAPES)
+    need = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
+            "cylinder": ["center", "radius", "half_height"]}[kind]
+    allowed = need + (["axis"] if kind == "cylinder" else [])
+    for k, v in d.items():
+        if k != "type" and v is not None and k not in allowed:
+            raise ConfigError(f"{key}.{k}", f"not used by a {kind}; accepted: {', '.join(allowed)}")
+    for k in need:
+        if d.get(k) is None:
+            raise ConfigError(f"{key}.{k}", f"missing for a {kind}")
+    center = _vector(f"{key}.center", d["center"], dim)
+    if kind == "box":
+        half = _vector(f"{key}.half_size", d["half_size"], dim)
+        for i, h in enumerate(half):
+            _number(f"{key}.half_size[{i}]", h, gt=0.0)
+        return mpm.Box(center, half)
+    radius = _number(f"{key}.radius", d["radius"], gt=0.0)
+    if kind == "sphere":
+        return mpm.Sphere(center, radius)
+    if dim != 3:
+        raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere")
+    axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
+    return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis)
+
+
+def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mpm.Scene, dict]:
+    d = _plain(node)
+    dim = _number(f"{key}.dim", d["dim"], int)
+    if dim not in (2, 3):
+        raise ConfigError(f"{key}.dim", f"{dim}; accepted: 2, 3")
+    domain = _vector(f"{key}.domain", d["domain"], dim)
+    for i, L in enumerate(domain):
+        _number(f"{key}.domain[{i}]", L, gt=0.0)
+    walls = d["walls"]
+    if isinstance(walls, str):
+        walls = [walls] * (2 * dim)
+    if not isinstance(walls, list) or len(walls) != 2 * dim:
+        raise ConfigError(f"{key}.walls", f"{walls!r}; accepted: one of {', '.join(WALL_TYPES)}, "
+                                         f"or a list of {2 * dim} (x_lo, x_hi, y_lo, ...)")
+    for i, w in enumerate(walls):
+        _choice(f"{key}.walls[{i}]", w, WALL_TYPES)
+    bodies = []
+    if not d["bodies"]:
+        raise ConfigError(f"{key}.bodies", "empty; accepted: at least one body")
+    for i, b in enumerate(d["bodies"]):
+        bkey = f"{key}.bodies[{i}]"
+        material = default_material if b.get("material") is None else \
+            make_material(b["material"], f"{bkey}.material")
+        w = b.get("angular_velocity")
+        if w is not None:
+            w = _number(f"{bkey}.angular_velocity", w) if dim == 2 else \
+                _vector(f"{bkey}.angular_velocity", w, 3)
+        bodies.append(mpm.Body(
+            shape=make_shape(b["shape"], f"{bkey}.shape", dim), material=material,
+            name=b.get("name") or f"body{i}",
+            velocity=None if b.get("velocity") is None else _vector(f"{bkey}.velocity", b["velocity"], dim),
+            angular_velocity=w,
+            ppc=_number(f"{bkey}.ppc", b.get("ppc"), int, ge=1, optional=True)))
+    scene = mpm.Scene(
+        dim=dim, domain=domain,
+        resolution=_number(f"{key}.resolution", d["resolution"], int, ge=4),
+        bodies=bodies,
+        gravity=_vector(f"{key}.gravity", d["gravity"], dim),
+        walls=tuple(walls),
+        wall_cells=_number(f"{key}.wall_cells", d["wall_cells"], int, ge=1),
+        ppc=_number(f"{key}.ppc", d["ppc"], int, ge=1),
+        jitter=_number(f"{key}.jitter", d["jitter"], ge=0.0, le=1.0),
+    )
+    return scene, d
+
+
+def make_run(node, key: str = "run") -> RunSettings:
+    d = _plain(node)
+    steps = _number(f"{key}.steps", d["steps"], int, ge=1, optional=True)
+    duration = _number(f"{key}.duration", d["duration"], gt=0.0, optional=True)
+    if steps is not None and duration is not None:
+        raise ConfigError(f"{key}.steps", "set run.steps or run.duration, not both")
+    precision = _choice(f"{key}.precision", d["precision"], PRECISIONS)
+    device = _choice(f"{key}.device", d["device"], DEVICES)
+    return RunSettings(
+        steps=steps, duration=duration,
+        dt=_number(f"{key}.dt", d["dt"], gt=0.0, optional=True),
+        cfl=_number(f"{key}.cfl", d["cfl"], gt=0.0, le=1.0),
+        dt_max=_number(f"{key}.dt_max", d["dt_max"], gt=0.0),
+        precision=precision, device=device)
+
+
+def resolve(cfg) -> RunSpec:
+    """Validate a composed :class:`pipelines.schema.Config`."""
+    run = make_run(cfg.run)
+    scheme = make_scheme(cfg.scheme)
+    kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
+    material = make_material(cfg.material, "material")
+    scene, sd = make_scene(cfg.scene, material)
+    try:
+        mpm.model.check_scene(scene, mpm.KERNELS[kernel_name])
+    except mpm.SceneError as e:
+        raise ConfigError(f"scene.{e.key}", e.message) from None
+    if run.steps is None and run.duration is None:
+        run.duration = _number("scene.duration", sd["duration"], gt=0.0)
+    lg = _plain(cfg.log)
+    every = _number("log.every", lg["every"], int, ge=0, optional=True)
+    if every is None:
+        every = _number("scene.log_every", sd["log_every"], int, ge=0)
+    log = LogSettings(
+        every=every, dJ=bool(lg["dJ"]), scalars=bool(lg["scalars"]),
+        flush_every=_number("log.flush_every", lg["flush_every"], int, ge=1),
+        progress=lg["progress"], recording=str(lg["recording"]))
+    if run.device == "cuda":
+        import warp as wp
+
+        if not wp.is_cuda_available():
+            raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
+    seed = _number("seed", cfg.seed, int)
+    return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
+                   kernel=mpm.KERNELS[kernel_name], run=run, log=log, seed=seed)
