@@ -20,26 +20,15 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from . import provenance, schema
+from . import schema
 from .errors import EXIT_CONFIG, describe
 from .runner import EXIT_CODES, execute
 from .validate import ConfigError, resolve
+from .warp_setup import init_warp
 
 schema.register()
 _last_status: list[str] = []
 _config_errors: list[str] = []
-
-
-def recording_properties(cfg: DictConfig, spec, overrides: list[str], choices: dict) -> dict:
-    prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
-    packages = prov.pop("packages")
-    return {
-        "config": {"yaml": OmegaConf.to_yaml(cfg, resolve=True),
-                   "overrides": overrides or [""],
-                   "choices": [f"{k}={v}" for k, v in sorted(choices.items()) if v is not None]},
-        "provenance": {k: (v if not isinstance(v, list) else (v or [""])) for k, v in prov.items()},
-        "packages": packages,
-    }
 
 
 def run(cfg: DictConfig) -> dict:
@@ -54,8 +43,7 @@ def run(cfg: DictConfig) -> dict:
     overrides = list(hc.overrides.task)
     choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     out_dir = Path(hc.runtime.output_dir)
-    props = recording_properties(cfg, spec, overrides, choices)
-    metrics = execute(spec, out_dir, props)
+    metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices)
     _last_status.append(metrics["status"])
     summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
@@ -78,9 +66,7 @@ def main() -> None:
     """Hydra's own error reports are multi-line; ask it to raise instead and
     print configuration errors on one line with exit code 2."""
     os.environ.setdefault("HYDRA_FULL_ERROR", "1")
-    import warp as wp
-
-    wp.config.log_level = wp.LOG_ERROR
+    init_warp()
     try:
         _main()
     except KeyboardInterrupt:

@@ -18,6 +18,7 @@ import numpy as np
 
 import mpm
 
+from . import provenance
 from .progress import Progress
 from .rerun_sink import RerunSink
 from .sinks import RunMeta, Sink
@@ -108,13 +109,31 @@ def _meta(spec: RunSpec, model: mpm.Model, properties: dict) -> RunMeta:
         scalar_groups=scalar_groups(scene.dim))
 
 
-def execute(spec: RunSpec, out_dir: Path, properties: dict | None = None,
-            sink: Sink | None = None) -> dict:
-    """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``."""
+def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
+                         choices: dict | None = None) -> dict:
+    """How to reproduce the run: resolved config, overrides, group choices,
+    git commit and dirty flag, package versions, device, precision, seed."""
+    prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
+    packages = prov.pop("packages")
+    nonempty = lambda v: v or [""]  # noqa: E731 - Rerun needs a non-empty batch
+    return {
+        "config": {"yaml": config_yaml, "overrides": nonempty(list(overrides)),
+                   "choices": nonempty([f"{k}={v}" for k, v in sorted((choices or {}).items())])},
+        "provenance": {k: nonempty(v) if isinstance(v, list) else v for k, v in prov.items()},
+        "packages": packages,
+    }
+
+
+def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),
+            choices: dict | None = None, sink: Sink | None = None) -> dict:
+    """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
+
+    ``config_yaml``, ``overrides`` and ``choices`` describe how the spec was
+    composed; they are stored in the recording with the provenance."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    properties = properties or {}
+    properties = recording_properties(spec, config_yaml, list(overrides), choices)
     run, log = spec.run, spec.log
     sink = sink if sink is not None else RerunSink(out_dir / log.recording, log.flush_every)
     metrics: dict = {"status": "failed", "reason": "did not start", "steps": 0, "sim_time": 0.0}
@@ -151,9 +170,11 @@ def execute(spec: RunSpec, out_dir: Path, properties: dict | None = None,
                 sink.scalars(step, t, row)
 
         def particles(step, t):
-            s = state.x.numpy()
-            dJ = state.dJ.numpy() if record_dJ else None
-            sink.particles(step, t, s, dJ)
+            # copies: on the CPU .numpy() is a view of memory the next step overwrites,
+            # and the sink may serialise later
+            x = state.x.numpy().copy()
+            dJ = state.dJ.numpy().copy() if record_dJ else None
+            sink.particles(step, t, x, dJ)
 
         record(0, 0.0, {"config_updates": 0.0})
         if log.every:

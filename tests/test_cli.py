@@ -1,0 +1,96 @@
+"""The command line: one-line configuration errors with exit code 2, clean
+stops on instability and on Ctrl-C/SIGTERM, each leaving a readable recording
+and metrics.json."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from helpers import ROOT, run_cli
+
+RERUN = Path(sys.executable).parent / "rerun"
+
+BAD_INPUTS = [
+    (["material.Ee=1"], "material.Ee: unknown key; accepted: model, rho, E, nu"),
+    (["material.nu=0.5"], "material.nu: 0.5 out of range; accepted: -1.0 < nu < 0.5"),
+    (["material.E=0"], "material.E: 0.0 out of range; accepted: 0.0 < E"),
+    (["material.rho=-1"], "material.rho: -1.0 out of range; accepted: 0.0 < rho"),
+    (["material=fluid", "material.gamma=1"], "material.gamma: 1.0 out of range; accepted: 1.0 < gamma"),
+    (["scene=nope"], "scene=nope: unknown option; accepted: cube_drop_3d, droplet_2d,"),
+    (["scheme=nope"], "scheme=nope: unknown option; accepted: empm"),
+    (["kernel=nope"], "kernel=nope: unknown option; accepted: quadratic"),
+    (["material=steel"], "material=steel: unknown option; accepted: fixed_corotated, fluid, neo_hookean"),
+    (["scene.bodies.0.shape.center=[0.5,0.9]"], "scene.bodies[0]: particles outside the domain"),
+    (["scene.bodies.0.shape.radius=0"], "scene.bodies[0].shape.radius: 0.0 out of range"),
+    (["scene.bodies.0.material={model: fluid, Kk: 3}"],
+     "scene.bodies[0].material.Kk: not a parameter of fluid; accepted: model, rho, K, gamma, viscosity"),
+    (["run.precision=float16"], "run.precision: 'float16' unknown; accepted: float32, float64"),
+    (["run.device=tpu"], "run.device: 'tpu' unknown; accepted: cpu, cuda"),
+    (["run.steps=0"], "run.steps: 0 out of range; accepted: run.steps >= 1"),
+    (["run.steps=5", "run.duration=1"], "run.steps: set run.steps or run.duration, not both"),
+    (["run.dt=-1"], "run.dt: -1.0 out of range; accepted: run.dt > 0.0"),
+    (["run.stepz=3"], "run.stepz: unknown key; accepted: steps, duration, dt"),
+    (["material.E=abc"], "material.E: 'abc' is not a number"),
+    (["scene.walls=[slip,slip]"], "scene.walls: ['slip', 'slip']; accepted: one of sticky, slip, open"),
+    (["scene.walls=glue"], "scene.walls[0]: 'glue' unknown; accepted: sticky, slip, open"),
+    (["log.every=-1"], "log.every: -1 out of range; accepted: log.every >= 0"),
+    (["material.E=["], "cannot parse the command line"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD_INPUTS, ids=[" ".join(a) for a, _ in BAD_INPUTS])
+def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
+    out = tmp_path / "run"
+    p = run_cli(args + [f"hydra.run.dir={out}"], cwd=ROOT, timeout=120)
+    assert p.returncode == 2, p.stderr
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert lines == [lines[0]] and lines[0].startswith(f"error: {message}"), p.stderr
+    assert "Traceback" not in p.stderr
+    assert not out.exists()  # nothing was run, nothing left behind
+
+
+def verify(path: Path) -> None:
+    p = subprocess.run([str(RERUN), "rrd", "verify", str(path)], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+
+
+def test_unstable_run_stops_cleanly(tmp_path):
+    # a far too large fixed time step for a stiff ball
+    p = run_cli(["material.E=1e8", "run.dt=2e-3", "run.steps=500", "scene.resolution=32",
+                 f"hydra.run.dir={tmp_path}"], cwd=ROOT)
+    assert p.returncode == 3, p.stderr
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["status"] == "unstable"
+    assert metrics["reason"].startswith(f"step {metrics['unstable_step']} (t = ")
+    assert metrics["steps"] == metrics["unstable_step"] < 500
+    assert "non-finite" in metrics["reason"] or "left the domain" in metrics["reason"]
+    assert metrics["reason"] in p.stderr
+    verify(tmp_path / "recording.rrd")
+
+
+@pytest.mark.parametrize("sig,name", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
+def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
+    rrd = tmp_path / "recording.rrd"
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", "run.steps=10000000",
+                             "log.every=20", f"hydra.run.dir={tmp_path}"], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and (not rrd.exists() or rrd.stat().st_size < 200_000):
+            time.sleep(0.2)  # wait until it is stepping and logging
+        assert proc.poll() is None
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["status"] == "interrupted" and metrics["reason"].startswith(f"{name} at step")
+    assert metrics["steps"] > 0 and metrics["energy_final"] is not None
+    verify(rrd)
