@@ -8,7 +8,8 @@ Measured quantities (names from :func:`diagnostic_names`):
                   with D = moment dx^2 (Jiang et al. 2015); in 2D the scalar
                   m (x0 v1 - x1 v0) + m D (C10 - C01)
   kinetic_energy  sum 1/2 m_p |v_p|^2 [J]
-  elastic_energy  sum V_p^0 psi(F_p) [J]
+  elastic_energy  sum V_p^0 psi(F_p) [J]; evaluated by the P2G pass, which
+                  decomposes F for the stress anyway (see mpm.transfer)
   potential_energy  -sum m_p g . x_p [J] (zero at the origin)
   momentum_scale  sum m_p |v_p|: the scale of relative momentum drifts
   angular_momentum_scale  sum m_p (|x_p| |v_p| + D |C_p|): same for angular
@@ -30,12 +31,12 @@ def diagnostic_names(dim: int) -> list[str]:
 
 
 @functools.cache
-def make_measure(t: Types, material):
+def make_measure(t: Types):
+    """Everything but the elastic energy, for all particles at once."""
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec = t.vec
     dim = t.dim
     f64 = wp.float64
-    energy = material.energy(t)
     nL = 1 if dim == 2 else 3
     iL = 1 + dim  # first angular momentum slot
     iE = iL + nL  # kinetic energy slot
@@ -43,19 +44,14 @@ def make_measure(t: Types, material):
     @wp.kernel(module="unique")
     def measure(
         mass: wp.array(dtype=S),
-        volume: wp.array(dtype=S),
-        body: wp.array(dtype=wp.int32),
-        body_params: wp.array(dtype=t.params),
         x: wp.array(dtype=t.vec),
         v: wp.array(dtype=t.vec),
         C: wp.array(dtype=t.mat),
-        F0s: wp.array(dtype=t.mat),
         D: S,
         gravity: t.vec,
-        start: int,
         out: wp.array(dtype=f64),
     ):
-        p = wp.tid() + start
+        p = wp.tid()
         m = mass[p]
         xp = x[p]
         vp = v[p]
@@ -72,7 +68,6 @@ def make_measure(t: Types, material):
             for d in range(3):
                 wp.atomic_add(out, iL + d, f64(L3[d]))
         wp.atomic_add(out, iE, f64(S(0.5) * m * wp.dot(vp, vp)))
-        wp.atomic_add(out, iE + 1, f64(volume[p] * energy(F0s[p], body_params[body[p]])))
         wp.atomic_add(out, iE + 2, f64(-m * wp.dot(gravity, xp)))
         speed = wp.length(vp)
         wp.atomic_add(out, iE + 3, f64(m * speed))

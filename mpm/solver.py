@@ -1,8 +1,8 @@
 """The explicit MPM step, as a short list of named stages.
 
-The solver compiles only what the model uses: one P2G and one diagnostics
-kernel per material model present, one G2P per distinct plasticity
-projection, the grid update for the scene's dimension and precision.
+The solver compiles only what the model uses: one P2G per material model
+present, one G2P per distinct plasticity projection, the grid update and the
+diagnostics for the scene's dimension and precision.
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ from .transfer import make_g2p, make_p2g
 class SolverOptions:
     record_dJ: bool = False
     """write the per-particle dJ field every step (for logging)"""
-    measure: bool = True
-    """compile the diagnostics kernel (mass, momenta, energies)"""
 
 
 @dataclass
@@ -77,20 +75,20 @@ class Solver:
             for proj, gs in groupby(model.groups, key=lambda g: g.cls.project)
         ]
         self._grid_update = make_grid_update(t)
-        self._measure = ([(make_measure(t, g.cls), g) for g in model.groups]
-                         if self.options.measure else [])
+        self._measure = make_measure(t)
 
         with wp.ScopedDevice(dev):
             self.grid_m = wp.zeros(model.n_nodes, dtype=S)
             self.grid_v = wp.zeros(model.n_nodes, dtype=t.vec)  # momentum, then velocity
             self.monitor = wp.zeros(3, dtype=wp.float64)
+            self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
             self.diagnostics = wp.zeros(len(diagnostic_names(t.dim)), dtype=wp.float64)
             self._no_dJ = wp.zeros(1, dtype=S)
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
-        ks = [k for k, _ in self._p2g] + [k for k, _ in self._g2p] + [self._grid_update]
-        return ks + [k for k, _ in self._measure]
+        return [k for k, _ in self._p2g] + [k for k, _ in self._g2p] + [self._grid_update,
+                                                                         self._measure]
 
     def load(self) -> float:
         """Compile (or load from the cache) every kernel this run uses; seconds taken."""
@@ -115,10 +113,11 @@ class Solver:
         self._interpolate(state, dt)
 
     def _clear(self):
-        """Zero the grid and the stability monitor."""
+        """Zero the grid, the stability monitor and the energy sum."""
         self.grid_m.zero_()
         self.grid_v.zero_()
         self.monitor.zero_()
+        self.energy.zero_()
 
     def _rasterize(self, state: State, dt):
         """P2G: mass and momentum, with the stress impulse, to the grid."""
@@ -128,7 +127,7 @@ class Solver:
                 m.mass, m.volume, m.body, m.body_params,
                 state.X, state.v, state.C, state.F0s,
                 self._inv_dx, self._cells, self._strides, self._K, dt, g.start,
-                self.grid_m, self.grid_v])
+                self.grid_m, self.grid_v, self.energy])
 
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls."""
@@ -155,19 +154,31 @@ class Solver:
         v2, nonfinite, outside = self.monitor.numpy()
         return Monitor(float(np.sqrt(v2)), int(nonfinite), int(outside))
 
-    def measure(self, state: State) -> np.ndarray:
-        """Diagnostics of ``state`` in the order of :func:`diagnostic_names` (float64)."""
+    def step_energy(self) -> float:
+        """Elastic energy [J] of the state the last step started from (P2G
+        evaluates it with the stress)."""
+        return float(self.energy.numpy()[0])
+
+    def measure(self, state: State, elastic: bool = True) -> np.ndarray:
+        """Diagnostics of ``state`` in the order of :func:`diagnostic_names`
+        (float64). ``elastic=False`` leaves the elastic energy NaN (take it
+        from :meth:`step_energy` of the next step); ``elastic=True`` runs a
+        P2G pass for it, which overwrites the scratch grid (harmless between
+        steps)."""
         m = self.model
-        if not self._measure:
-            raise RuntimeError("solver built with measure=False")
         self.diagnostics.zero_()
         D = m.types.scalar(m.kernel.moment * m.dx**2)
-        for kernel, g in self._measure:
-            wp.launch(kernel, g.count, device=m.device, inputs=[
-                m.mass, m.volume, m.body, m.body_params,
-                state.x, state.v, state.C, state.F0s, D, self._gravity, g.start,
-                self.diagnostics])
-        return self.diagnostics.numpy().copy()
+        wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
+            m.mass, state.x, state.v, state.C, D, self._gravity, self.diagnostics])
+        out = self.diagnostics.numpy().copy()
+        i = self.diagnostic_names().index("elastic_energy")
+        if elastic:
+            self._clear()
+            self._rasterize(state, m.types.scalar(0.0))
+            out[i] = self.step_energy()
+        else:
+            out[i] = np.nan
+        return out
 
     def diagnostic_names(self) -> list[str]:
         return diagnostic_names(self.model.dim)

@@ -11,7 +11,9 @@ P2G (eq. 10, 11, 20, 23, fused as in MLS-MPM):
     m_i      = sum_p W_ip m_p
     m_i v_i  = sum_p W_ip [m_p v_p + (m_p C_p - dt V_p^0 P(F^{0n}) F^{0s,T} K_p)(X_i - X_p)]
 so that after division by m_i the nodal velocity already holds the internal
-force impulse dt f_i / m_i.
+force impulse dt f_i / m_i. The stored energy sum_p V_p^0 psi(F^{0n}_p) of the
+state the step starts from is accumulated on the way (the decomposition of F
+is shared with the stress).
 
 G2P (eq. 28, 31, APIC form):
     v_p = sum_i W_ip v_i,   C_p = sum_i W_ip v_i (X_i - X_p)^T K_p,
@@ -32,12 +34,12 @@ from .types import Types
 @functools.cache
 def make_p2g(t: Types, kernel: Kernel, material):
     """P2G for the particles of one material model (``material`` is its class)."""
+    f64 = wp.float64
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim, Ks = t.dim, kernel.support
     locate = make_locate(t, kernel)
     node = make_node(t, kernel)
-    stress = material.stress(t)
+    stress_energy = material.stress_energy(t)
 
     @wp.kernel(module="unique")
     def p2g(
@@ -61,6 +63,8 @@ def make_p2g(t: Types, kernel: Kernel, material):
         # Grid out:
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
+        # Diagnostics out:
+        energy: wp.array(dtype=f64),
     ):
         p = wp.tid() + start
         flat, fx, W = locate(X[p], inv_dx, cells, strides)
@@ -69,7 +73,8 @@ def make_p2g(t: Types, kernel: Kernel, material):
         Cp = C[p]
         # Eulerian: F^{sn} = I at the start of the step, so F^{0n} = F^{0s}
         # and the velocity gradient in current coordinates is C_p.
-        P = stress(F, Cp, body_params[body[p]])
+        P, psi = stress_energy(F, Cp, body_params[body[p]])
+        wp.atomic_add(energy, 0, f64(volume[p] * psi))
         affine = m * Cp - (dt * volume[p] * K) * P * wp.transpose(F)
         mv = m * v[p]
         dx = S(1.0) / inv_dx
@@ -92,7 +97,7 @@ def make_g2p(t: Types, kernel: Kernel, project, record_dJ: bool):
     ``monitor`` accumulates [max |v_p|^2, non-finite count, outside count].
     """
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec, mat = t.vec, t.mat
     dim, Ks = t.dim, kernel.support
     locate = make_locate(t, kernel)
     node = make_node(t, kernel)

@@ -160,14 +160,24 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         names = solver.diagnostic_names()
         drift = Drift(names)
 
-        def record(step, t, extra):
-            d = solver.measure(state)
+        i_elastic = names.index("elastic_energy")
+        pending: list = []  # the scalar row of the last state, waiting for its elastic energy
+
+        def measure(step, t, extra):
+            """Measure the state just reached; its elastic energy arrives with
+            the next step's P2G (or from finish())."""
+            pending[:] = [step, t, solver.measure(state, elastic=False), extra]
+
+        def emit(elastic_energy):
+            step_, t_, d, extra = pending
+            d[i_elastic] = elastic_energy
             drift.add(d)
             if log.scalars:
                 row = dict(zip(names, d.tolist()))
                 row["total_energy"] = drift.energy(d)
                 row.update(extra)
-                sink.scalars(step, t, row)
+                sink.scalars(step_, t_, row)
+            pending.clear()
 
         def particles(step, t):
             # copies: on the CPU .numpy() is a view of memory the next step overwrites,
@@ -176,7 +186,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             dJ = state.dJ.numpy().copy() if record_dJ else None
             sink.particles(step, t, x, dJ)
 
-        record(0, 0.0, {"config_updates": 0.0})
+        measure(0, 0.0, {"config_updates": 0.0})
         if log.every:
             particles(0, 0.0)
         sink.event(0, 0.0, f"{spec.scheme.name}: the reference configuration is updated at every "
@@ -204,6 +214,8 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             t += dt
             step_ms.append(1e3 * elapsed)
             dts.append(dt)
+            if pending:
+                emit(solver.step_energy())
             if monitor.reason:
                 metrics["status"] = "unstable"
                 metrics["reason"] = f"step {step} (t = {t:.6g} s): {monitor.reason}"
@@ -216,9 +228,10 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             max_speed = monitor.max_speed
             t1 = time.perf_counter()
             last = (step == steps_end) if steps_end is not None else (t >= duration * (1 - 1e-12))
-            if log.scalars:
-                record(step, t, {"dt": dt, "max_speed": max_speed, "step_time_ms": step_ms[-1],
-                                 "config_updates": float(step)})
+            extra = {"dt": dt, "max_speed": max_speed, "step_time_ms": step_ms[-1],
+                     "config_updates": float(step)}
+            if log.scalars or last:
+                measure(step, t, extra)
             if log.every and (step % log.every == 0 or last):
                 particles(step, t)
                 log_ms.append(1e3 * (time.perf_counter() - t1))
@@ -242,9 +255,11 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         except ValueError:
             old_int = None
         try:
-            if drift is not None and metrics["status"] in ("interrupted", "completed") and step > 0:
-                if not log.scalars:
-                    drift.add(solver.measure(state))
+            if drift is not None and metrics["status"] != "failed":
+                # the last state reached: its elastic energy by one more P2G pass
+                if not pending:
+                    measure(step, t, {"config_updates": float(step)})
+                emit(solver.measure(state)[i_elastic])
                 if metrics["status"] == "interrupted" and log.every:
                     particles(step, t)
             if metrics["status"] == "interrupted":

@@ -90,3 +90,20 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
         if models[p] == "fluid":
             Fn[p] = np.linalg.det(Fn[p]) ** (1.0 / d) * np.eye(d)
     return xn, vn, Cn, Fn
+
+
+def energy(model, F, prm):
+    """Stored energy per unit rest volume psi(F)."""
+    d = F.shape[0]
+    J = np.linalg.det(F)
+    if model == "fixed_corotated":
+        mu, lam = prm
+        D = F - polar_rotation(F)
+        return mu * np.sum(D * D) + 0.5 * lam * (J - 1) ** 2
+    if model == "neo_hookean":
+        mu, lam = prm
+        return 0.5 * mu * (np.sum(F * F) - d) - mu * np.log(J) + 0.5 * lam * np.log(J) ** 2
+    if model == "fluid":
+        K, gamma, _ = prm
+        return K * (J ** (1 - gamma) / (gamma - 1) + J - gamma / (gamma - 1))
+    raise ValueError(model)

@@ -51,9 +51,9 @@ def test_mass_momentum_angular_momentum_conserved(dim, precision, device):
     tol = 2 * EPS[precision] * steps  # measured: below 0.25 eps per step
     assert after[0] == before[0]  # particle masses never change
     for i, name in enumerate(names):
-        if name.startswith("momentum"):
+        if name.startswith("momentum_") and name != "momentum_scale":
             assert abs(after[i] - before[i]) <= tol * p_scale, name
-        if name.startswith("angular_momentum"):
+        if name.startswith("angular_momentum") and name != "angular_momentum_scale":
             assert abs(after[i] - before[i]) <= tol * L_scale, name
     # the bodies did collide and deform: the test is not trivial
     assert after[names.index("elastic_energy")] > 1e-3 * before[names.index("kinetic_energy")]
@@ -71,7 +71,7 @@ def test_free_fall_follows_half_g_t_squared(dim, device):
                       bodies=[mpm.Body(mpm.Sphere(center, 0.1), mpm.FixedCorotated())],
                       gravity=gravity, walls=("slip",) * (2 * dim))
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
-    solver = mpm.Solver(model, options=mpm.SolverOptions(measure=False))
+    solver = mpm.Solver(model)
     y0 = state.x.numpy()[:, 1].copy()
     dt, n = 1e-3, 200
     for _ in range(n):

@@ -3,10 +3,12 @@
 A material is a plain dataclass of physical parameters (checked ranges, SI
 units) plus factories of Warp functions specialised for a :class:`Types`:
 
-* ``stress(F, L, params) -> P``: first Piola-Kirchhoff stress [Pa] of the
-  deformation gradient ``F`` (w.r.t. the rest state), given the velocity
-  gradient ``L`` in current coordinates [1/s] (used by viscous models only);
-* ``energy(F, params) -> psi``: stored energy per unit rest volume [J/m^3];
+* ``stress_energy(F, L, params) -> (P, psi)``: first Piola-Kirchhoff stress
+  ``P`` [Pa] of the deformation gradient ``F`` (w.r.t. the rest state), given
+  the velocity gradient ``L`` in current coordinates [1/s] (used by viscous
+  models only), and the stored energy ``psi`` per unit rest volume [J/m^3].
+  One function for both, so a kernel that needs both decomposes ``F`` once;
+  kernels that need one of them leave the other to dead-code elimination;
 * ``project(F, params) -> F`` (optional): applied when the reference
   configuration is updated (every step for the Eulerian scheme), e.g. a fluid
   keeps only the volume change of ``F``.
@@ -42,8 +44,7 @@ class Material:
     rho: float = param(1000.0, "rest density [kg/m^3]", gt=0.0)
 
     name: ClassVar[str] = ""
-    stress: ClassVar[Callable[[Types], Callable]]
-    energy: ClassVar[Callable[[Types], Callable]]
+    stress_energy: ClassVar[Callable[[Types], Callable]]
     project: ClassVar[Callable[[Types], Callable] | None] = None
 
     def __post_init__(self):

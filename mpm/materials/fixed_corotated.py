@@ -16,35 +16,22 @@ from .polar import make_rotation
 
 
 @functools.cache
-def _stress(t: Types):
+def _stress_energy(t: Types):
     rotation = make_rotation(t)
     S = t.scalar
 
     @wp.func
-    def stress(F: t.mat, L: t.mat, params: t.params):
+    def stress_energy(F: t.mat, L: t.mat, params: t.params):
         mu = params[0]
         lam = params[1]
         R = rotation(F)
         J = wp.determinant(F)
-        return S(2.0) * mu * (F - R) + lam * (J - S(1.0)) * J * wp.transpose(wp.inverse(F))
+        D = F - R
+        P = S(2.0) * mu * D + lam * (J - S(1.0)) * J * wp.transpose(wp.inverse(F))
+        psi = mu * wp.ddot(D, D) + S(0.5) * lam * (J - S(1.0)) * (J - S(1.0))
+        return P, psi
 
-    return stress
-
-
-@functools.cache
-def _energy(t: Types):
-    rotation = make_rotation(t)
-    S = t.scalar
-
-    @wp.func
-    def energy(F: t.mat, params: t.params):
-        mu = params[0]
-        lam = params[1]
-        D = F - rotation(F)
-        J = wp.determinant(F)
-        return mu * wp.ddot(D, D) + S(0.5) * lam * (J - S(1.0)) * (J - S(1.0))
-
-    return energy
+    return stress_energy
 
 
 @dataclass
@@ -52,8 +39,7 @@ class FixedCorotated(Material):
     """Fixed corotated hyperelastic solid."""
 
     name = "fixed_corotated"
-    stress = staticmethod(_stress)
-    energy = staticmethod(_energy)
+    stress_energy = staticmethod(_stress_energy)
 
     E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
     nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)

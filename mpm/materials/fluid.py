@@ -21,36 +21,23 @@ from .base import Material
 
 
 @functools.cache
-def _stress(t: Types):
+def _stress_energy(t: Types):
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    dim = t.dim
 
     @wp.func
-    def stress(F: t.mat, L: t.mat, params: t.params):
+    def stress_energy(F: t.mat, L: t.mat, params: t.params):
         K = params[0]
         gamma = params[1]
         viscosity = params[2]
         J = wp.determinant(F)
         p = K * (wp.pow(J, -gamma) - S(1.0))
         sigma = -p * wp.identity(n=dim, dtype=S) + viscosity * (L + wp.transpose(L))
-        return J * sigma * wp.transpose(wp.inverse(F))
+        P = J * sigma * wp.transpose(wp.inverse(F))
+        psi = K * (wp.pow(J, S(1.0) - gamma) / (gamma - S(1.0)) + J - gamma / (gamma - S(1.0)))
+        return P, psi
 
-    return stress
-
-
-@functools.cache
-def _energy(t: Types):
-    S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
-
-    @wp.func
-    def energy(F: t.mat, params: t.params):
-        K = params[0]
-        gamma = params[1]
-        J = wp.determinant(F)
-        return K * (wp.pow(J, S(1.0) - gamma) / (gamma - S(1.0)) + J - gamma / (gamma - S(1.0)))
-
-    return energy
+    return stress_energy
 
 
 @functools.cache
@@ -73,8 +60,7 @@ class Fluid(Material):
     """Weakly compressible (Tait-like) fluid."""
 
     name = "fluid"
-    stress = staticmethod(_stress)
-    energy = staticmethod(_energy)
+    stress_energy = staticmethod(_stress_energy)
     project = staticmethod(_project)
 
     K: float = param(2.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]", gt=0.0)

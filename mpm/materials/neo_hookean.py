@@ -15,30 +15,21 @@ from .base import Material, elastic_wave_speed, lame
 
 
 @functools.cache
-def _stress(t: Types):
+def _stress_energy(t: Types):
+    S = t.scalar
+    d = float(t.dim)
+
     @wp.func
-    def stress(F: t.mat, L: t.mat, params: t.params):
+    def stress_energy(F: t.mat, L: t.mat, params: t.params):
         mu = params[0]
         lam = params[1]
         FinvT = wp.transpose(wp.inverse(F))
-        return mu * (F - FinvT) + lam * wp.log(wp.determinant(F)) * FinvT
-
-    return stress
-
-
-@functools.cache
-def _energy(t: Types):
-    S = t.scalar
-    d = S(t.dim)
-
-    @wp.func
-    def energy(F: t.mat, params: t.params):
-        mu = params[0]
-        lam = params[1]
         lnJ = wp.log(wp.determinant(F))
-        return S(0.5) * mu * (wp.ddot(F, F) - d) - mu * lnJ + S(0.5) * lam * lnJ * lnJ
+        P = mu * (F - FinvT) + lam * lnJ * FinvT
+        psi = S(0.5) * mu * (wp.ddot(F, F) - S(d)) - mu * lnJ + S(0.5) * lam * lnJ * lnJ
+        return P, psi
 
-    return energy
+    return stress_energy
 
 
 @dataclass
@@ -46,8 +37,7 @@ class NeoHookean(Material):
     """Compressible neo-Hookean hyperelastic solid."""
 
     name = "neo_hookean"
-    stress = staticmethod(_stress)
-    energy = staticmethod(_energy)
+    stress_energy = staticmethod(_stress_energy)
 
     E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
     nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
