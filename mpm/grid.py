@@ -20,7 +20,7 @@ SLIP = WALL_TYPES.index("slip")
 @functools.cache
 def make_wall(t: Types):
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec = t.vec
 
     @wp.func
     def wall(v: t.vec, d: int, outward: S, kind: int):
@@ -36,7 +36,6 @@ def make_wall(t: Types):
 @functools.cache
 def make_grid_update(t: Types):
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
     dim = t.dim
     wall = make_wall(t)
 

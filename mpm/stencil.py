@@ -29,7 +29,7 @@ def make_locate(t: Types, kernel: Kernel):
     The base node is clamped to the grid so that a runaway particle never
     addresses memory outside it (G2P flags such particles)."""
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec = t.vec
     Wm = weight_matrix_type(t, kernel)
     weights = kernel.weights(t)
     last = kernel.support - 1
@@ -58,7 +58,7 @@ def make_locate(t: Types, kernel: Kernel):
 def make_node(t: Types, kernel: Kernel):
     """``node(a, b, c, flat, fx, W, strides, dx) -> (w, r, i)``; c is ignored in 2D."""
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec = t.vec
     Wm = weight_matrix_type(t, kernel)
 
     @wp.func

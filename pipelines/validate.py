@@ -83,7 +83,7 @@ def _number(key: str, value, kind=float, *, gt=None, ge=None, le=None, optional=
             raise ValueError
         v = kind(value)
     except (TypeError, ValueError):
-        raise ConfigError(key, f"{value!r} is not {'an integer' if kind is int else 'a number'}")
+        raise ConfigError(key, f"{value!r} is not {'an integer' if kind is int else 'a number'}") from None
     bounds = [f"{key} > {gt}" if gt is not None else None, f"{key} >= {ge}" if ge is not None else None,
               f"{key} <= {le}" if le is not None else None]
     if (gt is not None and not v > gt) or (ge is not None and not v >= ge) or \

@@ -43,8 +43,7 @@ def _stress_energy(t: Types):
 @functools.cache
 def _project(t: Types):
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
-
+    dim = t.dim
     inv_dim = 1.0 / t.dim
 
     @wp.func

@@ -10,7 +10,7 @@ from ..types import Types
 @functools.cache
 def make_rotation(t: Types):
     S = t.scalar
-    vec, mat, ivec, dim = t.vec, t.mat, t.ivec, t.dim
+    vec, mat = t.vec, t.mat
 
     if t.dim == 2:
 
