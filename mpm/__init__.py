@@ -8,12 +8,13 @@ from .kernels import KERNELS, Kernel
 from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
 from .model import Model, SceneError, State, build
 from .scene import WALL_TYPES, Body, Box, Cylinder, Scene, Sphere
-from .schemes import EMPM, SCHEMES
-from .solver import Monitor, Solver, SolverOptions
+from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
+from .solver import Solver, SolverOptions, StepReport
 from .timestep import cfl_dt
 
 __all__ = [
     "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
     "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Cylinder",
-    "Scene", "Sphere", "EMPM", "SCHEMES", "Monitor", "Solver", "SolverOptions", "cfl_dt",
+    "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
+    "StepReport", "cfl_dt",
 ]

@@ -3,10 +3,11 @@
 Measured quantities (names from :func:`diagnostic_names`):
   mass            sum m_p [kg]
   momentum        sum m_p v_p [kg m/s]
-  angular_momentum  APIC angular momentum about the origin
-                  sum m_p x_p x v_p + m_p D eps:(C_p^T)   [kg m^2/s]
-                  with D = moment dx^2 (Jiang et al. 2015); in 2D the scalar
-                  m (x0 v1 - x1 v0) + m D (C10 - C01)
+  angular_momentum  APIC angular momentum about the origin [kg m^2/s]
+                  sum m_p x_p x v_p + m_p D axial(A_p),  A_p = C_p F^sn_p^T,
+                  D = moment dx^2 (Jiang et al. 2015): the angular momentum of
+                  the nodal field sum_i q_i x m_i v_i each particle rasterises;
+                  in 2D the scalar m (x0 v1 - x1 v0) + m D (A10 - A01)
   kinetic_energy  sum 1/2 m_p |v_p|^2 [J]
   elastic_energy  sum V_p^0 psi(F_p) [J]; evaluated by the P2G pass, which
                   decomposes F for the stress anyway (see mpm.transfer)
@@ -47,6 +48,7 @@ def make_measure(t: Types):
         x: wp.array(dtype=t.vec),
         v: wp.array(dtype=t.vec),
         C: wp.array(dtype=t.mat),
+        Fsn: wp.array(dtype=t.mat),
         D: S,
         gravity: t.vec,
         out: wp.array(dtype=f64),
@@ -56,15 +58,16 @@ def make_measure(t: Types):
         xp = x[p]
         vp = v[p]
         Cp = C[p]
+        A = Cp * wp.transpose(Fsn[p])
         wp.atomic_add(out, 0, f64(m))
         for d in range(wp.static(dim)):
             wp.atomic_add(out, 1 + d, f64(m * vp[d]))
         if wp.static(dim == 2):
-            L = m * (xp[0] * vp[1] - xp[1] * vp[0]) + m * D * (Cp[1, 0] - Cp[0, 1])
+            L = m * (xp[0] * vp[1] - xp[1] * vp[0]) + m * D * (A[1, 0] - A[0, 1])
             wp.atomic_add(out, iL, f64(L))
         else:
             L3 = m * wp.cross(xp, vp) + m * D * vec(
-                Cp[2, 1] - Cp[1, 2], Cp[0, 2] - Cp[2, 0], Cp[1, 0] - Cp[0, 1])
+                A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1])
             for d in range(3):
                 wp.atomic_add(out, iL + d, f64(L3[d]))
         wp.atomic_add(out, iE, f64(S(0.5) * m * wp.dot(vp, vp)))

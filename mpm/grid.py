@@ -1,9 +1,13 @@
 """Grid velocity update: momentum to velocity, gravity, box walls.
 
-v_i = (m_i v_i) / m_i + dt g  on every node with mass, then for nodes within
-``wall_cells`` of a face: sticky walls set v_i = 0, slip walls remove the
-velocity component pointing into the wall (separation and tangential motion
-are free), open faces do nothing.
+On every node with mass:
+    v_i = (m_i v_i) / m_i + dt g,    q_i = (m_i q_i) / m_i,
+then (after contact, when bodies can touch: mpm.contact) the boundary
+conditions: walls act on nodes whose current position q_i lies within the wall band
+of a face: closer than ``(wall_cells - 1/2) dx`` to it, i.e. the first
+``wall_cells`` lattice nodes of an Eulerian grid. Sticky walls set v_i = 0,
+slip walls remove the velocity component pointing into the wall (separation
+and tangential motion are free), open faces do nothing.
 """
 
 import functools
@@ -34,36 +38,75 @@ def make_wall(t: Types):
 
 
 @functools.cache
-def make_grid_update(t: Types):
+def make_walls(t: Types):
+    """``walls(v, q, domain, band, wall_lo, wall_hi) -> v``."""
     S = t.scalar
-    dim = t.dim
     wall = make_wall(t)
+
+    @wp.func
+    def walls(v: t.vec, q: t.vec, domain: t.vec, band: S, wall_lo: t.ivec, wall_hi: t.ivec):
+        for d in range(wp.static(t.dim)):
+            if q[d] < band:
+                v = wall(v, d, S(-1.0), wall_lo[d])
+            if q[d] > domain[d] - band:
+                v = wall(v, d, S(1.0), wall_hi[d])
+        return v
+
+    return walls
+
+
+@functools.cache
+def make_grid_update(t: Types, with_walls: bool):
+    """Momentum to velocity and gravity; the walls too unless ``with_walls`` is
+    False (contact comes first, then :func:`make_boundary`)."""
+    S = t.scalar
+    walls = make_walls(t)
 
     @wp.kernel(module="unique")
     def grid_update(
         grid_m: wp.array(dtype=S),
         gravity: t.vec,
         dt: S,
-        cells: t.ivec,
-        strides: t.ivec,
+        domain: t.vec,
+        band: S,
         wall_lo: t.ivec,
         wall_hi: t.ivec,
-        wall_cells: int,
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
+        grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position, out: position
     ):
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
         vi = grid_v[i] / m + dt * gravity
-        rest = i
-        for d in range(wp.static(dim)):
-            n = rest // strides[d]
-            rest -= n * strides[d]
-            if n < wall_cells:
-                vi = wall(vi, d, S(-1.0), wall_lo[d])
-            if n > cells[d] - wall_cells:
-                vi = wall(vi, d, S(1.0), wall_hi[d])
+        qi = grid_q[i] / m
+        if wp.static(with_walls):
+            vi = walls(vi, qi, domain, band, wall_lo, wall_hi)
         grid_v[i] = vi
+        grid_q[i] = qi
 
     return grid_update
+
+
+@functools.cache
+def make_boundary(t: Types):
+    """The walls as a pass of their own (after contact)."""
+    S = t.scalar
+    walls = make_walls(t)
+
+    @wp.kernel(module="unique")
+    def boundary(
+        grid_m: wp.array(dtype=S),
+        grid_q: wp.array(dtype=t.vec),
+        domain: t.vec,
+        band: S,
+        wall_lo: t.ivec,
+        wall_hi: t.ivec,
+        grid_v: wp.array(dtype=t.vec),
+    ):
+        i = wp.tid()
+        if grid_m[i] <= S(0.0):
+            return
+        grid_v[i] = walls(grid_v[i], grid_q[i], domain, band, wall_lo, wall_hi)
+
+    return boundary

@@ -16,6 +16,7 @@ from .kernels import Kernel
 from .materials import Material
 from .params import violations
 from .sampling import sample_shape
+from .stencil import weight_matrix_type
 from .scene import WALL_TYPES, Scene
 from .types import Types, make_types
 
@@ -95,23 +96,31 @@ class Model:
 class State:
     """Time-varying particle data.
 
-    ``X`` are the reference positions (at the last configuration update) and
-    ``F0s`` the deformation gradient at that update; for the Eulerian scheme
-    the reference is updated every step, so ``X`` is the same array as ``x``
-    and ``F0s`` is the full deformation gradient ``F``.
+    ``X`` are the reference positions (at the last configuration update of the
+    particle's body), ``F0s`` the deformation gradient at that update and
+    ``Fsn`` the deformation since then, so F = Fsn F0s. The stencil cache
+    (first node, local coordinate, weights) belongs to the reference
+    configuration and is recomputed with it (mpm.configuration).
     """
 
     x: wp.array  # current positions [m]
     v: wp.array  # velocities [m/s]
-    C: wp.array  # affine velocity matrices [1/s]
+    C: wp.array  # affine matrices: velocity gradient w.r.t. the reference [1/s]
     F0s: wp.array  # deformation gradient at the last configuration update
+    Fsn: wp.array  # deformation gradient since the last configuration update
     X: wp.array  # reference positions [m]
-    dJ: wp.array | None = None  # |det F^sn - 1| of the last step, when recorded
+    dJ: wp.array  # |det Fsn - 1| after the last step (written when recorded)
+    cache_base: wp.array  # flat index of the first stencil node
+    cache_fx: wp.array  # X / dx - base
+    cache_W: wp.array  # per-axis kernel weights
+
+    def F(self) -> np.ndarray:
+        """The full deformation gradient F^{0n} = F^{sn} F^{0s} (host copy)."""
+        return self.Fsn.numpy() @ self.F0s.numpy()
 
     def numpy(self) -> dict[str, np.ndarray]:
-        out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s")}
-        if self.dJ is not None:
-            out["dJ"] = self.dJ.numpy().copy()
+        out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s", "Fsn", "X", "dJ")}
+        out["F"] = out["Fsn"] @ out["F0s"]
         return out
 
 
@@ -227,12 +236,17 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
                                  dtype=t.params),
             groups=groups, body_ranges=body_ranges, wall_codes=wall_codes,
         )
-        xw = wp.array(x.astype(S), dtype=t.vec)
+        eye = np.tile(np.eye(d, dtype=S), (n, 1, 1))
         state = State(
-            x=xw,
+            x=wp.array(x.astype(S), dtype=t.vec),
             v=wp.array(np.concatenate(vs).astype(S), dtype=t.vec),
             C=wp.array(np.concatenate(Cs).astype(S), dtype=t.mat),
-            F0s=wp.array(np.tile(np.eye(d, dtype=S), (n, 1, 1)), dtype=t.mat),
-            X=xw,
+            F0s=wp.array(eye, dtype=t.mat),
+            Fsn=wp.array(eye, dtype=t.mat),
+            X=wp.array(x.astype(S), dtype=t.vec),
+            dJ=wp.zeros(n, dtype=t.scalar),
+            cache_base=wp.zeros(n, dtype=wp.int32),
+            cache_fx=wp.zeros(n, dtype=t.vec),
+            cache_W=wp.zeros(n, dtype=weight_matrix_type(t, kernel)),
         )
     return model, state

@@ -13,10 +13,11 @@ import math
 from typing import Any, Iterator
 
 
-def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None):
-    """A dataclass field with a documented, checked range (bounds may be None)."""
+def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, inf=False):
+    """A dataclass field with a documented, checked range (bounds may be None;
+    ``inf``: +infinity is accepted; None values are not checked)."""
     return dataclasses.field(
-        default=default, metadata={"doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le}
+        default=default, metadata={"doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le, "inf": inf}
     )
 
 
@@ -26,11 +27,14 @@ def accepted_range(name: str, meta: dict) -> str:
         f"{meta['ge']} <= " if meta.get("ge") is not None else "")
     hi = f" < {meta['lt']}" if meta.get("lt") is not None else (
         f" <= {meta['le']}" if meta.get("le") is not None else "")
-    return f"{lo}{name}{hi}" if (lo or hi) else f"{name} finite"
+    text = f"{lo}{name}{hi}" if (lo or hi) else f"{name} finite"
+    return text + (" (inf allowed)" if meta.get("inf") else "")
 
 
 def in_range(value: float, meta: dict) -> bool:
-    if value is None or not math.isfinite(value):
+    if value is None or math.isnan(value):
+        return False
+    if math.isinf(value) and not (meta.get("inf") and value > 0):
         return False
     if meta.get("gt") is not None and not value > meta["gt"]:
         return False
@@ -52,6 +56,8 @@ def violations(obj: Any) -> Iterator[tuple[str, Any, str]]:
         if not any(meta.get(k) is not None for k in ("gt", "ge", "lt", "le")):
             continue
         value = getattr(obj, f.name)
+        if value is None:
+            continue
         try:
             ok = in_range(float(value), meta)
         except (TypeError, ValueError):

@@ -14,6 +14,7 @@ import numpy as np
 from .materials import Material
 
 WALL_TYPES = ("sticky", "slip", "open")
+CONTACT_TYPES = ("frictionless", "none")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
 
@@ -108,6 +109,8 @@ class Scene:
     regular sub-lattice, anything else uniform random points per cell"""
     jitter: float = 0.0
     """random displacement of lattice samples, as a fraction of their spacing"""
+    contact: str = "frictionless"
+    """between bodies: "frictionless" (mpm.contact) or "none" (they pass through)"""
 
     @property
     def dx(self) -> float:

@@ -1,24 +1,30 @@
 """The explicit MPM step, as a short list of named stages.
 
+One formulation serves every scheme (mpm.schemes): each body has its own
+reference grid (mpm.layout); a step rasterises the particles to it, updates
+the nodal velocities, interpolates back and leaves the configuration update
+to the scheme's rule, evaluated by :meth:`Solver.advance`.
+
 The solver compiles only what the model uses: one P2G per material model
-present, one G2P per distinct plasticity projection, the grid update and the
-diagnostics for the scene's dimension and precision.
+present, one configuration update per distinct plasticity projection, one
+G2P, grid update and diagnostics kernel for the dimension and precision.
 """
 
-from __future__ import annotations
-
 import time
-from dataclasses import dataclass
-from itertools import groupby
+from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
 
+from .configuration import make_update
 from .diagnostics import diagnostic_names, make_measure
-from .grid import make_grid_update
-from .model import MaterialGroup, Model, State
-from .schemes import EMPM
-from .transfer import make_g2p, make_p2g
+from .contact import make_contact
+from .grid import make_boundary, make_grid_update
+from .layout import GridLayout
+from .materials import Fluid
+from .model import Model, State
+from .schemes import AULMPM, EMPM
+from .transfer import STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, make_g2p, make_p2g
 
 
 @dataclass
@@ -28,12 +34,16 @@ class SolverOptions:
 
 
 @dataclass
-class Monitor:
-    """Stability figures of the last step."""
+class StepReport:
+    """What one step left behind: stability figures, the criterion per body,
+    the configuration updates it triggered."""
 
     max_speed: float  # [m/s]
-    nonfinite: int  # particles with a non-finite position, velocity or F
+    nonfinite: int  # particles with a non-finite position, velocity or F^sn
     outside: int  # particles that left the domain interior
+    marked: np.ndarray  # per body: particles with dJ >= epsilon (A-ULMPM), else 0
+    updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
+    update_time: float = 0.0  # [s] deciding and updating
 
     @property
     def reason(self) -> str | None:
@@ -49,46 +59,69 @@ class Solver:
 
     def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
         self.model = model
-        self.scheme = scheme or EMPM()
-        if not isinstance(self.scheme, EMPM):
-            raise ValueError(f"scheme {self.scheme!r} not supported; accepted: empm")
+        scheme = scheme or EMPM()
+        if isinstance(scheme, AULMPM):
+            scheme = scheme.resolved(any(isinstance(b.material, Fluid) for b in model.scene.bodies))
+        self.scheme = scheme
         self.options = options or SolverOptions()
         t, k, dev = model.types, model.kernel, model.device
         S = t.scalar
+        nb = len(model.scene.bodies)
+        self.n_bodies = nb
+        self.body_counts = np.array([c for _, c in model.body_ranges])
 
         # constants of the launches
+        self._dx = S(model.dx)
         self._inv_dx = S(1.0 / model.dx)
-        self._cells = t.ivec(*model.cells)
-        self._strides = t.ivec(*model.strides)
         self._K = S(1.0 / (k.moment * model.dx**2))  # MLS moment inverse K_p
         self._gravity = t.vec(*model.gravity)
+        self._domain = t.vec(*model.domain)
+        self._band = S((model.scene.wall_cells - 0.5) * model.dx)
         self._wall_lo = t.ivec(*model.wall_codes[0])
         self._wall_hi = t.ivec(*model.wall_codes[1])
         margin = k.margin * model.dx
         self._inside_lo = t.vec(*([margin] * t.dim))
         self._inside_hi = t.vec(*[L - margin for L in model.domain])
+        eps = getattr(scheme, "epsilon", None)
+        self._epsilon = S(eps if eps is not None and np.isfinite(eps) else 0.0)
 
         # kernels specialised for what the model holds
         self._p2g = [(make_p2g(t, k, g.cls), g) for g in model.groups]
-        self._g2p = [
-            (make_g2p(t, k, proj, self.options.record_dJ), _merge(list(gs)))
-            for proj, gs in groupby(model.groups, key=lambda g: g.cls.project)
-        ]
-        self._grid_update = make_grid_update(t)
+        self._g2p = make_g2p(t, k, self.options.record_dJ, scheme.tracks_marks())
+        self.contact = nb > 1 and model.scene.contact != "none"
+        self._grid_update = make_grid_update(t, with_walls=not self.contact)
+        self._contact = make_contact(t) if self.contact else ()
+        self._boundary = make_boundary(t) if self.contact else None
         self._measure = make_measure(t)
+        transform = scheme.affine == "transform"
+        self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform)
+                        for b in range(nb)}
 
+        self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev)
         with wp.ScopedDevice(dev):
-            self.grid_m = wp.zeros(model.n_nodes, dtype=S)
-            self.grid_v = wp.zeros(model.n_nodes, dtype=t.vec)  # momentum, then velocity
-            self.monitor = wp.zeros(3, dtype=wp.float64)
+            n_status = STATUS_HEADER + nb + 2 * nb * t.dim
+            self.status = wp.zeros(n_status, dtype=wp.float64)
+            reset = np.zeros(n_status)
+            reset[STATUS_HEADER + nb: STATUS_HEADER + nb + nb * t.dim] = np.inf
+            reset[STATUS_HEADER + nb + nb * t.dim:] = -np.inf
+            self._status_reset = wp.array(reset, dtype=wp.float64)
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
+            if self.contact:  # per-body fields on the global lattice
+                n_global = model.n_nodes
+                self._cells = t.ivec(*model.cells)
+                self._global_strides = t.ivec(*model.strides)
+                self.contact_M = wp.zeros(nb * n_global, dtype=t.scalar)
+                self.contact_P = wp.zeros(nb * n_global, dtype=t.vec)
+                self.contact_dV = wp.zeros(nb * n_global, dtype=t.vec)
             self.diagnostics = wp.zeros(len(diagnostic_names(t.dim)), dtype=wp.float64)
-            self._no_dJ = wp.zeros(1, dtype=S)
+        self._capacity = 0
+        self.grid_m = self.grid_v = self.grid_q = None
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
-        return [k for k, _ in self._p2g] + [k for k, _ in self._g2p] + [self._grid_update,
-                                                                         self._measure]
+        ks = [k for k, _ in self._p2g] + [self._g2p, self._grid_update, self._measure]
+        ks += list(self._contact) + ([self._boundary] if self._boundary else [])
+        return ks + list(self._update.values())
 
     def load(self) -> float:
         """Compile (or load from the cache) every kernel this run uses; seconds taken."""
@@ -98,61 +131,142 @@ class Solver:
         return time.perf_counter() - t0
 
     def prepare(self, state: State) -> None:
-        """Allocate the scheme's per-particle arrays in ``state``."""
-        if self.options.record_dJ and state.dJ is None:
-            state.dJ = wp.zeros(self.model.n_particles, dtype=self.model.types.scalar,
-                                device=self.model.device)
+        """Take the initial positions as every body's reference configuration."""
+        x = state.x.numpy()
+        for b, (start, count) in enumerate(self.model.body_ranges):
+            xb = x[start:start + count]
+            self.layout.fit(b, xb.min(axis=0), xb.max(axis=0))
+        self._commit_layout()
+        for b in range(self.n_bodies):
+            self._launch_update(state, b)
 
     # ------------------------------------------------------------------ step
+    def advance(self, state: State, dt: float) -> StepReport:
+        """One step, then the configuration updates the scheme asks for."""
+        self.step(state, dt)
+        report = self.check()
+        if report.reason is None:
+            t0 = time.perf_counter()
+            report.updated = [b for b in range(self.n_bodies)
+                              if self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]))]
+            if report.updated:
+                self.update_configuration(state, report.updated)
+            report.update_time = time.perf_counter() - t0
+        return report
+
     def step(self, state: State, dt: float) -> None:
-        """Advance ``state`` by ``dt`` [s]."""
+        """Advance ``state`` by ``dt`` [s] in the current reference configurations."""
         dt = self.model.types.scalar(dt)
         self._clear()
         self._rasterize(state, dt)
         self._update_grid(dt)
+        if self.contact:
+            self._resolve_contact()
+            self._apply_boundary()
         self._interpolate(state, dt)
 
     def _clear(self):
-        """Zero the grid, the stability monitor and the energy sum."""
-        self.grid_m.zero_()
-        self.grid_v.zero_()
-        self.monitor.zero_()
+        """Zero the grid, the status buffer and the energy sum."""
+        n = self.layout.n_nodes
+        self.grid_m[:n].zero_()
+        self.grid_v[:n].zero_()
+        self.grid_q[:n].zero_()
+        wp.copy(self.status, self._status_reset)
         self.energy.zero_()
 
     def _rasterize(self, state: State, dt):
-        """P2G: mass and momentum, with the stress impulse, to the grid."""
+        """P2G: mass, momentum with the stress impulse, and node positions."""
         m = self.model
         for kernel, g in self._p2g:
             wp.launch(kernel, g.count, device=m.device, inputs=[
-                m.mass, m.volume, m.body, m.body_params,
-                state.X, state.v, state.C, state.F0s,
-                self._inv_dx, self._cells, self._strides, self._K, dt, g.start,
-                self.grid_m, self.grid_v, self.energy])
+                m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
+                state.x, state.v, state.C, state.F0s, state.Fsn,
+                state.cache_base, state.cache_fx, state.cache_W,
+                self._dx, self._K, dt, g.start,
+                self.grid_m, self.grid_v, self.grid_q, self.energy])
 
     def _update_grid(self, dt):
-        """Grid momentum to velocity, gravity, walls."""
-        m = self.model
-        wp.launch(self._grid_update, m.n_nodes, device=m.device, inputs=[
-            self.grid_m, self._gravity, dt, self._cells, self._strides,
-            self._wall_lo, self._wall_hi, m.scene.wall_cells, self.grid_v])
+        """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
+        wp.launch(self._grid_update, self.layout.n_nodes, device=self.model.device, inputs=[
+            self.grid_m, self._gravity, dt, self._domain, self._band, self._wall_lo,
+            self._wall_hi, self.grid_v, self.grid_q])
+
+    def _resolve_contact(self):
+        """Frictionless contact between bodies on the global lattice."""
+        m, lay = self.model, self.layout
+        splat, resolve, gather = self._contact
+        n_global = m.n_nodes
+        self.contact_M.zero_()
+        self.contact_P.zero_()
+        self.contact_dV.zero_()
+        common = [lay.offset_d, self.n_bodies, self._inv_dx, self._cells, self._global_strides,
+                  n_global]
+        wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
+            self.grid_m, self.grid_v, self.grid_q, *common, self.contact_M, self.contact_P])
+        wp.launch(resolve, n_global, device=m.device, inputs=[
+            self.n_bodies, self._cells, self._global_strides, n_global,
+            self.contact_M, self.contact_P, self.contact_dV])
+        wp.launch(gather, lay.n_nodes, device=m.device, inputs=[
+            self.grid_m, self.grid_q, *common, self.contact_dV, self.grid_v])
+
+    def _apply_boundary(self):
+        """Walls, after contact."""
+        wp.launch(self._boundary, self.layout.n_nodes, device=self.model.device, inputs=[
+            self.grid_m, self.grid_q, self._domain, self._band, self._wall_lo, self._wall_hi,
+            self.grid_v])
 
     def _interpolate(self, state: State, dt):
-        """G2P: velocities, affine matrices, positions, deformation; fused
-        Eulerian configuration update."""
+        """G2P: velocities, affine matrices, positions, F^sn, the criterion."""
         m = self.model
-        dJ = state.dJ if state.dJ is not None else self._no_dJ
-        for kernel, g in self._g2p:
-            wp.launch(kernel, g.count, device=m.device, inputs=[
-                m.body, m.body_params, self.grid_v,
-                self._inv_dx, self._cells, self._strides, self._K, dt, g.start,
-                self._inside_lo, self._inside_hi,
-                state.x, state.v, state.C, state.F0s, dJ, self.monitor])
+        wp.launch(self._g2p, m.n_particles, device=m.device, inputs=[
+            m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
+            state.cache_base, state.cache_fx, state.cache_W,
+            self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
+            state.x, state.v, state.C, state.Fsn, state.dJ, self.status])
+
+    # -------------------------------------------------- configuration update
+    def update_configuration(self, state: State, bodies: list[int]) -> None:
+        """Move the reference configuration of ``bodies`` to the current one
+        (their new boxes come from the bounding boxes G2P measured)."""
+        nb, d = self.n_bodies, self.model.dim
+        s = self.status.numpy()
+        lo = s[STATUS_HEADER + nb: STATUS_HEADER + nb + nb * d].reshape(nb, d)
+        hi = s[STATUS_HEADER + nb + nb * d:].reshape(nb, d)
+        for b in bodies:
+            self.layout.fit(b, lo[b], hi[b])
+        self._commit_layout()
+        for b in bodies:
+            self._launch_update(state, b)
+
+    def _launch_update(self, state: State, b: int) -> None:
+        m = self.model
+        start, count = m.body_ranges[b]
+        wp.launch(self._update[b], count, device=m.device, inputs=[
+            m.body, m.body_params, self.layout.lo_d, self.layout.shape_d, self.layout.offset_d,
+            self._inv_dx, start, state.x, state.X, state.C, state.F0s, state.Fsn,
+            state.cache_base, state.cache_fx, state.cache_W])
+
+    def _commit_layout(self) -> None:
+        """Upload the boxes; grow the grid arrays (by half again) if they no longer fit."""
+        self.layout.commit()
+        n = self.layout.n_nodes
+        if n > self._capacity:
+            t = self.model.types
+            self._capacity = int(1.5 * n) if self._capacity else n
+            with wp.ScopedDevice(self.model.device):
+                self.grid_m = wp.zeros(self._capacity, dtype=t.scalar)
+                self.grid_v = wp.zeros(self._capacity, dtype=t.vec)
+                self.grid_q = wp.zeros(self._capacity, dtype=t.vec)
 
     # ------------------------------------------------------------ read back
-    def check(self) -> Monitor:
-        """Stability figures of the last step (one small device-to-host copy)."""
-        v2, nonfinite, outside = self.monitor.numpy()
-        return Monitor(float(np.sqrt(v2)), int(nonfinite), int(outside))
+    def check(self) -> StepReport:
+        """Stability figures and criterion counts of the last step (one small
+        device-to-host copy)."""
+        s = self.status.numpy()
+        return StepReport(
+            max_speed=float(np.sqrt(s[STATUS_MAX_V2])), nonfinite=int(s[STATUS_NONFINITE]),
+            outside=int(s[STATUS_OUTSIDE]),
+            marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64))
 
     def step_energy(self) -> float:
         """Elastic energy [J] of the state the last step started from (P2G
@@ -169,7 +283,7 @@ class Solver:
         self.diagnostics.zero_()
         D = m.types.scalar(m.kernel.moment * m.dx**2)
         wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
-            m.mass, state.x, state.v, state.C, D, self._gravity, self.diagnostics])
+            m.mass, state.x, state.v, state.C, state.Fsn, D, self._gravity, self.diagnostics])
         out = self.diagnostics.numpy().copy()
         i = self.diagnostic_names().index("elastic_energy")
         if elastic:
@@ -182,8 +296,3 @@ class Solver:
 
     def diagnostic_names(self) -> list[str]:
         return diagnostic_names(self.model.dim)
-
-
-def _merge(groups: list[MaterialGroup]) -> MaterialGroup:
-    """One launch range over consecutive groups."""
-    return MaterialGroup(groups[0].cls, groups[0].start, sum(g.count for g in groups))

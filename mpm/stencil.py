@@ -1,11 +1,11 @@
-"""Locating a particle in the grid and walking its stencil; shared by every
-transfer.
+"""Locating a particle in its body's reference grid and walking its stencil.
 
-``locate`` gives the flat index of the first stencil node, the local
-coordinate ``fx = X / dx - base`` and the per-axis kernel weights ``W``
-(row d: the 1-D weights along axis d). ``node(a, b, c, ...)`` gives, for the
-stencil node at offset (a, b[, c]), its weight ``w``, its offset from the
-particle ``r = X_i - X_p`` [m] and its flat index. Loops over
+``locate`` (used when a configuration is updated) gives the flat index of the
+first stencil node in the body's box, the local coordinate
+``fx = X / dx - base`` and the per-axis kernel weights ``W`` (row d: the 1-D
+weights along axis d); the transfers read these from the cache and call
+``node(a, b, c, ...)`` for the weight ``w``, the offset ``r = X_i - X_p`` [m]
+and the flat index of the stencil node at offset (a, b[, c]). Loops over
 ``range(kernel.support)`` have compile-time bounds and are unrolled.
 """
 
@@ -23,28 +23,44 @@ def weight_matrix_type(t: Types, kernel: Kernel):
 
 
 @functools.cache
-def make_locate(t: Types, kernel: Kernel):
-    """``locate(X, inv_dx, cells, strides) -> (flat, fx, W)``.
-
-    The base node is clamped to the grid so that a runaway particle never
-    addresses memory outside it (G2P flags such particles)."""
-    S = t.scalar
-    vec = t.vec
-    Wm = weight_matrix_type(t, kernel)
-    weights = kernel.weights(t)
-    last = kernel.support - 1
-    offset = kernel.offset
-    support = kernel.support
+def make_strides(t: Types):
+    """Strides of a C-ordered box of ``shape`` nodes."""
+    ivec = t.ivec
 
     @wp.func
-    def locate(X: t.vec, inv_dx: S, cells: t.ivec, strides: t.ivec):
+    def strides(shape: t.ivec):
+        if wp.static(t.dim == 2):
+            return ivec(shape[1], 1)
+        else:
+            return ivec(shape[1] * shape[2], shape[2], 1)
+
+    return strides
+
+
+@functools.cache
+def make_locate(t: Types, kernel: Kernel):
+    """``locate(X, inv_dx, lo, shape, offset) -> (flat, fx, W)`` in a body's box.
+
+    The stencil is clamped to the box, so that a runaway particle never
+    addresses memory outside it (G2P flags such particles)."""
+    S = t.scalar
+    Wm = weight_matrix_type(t, kernel)
+    weights = kernel.weights(t)
+    strides = make_strides(t)
+    k_offset = kernel.offset
+    support = kernel.support
+    vec = t.vec
+
+    @wp.func
+    def locate(X: t.vec, inv_dx: S, lo: t.ivec, shape: t.ivec, offset: int):
         g = X * inv_dx
+        st = strides(shape)
         fx = vec()
         W = Wm()
-        flat = int(0)
+        flat = offset
         for d in range(wp.static(t.dim)):
-            b = wp.clamp(int(wp.floor(g[d] - S(offset))), 0, cells[d] - last)
-            flat += b * strides[d]
+            b = wp.clamp(int(wp.floor(g[d] - S(k_offset))), lo[d], lo[d] + shape[d] - support)
+            flat += (b - lo[d]) * st[d]
             fx[d] = g[d] - S(b)
             w = weights(fx[d])
             for s in range(wp.static(support)):

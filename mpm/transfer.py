@@ -1,25 +1,24 @@
-"""Particle-to-grid and grid-to-particle transfers (MLS-MPM with APIC).
+"""Particle-to-grid and grid-to-particle transfers (MLS-MPM with APIC), in
+each body's reference configuration.
 
 Notation (REFERENCE.md §1, A-ULMPM paper eq. 10-33): ``X_p`` reference
-particle positions, ``X_i`` reference node positions, ``W_ip`` kernel weights
-in the reference configuration, ``K_p = I / (moment dx^2)`` the MLS moment
-inverse, ``F^{0s}`` the deformation gradient at the last configuration
-update, ``F^{sn}`` the deformation since then (identity at the start of an
-Eulerian step), ``F^{0n} = F^{sn} F^{0s}``.
+particle positions, ``X_i`` reference node positions, ``r = X_i - X_p``,
+``W_ip`` kernel weights (cached at the last configuration update),
+``K_p = I / (moment dx^2)`` the MLS moment inverse, ``F^{0s}`` the deformation
+gradient at the last update, ``F^{sn}`` the deformation since then,
+``F^{0n} = F^{sn} F^{0s}``.
 
-P2G (eq. 10, 11, 20, 23, fused as in MLS-MPM):
+P2G (eq. 10-12, 20, 23; force and momentum fused as in MLS-MPM):
     m_i      = sum_p W_ip m_p
-    m_i v_i  = sum_p W_ip [m_p v_p + (m_p C_p - dt V_p^0 P(F^{0n}) F^{0s,T} K_p)(X_i - X_p)]
-so that after division by m_i the nodal velocity already holds the internal
-force impulse dt f_i / m_i. The stored energy sum_p V_p^0 psi(F^{0n}_p) of the
-state the step starts from is accumulated on the way (the decomposition of F
-is shared with the stress).
+    m_i v_i  = sum_p W_ip [m_p v_p + (m_p C_p - dt V_p^0 P(F^{0n}) F^{0s,T} K_p) r]
+    m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
+after division by m_i the nodal velocity holds the internal-force impulse.
+The stored energy sum_p V_p^0 psi(F^{0n}_p) of the state the step starts from
+is accumulated on the way (one decomposition of F for stress and energy).
 
-G2P (eq. 28, 31, APIC form):
-    v_p = sum_i W_ip v_i,   C_p = sum_i W_ip v_i (X_i - X_p)^T K_p,
-    x_p += dt v_p,          F^{sn} += dt C_p.
-For the Eulerian scheme F^{sn} = I + dt C_p and the configuration update
-(X <- x, F^{0s} <- F^{sn} F^{0s}, F^{sn} <- I) is fused into G2P.
+G2P (eq. 28, 30, 31; APIC form):
+    v_p = sum_i W_ip v_i,   C_p = sum_i W_ip v_i r^T K_p,
+    x_p += dt v_p,          F^{sn} += dt C_p,   dJ_p = |det F^{sn} - 1|.
 """
 
 import functools
@@ -27,8 +26,11 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_locate, make_node
+from .stencil import make_node, make_strides, weight_matrix_type
 from .types import Types
+
+# layout of the per-step status buffer (float64): see Solver.check
+STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
 
 
 @functools.cache
@@ -37,9 +39,11 @@ def make_p2g(t: Types, kernel: Kernel, material):
     f64 = wp.float64
     S = t.scalar
     dim, Ks = t.dim, kernel.support
-    locate = make_locate(t, kernel)
     node = make_node(t, kernel)
+    strides = make_strides(t)
     stress_energy = material.stress_energy(t)
+    Wm = weight_matrix_type(t, kernel)
+    needs_L = material.needs_velocity_gradient
 
     @wp.kernel(module="unique")
     def p2g(
@@ -48,120 +52,142 @@ def make_p2g(t: Types, kernel: Kernel, material):
         volume: wp.array(dtype=S),
         body: wp.array(dtype=wp.int32),
         body_params: wp.array(dtype=t.params),
+        shape: wp.array(dtype=t.ivec),
         # State in:
-        X: wp.array(dtype=t.vec),
+        x: wp.array(dtype=t.vec),
         v: wp.array(dtype=t.vec),
         C: wp.array(dtype=t.mat),
         F0s: wp.array(dtype=t.mat),
-        # Grid geometry and step:
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
+        Fsn: wp.array(dtype=t.mat),
+        cache_base: wp.array(dtype=wp.int32),
+        cache_fx: wp.array(dtype=t.vec),
+        cache_W: wp.array(dtype=Wm),
+        # Step:
+        dx: S,
         K: S,
         dt: S,
         start: int,
         # Grid out:
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
+        grid_mq: wp.array(dtype=t.vec),
         # Diagnostics out:
         energy: wp.array(dtype=f64),
     ):
         p = wp.tid() + start
-        flat, fx, W = locate(X[p], inv_dx, cells, strides)
+        b = body[p]
+        st = strides(shape[b])
+        flat = cache_base[p]
+        fx = cache_fx[p]
+        W = cache_W[p]
         m = mass[p]
-        F = F0s[p]
+        xp = x[p]
         Cp = C[p]
-        # Eulerian: F^{sn} = I at the start of the step, so F^{0n} = F^{0s}
-        # and the velocity gradient in current coordinates is C_p.
-        P, psi = stress_energy(F, Cp, body_params[body[p]])
+        Fs = Fsn[p]
+        F0 = F0s[p]
+        L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
+        if wp.static(needs_L):
+            L = Cp * wp.inverse(Fs)
+        P, psi = stress_energy(Fs * F0, L, body_params[b])
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
-        affine = m * Cp - (dt * volume[p] * K) * P * wp.transpose(F)
+        affine = m * Cp - (dt * volume[p] * K) * P * wp.transpose(F0)
         mv = m * v[p]
-        dx = S(1.0) / inv_dx
         for a in range(Ks):
-            for b in range(Ks):
+            for bb in range(Ks):
                 for c in range(wp.static(Ks if dim == 3 else 1)):
-                    w, r, i = node(a, b, c, flat, fx, W, strides, dx)
+                    w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                     wp.atomic_add(grid_m, i, w * m)
                     wp.atomic_add(grid_mv, i, w * (mv + affine * r))
+                    wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
 
     return p2g
 
 
 @functools.cache
-def make_g2p(t: Types, kernel: Kernel, project, record_dJ: bool):
-    """G2P with the Eulerian configuration update fused in.
+def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
+    """G2P for all particles.
 
-    ``project``: the material's projection factory or None; ``record_dJ``:
-    write ``dJ_p = |det(I + dt C_p) - 1|`` (paper eq. 33 for s = n).
-    ``monitor`` accumulates [max |v_p|^2, non-finite count, outside count].
+    ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
+    then per body the marked count (``count_marked``: dJ_p >= epsilon) and the
+    bounding box of the new positions (min per axis, then max per axis).
     """
     S = t.scalar
+    f64 = wp.float64
     vec, mat = t.vec, t.mat
     dim, Ks = t.dim, kernel.support
-    locate = make_locate(t, kernel)
     node = make_node(t, kernel)
-    proj = project(t) if project is not None else None
+    strides = make_strides(t)
+    Wm = weight_matrix_type(t, kernel)
 
     @wp.kernel(module="unique")
     def g2p(
         # Model:
         body: wp.array(dtype=wp.int32),
-        body_params: wp.array(dtype=t.params),
+        shape: wp.array(dtype=t.ivec),
+        n_bodies: int,
         # Grid in:
         grid_v: wp.array(dtype=t.vec),
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
+        # Stencil cache:
+        cache_base: wp.array(dtype=wp.int32),
+        cache_fx: wp.array(dtype=t.vec),
+        cache_W: wp.array(dtype=Wm),
+        # Step:
+        dx: S,
         K: S,
         dt: S,
-        start: int,
+        epsilon: S,
         inside_lo: t.vec,
         inside_hi: t.vec,
         # State in/out:
         x: wp.array(dtype=t.vec),
         v: wp.array(dtype=t.vec),
         C: wp.array(dtype=t.mat),
-        F0s: wp.array(dtype=t.mat),
+        Fsn: wp.array(dtype=t.mat),
         dJ: wp.array(dtype=S),
-        monitor: wp.array(dtype=wp.float64),
+        status: wp.array(dtype=f64),
     ):
-        p = wp.tid() + start
-        xp = x[p]
-        flat, fx, W = locate(xp, inv_dx, cells, strides)
-        dx = S(1.0) / inv_dx
+        p = wp.tid()
+        b = body[p]
+        st = strides(shape[b])
+        flat = cache_base[p]
+        fx = cache_fx[p]
+        W = cache_W[p]
         vp = vec()
         B = mat()
         for a in range(Ks):
-            for b in range(Ks):
+            for bb in range(Ks):
                 for c in range(wp.static(Ks if dim == 3 else 1)):
-                    w, r, i = node(a, b, c, flat, fx, W, strides, dx)
+                    w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                     wv = w * grid_v[i]
                     vp += wv
                     B += wp.outer(wv, r)
         Cp = B * K
-        xp = xp + dt * vp
-        Fsn = wp.identity(n=dim, dtype=S) + dt * Cp
-        F = Fsn * F0s[p]
-        if wp.static(proj is not None):
-            F = proj(F, body_params[body[p]])
+        xp = x[p] + dt * vp
+        Fs = Fsn[p] + dt * Cp
         x[p] = xp
         v[p] = vp
         C[p] = Cp
-        F0s[p] = F
+        Fsn[p] = Fs
+        dj = wp.abs(wp.determinant(Fs) - S(1.0))
         if wp.static(record_dJ):
-            dJ[p] = wp.abs(wp.determinant(Fsn) - S(1.0))
+            dJ[p] = dj
+        if wp.static(count_marked):
+            if dj >= epsilon:
+                wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
 
-        # stability monitor
-        wp.atomic_max(monitor, 0, wp.float64(wp.dot(vp, vp)))
-        if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(F)):
-            wp.atomic_add(monitor, 1, wp.float64(1.0))
+        # stability monitor and bounding box of the new positions
+        wp.atomic_max(status, STATUS_MAX_V2, f64(wp.dot(vp, vp)))
+        if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
+            wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:
             outside = False
+            box = STATUS_HEADER + n_bodies + b * dim
             for d in range(wp.static(dim)):
                 if xp[d] < inside_lo[d] or xp[d] > inside_hi[d]:
                     outside = True
+                wp.atomic_min(status, box + d, f64(xp[d]))
+                wp.atomic_max(status, box + n_bodies * dim + d, f64(xp[d]))
             if outside:
-                wp.atomic_add(monitor, 2, wp.float64(1.0))
+                wp.atomic_add(status, STATUS_OUTSIDE, f64(1.0))
 
     return g2p

@@ -26,20 +26,18 @@ from .validate import RunSpec
 
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}
 
-SCALAR_GROUPS_2D = {
-    "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
-    "momentum": ["momentum_x", "momentum_y", "angular_momentum"],
-    "step": ["dt", "max_speed", "step_time_ms"],
-    "configuration updates": ["config_updates"],
-}
 
-
-def scalar_groups(dim: int) -> dict:
-    groups = dict(SCALAR_GROUPS_2D)
-    if dim == 3:
-        groups["momentum"] = ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
-                              "angular_momentum_y", "angular_momentum_z"]
-    return groups
+def scalar_groups(dim: int, marked: list[str]) -> dict:
+    """Time-series views of the recording's blueprint."""
+    momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
+                ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
+                 "angular_momentum_y", "angular_momentum_z"])
+    return {
+        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
+        "momentum": momentum,
+        "step": ["dt", "max_speed", "step_time_ms"],
+        "configuration updates": ["config_updates", "fracture"] + marked,
+    }
 
 
 class _Terminate(KeyboardInterrupt):
@@ -97,18 +95,6 @@ def _median(xs: list[float]) -> float | None:
     return statistics.median(xs) if xs else None
 
 
-def _meta(spec: RunSpec, model: mpm.Model, properties: dict) -> RunMeta:
-    scene = spec.scene
-    ppc = [b.ppc or scene.ppc for b in scene.bodies]
-    spacing = model.dx / max(ppc) ** (1.0 / scene.dim)
-    return RunMeta(
-        name=f"{spec.scene_name} / {spec.scheme.name} / {spec.kernel.name}",
-        dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
-        body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
-        particle_radius=0.5 * spacing, properties=properties,
-        scalar_groups=scalar_groups(scene.dim))
-
-
 def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
                          choices: dict | None = None) -> dict:
     """How to reproduce the run: resolved config, overrides, group choices,
@@ -124,6 +110,207 @@ def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
     }
 
 
+class Run:
+    """One run: the solver, the sink and the bookkeeping between them."""
+
+    def __init__(self, spec: RunSpec, out_dir: Path, properties: dict, sink: Sink):
+        self.spec, self.out_dir, self.properties, self.sink = spec, out_dir, properties, sink
+        self.metrics: dict = {"status": "failed", "reason": "did not start", "steps": 0,
+                              "sim_time": 0.0}
+        self.step, self.t = 0, 0.0
+        self.step_ms: list[float] = []
+        self.log_ms: list[float] = []
+        self.update_ms: list[float] = []
+        self.dts: list[float] = []
+        self.solver = self.state = self.drift = None
+        self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
+
+    # ------------------------------------------------------------ build
+    def build(self) -> None:
+        spec, run, log = self.spec, self.spec.run, self.spec.log
+        self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
+        self.record_dJ = log.every > 0 and log.dJ
+        self.solver = mpm.Solver(self.model, spec.scheme, mpm.SolverOptions(record_dJ=self.record_dJ))
+        self.scheme = self.solver.scheme  # defaults resolved
+        self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes)
+        self.metrics["compile_time_s"] = self.solver.load()
+        self.solver.prepare(self.state)
+        self.names = self.solver.diagnostic_names()
+        self.drift = Drift(self.names)
+        bodies = [b.name for b in spec.scene.bodies]
+        self.marked_names = (["marked_fraction"] if len(bodies) == 1 else
+                             [f"marked_fraction/{b}" for b in bodies])
+        self.updates = np.zeros(len(bodies), np.int64)
+        self.update_steps = 0  # steps at which at least one body was updated
+
+    def meta(self) -> RunMeta:
+        scene, model = self.spec.scene, self.model
+        ppc = [b.ppc or scene.ppc for b in scene.bodies]
+        return RunMeta(
+            name=f"{self.spec.scene_name} / {self.scheme.name} / {self.spec.kernel.name}",
+            dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
+            body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
+            particle_radius=0.5 * model.dx / max(ppc) ** (1.0 / scene.dim),
+            properties=self.properties,
+            scalar_groups=scalar_groups(scene.dim, self.marked_names if self.scheme.tracks_marks() else []))
+
+    # ------------------------------------------------------------ logging
+    def measure(self, extra: dict) -> None:
+        """Measure the state just reached; its elastic energy arrives with the
+        next step's P2G (or from :meth:`finish`)."""
+        self._pending[:] = [self.step, self.t, self.solver.measure(self.state, elastic=False), extra]
+
+    def emit(self, elastic_energy: float) -> None:
+        step, t, d, extra = self._pending
+        d[self.names.index("elastic_energy")] = elastic_energy
+        self.drift.add(d)
+        if self.spec.log.scalars:
+            row = dict(zip(self.names, d.tolist()))
+            row["total_energy"] = self.drift.energy(d)
+            row.update(extra)
+            self.sink.scalars(step, t, row)
+        self._pending.clear()
+
+    def particles(self) -> None:
+        # copies: on the CPU .numpy() is a view of memory the next step
+        # overwrites, and the sink may serialise later
+        x = self.state.x.numpy().copy()
+        dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
+        self.sink.particles(self.step, self.t, x, dJ)
+
+    def announce_scheme(self) -> None:
+        s = self.scheme
+        if s.name == "empm":
+            text = ("empm: every body's reference configuration is updated at every step (s = n); "
+                    "the cumulative count is the scalar config_updates")
+        elif s.name == "tlmpm":
+            text = "tlmpm: the reference configuration is the initial one (s = 0), never updated"
+        else:
+            text = (f"aulmpm: a body is updated when the fraction of its particles with "
+                    f"dJ >= {s.epsilon:g} reaches {s.eta:g}; affine matrix: {s.affine}")
+        params = {k: v for k, v in vars(s).items() if isinstance(v, (int, float, str))}
+        self.sink.event(0, 0.0, text, scheme=s.name, **params)
+
+    def record_updates(self, report: mpm.StepReport) -> None:
+        counts = self.solver.body_counts
+        if report.updated:
+            self.update_steps += 1
+            self.updates[report.updated] += 1
+        if self.scheme.name != "aulmpm":
+            return  # EMPM: every step, logged as the count; TLMPM: never
+        for b in report.updated:
+            name = self.spec.scene.bodies[b].name
+            frac = report.marked[b] / counts[b]
+            self.sink.event(
+                self.step, self.t,
+                f"configuration update of {name}: {100 * frac:.1f}% of its particles have "
+                f"dJ >= {self.scheme.epsilon:g} ({1e3 * report.update_time:.3f} ms)",
+                body=name, marked_fraction=float(frac), update_ms=1e3 * report.update_time,
+                update_step=self.step, update_time=self.t)
+
+    def row_extra(self, dt: float, report: mpm.StepReport) -> dict:
+        extra = {"dt": dt, "max_speed": report.max_speed, "step_time_ms": self.step_ms[-1],
+                 "config_updates": float(self.updates.sum())}
+        if self.scheme.tracks_marks():
+            for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
+                extra[name] = float(m / n)
+        return extra
+
+    # ------------------------------------------------------------ loop
+    def next_dt(self, max_speed: float, duration: float | None) -> float:
+        run, model = self.spec.run, self.model
+        if run.dt is not None:
+            dt = run.dt
+        else:
+            dt = min(run.dt_max, mpm.cfl_dt(model.dx, self._wave, max_speed, run.cfl,
+                                             self._visc, model.dim))
+        return dt if duration is None else min(dt, duration - self.t)
+
+    def loop(self) -> None:
+        log = self.spec.log
+        steps_end, duration = self.spec.end
+        self.measure({"config_updates": 0.0})
+        if log.every:
+            self.particles()
+        self.announce_scheme()
+        progress = Progress(steps_end, duration, log.progress)
+        max_speed = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
+        self._wave, self._visc = self.model.wave_speed(), self.model.kinematic_viscosity()
+        self.metrics["status"], self.metrics["reason"] = "running", ""
+
+        def done() -> bool:
+            return self.step >= steps_end if steps_end is not None else self.t >= duration * (1 - 1e-12)
+
+        while not done():
+            dt = self.next_dt(max_speed, duration)
+            t0 = time.perf_counter()
+            report = self.solver.advance(self.state, dt)
+            self.step_ms.append(1e3 * (time.perf_counter() - t0))
+            self.update_ms.append(1e3 * report.update_time)
+            self.dts.append(dt)
+            self.step += 1
+            self.t += dt
+            if self._pending:
+                self.emit(self.solver.step_energy())
+            if report.reason:
+                self.unstable(report)
+                break
+            self.record_updates(report)
+            max_speed = report.max_speed
+            t1 = time.perf_counter()
+            last = done()
+            if log.scalars or last:
+                self.measure(self.row_extra(dt, report))
+            if log.every and (self.step % log.every == 0 or last):
+                self.particles()
+                self.log_ms.append(1e3 * (time.perf_counter() - t1))
+            progress.update(self.step, self.t, self.step_ms[-1])
+        else:
+            self.metrics["status"], self.metrics["reason"] = "completed", ""
+        progress.close()
+
+    def unstable(self, report: mpm.StepReport) -> None:
+        self.metrics["status"] = "unstable"
+        self.metrics["reason"] = f"step {self.step} (t = {self.t:.6g} s): {report.reason}"
+        self.metrics["unstable_step"] = self.step
+        if self.spec.log.every:
+            self.particles()
+        self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR",
+                        nonfinite=report.nonfinite, outside=report.outside)
+
+    # ------------------------------------------------------------ finish
+    def finish(self) -> None:
+        """Complete the last scalar row, summarise, close the sink, write metrics.json."""
+        m = self.metrics
+        if self.drift is not None and m["status"] != "failed":
+            # the last state reached: its elastic energy by one more P2G pass
+            if not self._pending:
+                self.measure({"config_updates": float(self.updates.sum())})
+            self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
+            if m["status"] == "interrupted" and self.spec.log.every:
+                self.particles()
+        if m["status"] == "interrupted":
+            self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
+        steps = self.step
+        m.update(
+            steps=steps, sim_time=self.t,
+            dt=(self.t / steps) if steps else None, dt_min=min(self.dts) if self.dts else None,
+            dt_max=max(self.dts) if self.dts else None,
+            step_time_ms=_median(self.step_ms), log_time_ms=_median(self.log_ms))
+        if self.solver is not None:
+            names = [b.name for b in self.spec.scene.bodies]
+            m.update(
+                scheme=self.scheme.name, grid_nodes=self.solver.layout.n_nodes,
+                config_updates={"total": int(self.updates.sum()),
+                                **{n: int(c) for n, c in zip(names, self.updates)}},
+                updates_per_1e4_steps=1e4 * self.update_steps / steps if steps else None,
+                update_time_ms=float(np.mean(self.update_ms)) if self.update_ms else None)
+            if self.scheme.name == "aulmpm":
+                m.update(epsilon=self.scheme.epsilon, eta=self.scheme.eta, affine=self.scheme.affine)
+        if self.drift is not None:
+            m.update(self.drift.summary())
+
+
 def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),
             choices: dict | None = None, sink: Sink | None = None) -> dict:
     """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
@@ -134,118 +321,25 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     properties = recording_properties(spec, config_yaml, list(overrides), choices)
-    run, log = spec.run, spec.log
-    sink = sink if sink is not None else RerunSink(out_dir / log.recording, log.flush_every)
-    metrics: dict = {"status": "failed", "reason": "did not start", "steps": 0, "sim_time": 0.0}
-    step_ms: list[float] = []
-    log_ms: list[float] = []
-    dts: list[float] = []
-    step, t = 0, 0.0
-    model = state = solver = drift = None
+    if sink is None:
+        sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
+    run = Run(spec, out_dir, properties, sink)
     previous_term = None
     try:
         previous_term = signal.signal(signal.SIGTERM, _raise_terminate)
     except ValueError:  # not the main thread
         pass
-
     try:
-        # ---------------------------------------------------------- build
-        model, state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
-        record_dJ = log.every > 0 and log.dJ
-        solver = mpm.Solver(model, spec.scheme, mpm.SolverOptions(record_dJ=record_dJ))
-        solver.prepare(state)
-        metrics.update(particles=model.n_particles, grid_nodes=model.n_nodes)
-        metrics["compile_time_s"] = solver.load()
-        sink.start(_meta(spec, model, properties))
-        names = solver.diagnostic_names()
-        drift = Drift(names)
-
-        i_elastic = names.index("elastic_energy")
-        pending: list = []  # the scalar row of the last state, waiting for its elastic energy
-
-        def measure(step, t, extra):
-            """Measure the state just reached; its elastic energy arrives with
-            the next step's P2G (or from finish())."""
-            pending[:] = [step, t, solver.measure(state, elastic=False), extra]
-
-        def emit(elastic_energy):
-            step_, t_, d, extra = pending
-            d[i_elastic] = elastic_energy
-            drift.add(d)
-            if log.scalars:
-                row = dict(zip(names, d.tolist()))
-                row["total_energy"] = drift.energy(d)
-                row.update(extra)
-                sink.scalars(step_, t_, row)
-            pending.clear()
-
-        def particles(step, t):
-            # copies: on the CPU .numpy() is a view of memory the next step overwrites,
-            # and the sink may serialise later
-            x = state.x.numpy().copy()
-            dJ = state.dJ.numpy().copy() if record_dJ else None
-            sink.particles(step, t, x, dJ)
-
-        measure(0, 0.0, {"config_updates": 0.0})
-        if log.every:
-            particles(0, 0.0)
-        sink.event(0, 0.0, f"{spec.scheme.name}: the reference configuration is updated at every "
-                   "step (s = n); the per-step count is the scalar config_updates",
-                   scheme=spec.scheme.name, updates_every_step=True)
-
-        # ---------------------------------------------------------- step
-        steps_end, duration = spec.end
-        progress = Progress(steps_end, duration, log.progress)
-        max_speed = float(np.max(np.linalg.norm(state.v.numpy(), axis=1)))
-        wave, visc = model.wave_speed(), model.kinematic_viscosity()
-        metrics["status"], metrics["reason"] = "running", ""
-        while (step < steps_end) if steps_end is not None else (t < duration * (1 - 1e-12)):
-            if run.dt is not None:
-                dt = run.dt
-            else:
-                dt = min(run.dt_max, mpm.cfl_dt(model.dx, wave, max_speed, run.cfl, visc, model.dim))
-            if duration is not None:
-                dt = min(dt, duration - t)
-            t0 = time.perf_counter()
-            solver.step(state, dt)
-            monitor = solver.check()
-            elapsed = time.perf_counter() - t0
-            step += 1
-            t += dt
-            step_ms.append(1e3 * elapsed)
-            dts.append(dt)
-            if pending:
-                emit(solver.step_energy())
-            if monitor.reason:
-                metrics["status"] = "unstable"
-                metrics["reason"] = f"step {step} (t = {t:.6g} s): {monitor.reason}"
-                metrics["unstable_step"] = step
-                if log.every:
-                    particles(step, t)
-                sink.event(step, t, f"unstable: {metrics['reason']}", level="ERROR",
-                           nonfinite=monitor.nonfinite, outside=monitor.outside)
-                break
-            max_speed = monitor.max_speed
-            t1 = time.perf_counter()
-            last = (step == steps_end) if steps_end is not None else (t >= duration * (1 - 1e-12))
-            extra = {"dt": dt, "max_speed": max_speed, "step_time_ms": step_ms[-1],
-                     "config_updates": float(step)}
-            if log.scalars or last:
-                measure(step, t, extra)
-            if log.every and (step % log.every == 0 or last):
-                particles(step, t)
-                log_ms.append(1e3 * (time.perf_counter() - t1))
-            progress.update(step, t, step_ms[-1])
-        else:
-            metrics["status"], metrics["reason"] = "completed", ""
-        progress.close()
+        run.build()
+        sink.start(run.meta())
+        run.loop()
     except KeyboardInterrupt as e:
-        metrics["status"] = "interrupted"
+        run.metrics["status"] = "interrupted"
         what = "SIGTERM" if isinstance(e, _Terminate) else "Ctrl-C"
-        metrics["reason"] = f"{what} at step {step} (t = {t:.6g} s)"
+        run.metrics["reason"] = f"{what} at step {run.step} (t = {run.t:.6g} s)"
     except Exception as e:
-        metrics["status"] = "failed"
-        metrics["reason"] = f"{type(e).__name__}: {e}"
+        run.metrics["status"] = "failed"
+        run.metrics["reason"] = f"{type(e).__name__}: {e}"
         raise
     finally:
         # no second Ctrl-C may cut the cleanup short
@@ -255,37 +349,24 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         except ValueError:
             old_int = None
         try:
-            if drift is not None and metrics["status"] != "failed":
-                # the last state reached: its elastic energy by one more P2G pass
-                if not pending:
-                    measure(step, t, {"config_updates": float(step)})
-                emit(solver.measure(state)[i_elastic])
-                if metrics["status"] == "interrupted" and log.every:
-                    particles(step, t)
-            if metrics["status"] == "interrupted":
-                sink.event(step, t, f"interrupted: {metrics['reason']}", level="WARN")
-            metrics.update(
-                steps=step, sim_time=t,
-                dt=(t / step) if step else None, dt_min=min(dts) if dts else None,
-                dt_max=max(dts) if dts else None,
-                step_time_ms=_median(step_ms), log_time_ms=_median(log_ms),
-                config_updates=step, updates_per_1e4_steps=1e4 if step else None,
-            )
-            if drift is not None:
-                metrics.update(drift.summary())
-            metrics["wall_time_s"] = time.perf_counter() - t_start
-            sink.close()
-            _write_metrics(out_dir / "metrics.json", metrics)
+            try:
+                run.finish()
+            finally:
+                run.metrics["wall_time_s"] = time.perf_counter() - t_start
+                sink.close()
+                _write_metrics(out_dir / "metrics.json", run.metrics)
         finally:
             if old_int is not None:
                 signal.signal(signal.SIGINT, old_int)
             if previous_term is not None:
                 signal.signal(signal.SIGTERM, previous_term)
-    return metrics
+    return run.metrics
 
 
 def _write_metrics(path: Path, metrics: dict) -> None:
     def clean(v):
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
         if isinstance(v, (np.floating, np.integer)):
             v = v.item()
         if isinstance(v, float) and not math.isfinite(v):

@@ -15,6 +15,7 @@ import mpm
 from mpm.materials import MATERIALS, Material
 from mpm.params import violations
 from mpm.scene import WALL_TYPES
+from mpm.schemes import AFFINE
 
 from .schema import DEVICES, PRECISIONS, SHAPES
 
@@ -134,6 +135,8 @@ def make_scheme(node, key: str = "scheme"):
     scheme = cls(**d)
     for fname, value, accepted in violations(scheme):
         raise ConfigError(f"{key}.{fname}", f"{value} out of range; accepted: {accepted}")
+    if "affine" in d:
+        _choice(f"{key}.affine", d["affine"], AFFINE)
     return scheme
 
 

@@ -38,11 +38,24 @@ def quadratic_weights(fx):
     return np.array([0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2])
 
 
-def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wall_cells=3):
+def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wall_cells=3,
+         body=None):
     """One MLS-MPM step; returns new (x, v, C, F). ``models``/``prms`` per particle.
 
     walls: per face (x_lo, x_hi, y_lo, ...) "sticky" | "slip" | "open".
+    body: per-particle body index; each body is rasterised to a grid of its own
+    (no contact between bodies).
     """
+    if body is not None and len(np.unique(body)) > 1:
+        out = [a.copy() for a in (x, v, C, F)]
+        for b in np.unique(body):
+            sel = body == b
+            res = step(x[sel], v[sel], C[sel], F[sel], mass[sel], vol[sel],
+                       [mo for mo, s in zip(models, sel) if s], [pr for pr, s in zip(prms, sel) if s],
+                       dx, cells, gravity, walls, dt, wall_cells)
+            for o, r in zip(out, res):
+                o[sel] = r
+        return tuple(out)
     n, d = x.shape
     shape = tuple(c + 1 for c in cells)
     gm = np.zeros(shape)

@@ -46,6 +46,7 @@ class Material:
     name: ClassVar[str] = ""
     stress_energy: ClassVar[Callable[[Types], Callable]]
     project: ClassVar[Callable[[Types], Callable] | None] = None
+    needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
 
     def __post_init__(self):
         if not self.model:

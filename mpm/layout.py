@@ -1,0 +1,64 @@
+"""Per-body reference grids ("configuration maps").
+
+Each body has its own grid in its reference configuration: the nodes of the
+global lattice (spacing dx, node 0 at the origin) inside a box that covers
+the stencils of its reference positions X. The boxes of all bodies are stored
+one after another in flat arrays; a box is recomputed when its body's
+configuration is updated (every step for the Eulerian scheme). Two bodies
+never share a node, so they interact only through contact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .kernels import Kernel
+from .types import Types
+
+
+class GridLayout:
+    """Boxes of the bodies' reference grids and the device tables (first node, nodes
+    per axis, offset into the flat arrays) per body."""
+
+    def __init__(self, t: Types, kernel: Kernel, dx: float, cells: tuple[int, ...],
+                 n_bodies: int, device: str):
+        self.t, self.kernel, self.dx = t, kernel, dx
+        self.cells = np.asarray(cells)
+        self.lo = np.zeros((n_bodies, t.dim), np.int32)  # first node (global lattice index)
+        self.shape = np.ones((n_bodies, t.dim), np.int32)  # nodes per axis
+        self.offset = np.zeros(n_bodies, np.int32)
+        self.n_nodes = 0
+        with wp.ScopedDevice(device):
+            self.lo_d = wp.zeros(n_bodies, dtype=t.ivec)
+            self.shape_d = wp.zeros(n_bodies, dtype=t.ivec)
+            self.offset_d = wp.zeros(n_bodies, dtype=wp.int32)
+
+    def fit(self, body: int, xmin: np.ndarray, xmax: np.ndarray) -> None:
+        """Make ``body``'s box cover every stencil of positions in [xmin, xmax]."""
+        k = self.kernel
+        last = self.cells - (k.support - 1)
+        lo = np.clip(np.floor(np.asarray(xmin) / self.dx - k.offset).astype(np.int64), 0, last)
+        hi = np.clip(np.floor(np.asarray(xmax) / self.dx - k.offset).astype(np.int64), 0, last)
+        self.lo[body] = lo
+        self.shape[body] = hi - lo + k.support
+
+    def commit(self) -> None:
+        """Recompute offsets and upload the tables (after one or more ``fit``)."""
+        sizes = np.prod(self.shape.astype(np.int64), axis=1)
+        self.offset[:] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        self.n_nodes = int(sizes.sum())
+        self.lo_d.assign(self.lo)
+        self.shape_d.assign(self.shape)
+        self.offset_d.assign(self.offset)
+
+    def body_of_nodes(self) -> np.ndarray:
+        return np.repeat(np.arange(len(self.offset)), np.prod(self.shape, axis=1))
+
+    def node_positions(self) -> np.ndarray:
+        """Reference positions X_i of all nodes [m] (for tests and tools)."""
+        out = []
+        for lo, shape in zip(self.lo, self.shape):
+            idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1)
+            out.append((idx.reshape(-1, self.t.dim) + lo) * self.dx)
+        return np.concatenate(out)
