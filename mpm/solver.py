@@ -18,6 +18,7 @@ import warp as wp
 
 from .configuration import make_update
 from .diagnostics import diagnostic_names, make_measure
+from .fracture import make_fracture, neighbour_pairs
 from .contact import make_contact
 from .grid import make_boundary, make_grid_update
 from .layout import GridLayout
@@ -93,6 +94,7 @@ class Solver:
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t) if self.contact else None
         self._measure = make_measure(t)
+        self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
         self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform)
                         for b in range(nb)}
@@ -119,7 +121,8 @@ class Solver:
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
-        ks = [k for k, _ in self._p2g] + [self._g2p, self._grid_update, self._measure]
+        ks = [k for k, _ in self._p2g] + [self._g2p, self._grid_update, self._measure,
+                                          self._fracture]
         ks += list(self._contact) + ([self._boundary] if self._boundary else [])
         return ks + list(self._update.values())
 
@@ -131,8 +134,10 @@ class Solver:
         return time.perf_counter() - t0
 
     def prepare(self, state: State) -> None:
-        """Take the initial positions as every body's reference configuration."""
+        """Take the initial positions as every body's reference configuration
+        and record the neighbour pairs of the fracture measure."""
         x = state.x.numpy()
+        self._prepare_fracture(x)
         for b, (start, count) in enumerate(self.model.body_ranges):
             xb = x[start:start + count]
             self.layout.fit(b, xb.min(axis=0), xb.max(axis=0))
@@ -268,6 +273,29 @@ class Solver:
             outside=int(s[STATUS_OUTSIDE]),
             marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64))
 
+    def _prepare_fracture(self, x: np.ndarray) -> None:
+        m = self.model
+        scene = m.scene
+        spacing = np.array([m.dx / (b.ppc or scene.ppc) ** (1.0 / m.dim) for b in scene.bodies])
+        body = m.body.numpy()
+        p, q = neighbour_pairs(x, body, 1.5 * spacing)
+        self.pair_counts = np.bincount(body[p], minlength=self.n_bodies)
+        with wp.ScopedDevice(m.device):
+            self._pair_p = wp.array(p, dtype=wp.int32)
+            self._pair_q = wp.array(q, dtype=wp.int32)
+            self._pair_offset = wp.array((x[q] - x[p]).astype(state_dtype(m)), dtype=m.types.vec)
+            self._broken = wp.zeros(self.n_bodies, dtype=wp.float64)
+
+    def fracture(self, state: State) -> np.ndarray:
+        """Fraction of initially neighbouring pairs broken, per body (mpm.fracture)."""
+        m = self.model
+        self._broken.zero_()
+        if len(self._pair_p):
+            wp.launch(self._fracture, len(self._pair_p), device=m.device, inputs=[
+                self._pair_p, self._pair_q, self._pair_offset, m.body, state.x, state.F0s,
+                state.Fsn, self._dx, self._broken])
+        return self._broken.numpy() / np.maximum(self.pair_counts, 1)
+
     def step_energy(self) -> float:
         """Elastic energy [J] of the state the last step started from (P2G
         evaluates it with the stress)."""
@@ -296,3 +324,7 @@ class Solver:
 
     def diagnostic_names(self) -> list[str]:
         return diagnostic_names(self.model.dim)
+
+
+def state_dtype(model: Model):
+    return np.float32 if model.types.precision == "float32" else np.float64

@@ -123,6 +123,8 @@ class Run:
         self.update_ms: list[float] = []
         self.dts: list[float] = []
         self.solver = self.state = self.drift = None
+        self.fracture = None  # (overall, per body) at the last evaluation
+        self.fracture_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
 
     # ------------------------------------------------------------ build
@@ -172,11 +174,23 @@ class Run:
         self._pending.clear()
 
     def particles(self) -> None:
+        """Particles, dJ and the fracture measure of the current state."""
         # copies: on the CPU .numpy() is a view of memory the next step
         # overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
         self.sink.particles(self.step, self.t, x, dJ)
+        self.log_fracture()
+
+    def log_fracture(self) -> np.ndarray:
+        frac = self.solver.fracture(self.state)
+        overall = float(np.sum(frac * self.solver.pair_counts) / max(self.solver.pair_counts.sum(), 1))
+        row = {"fracture": overall}
+        if len(frac) > 1:
+            row.update({f"fracture/{b.name}": float(f) for b, f in zip(self.spec.scene.bodies, frac)})
+        self.sink.scalars(self.step, self.t, row)
+        self.fracture, self.fracture_step = (overall, frac), self.step
+        return frac
 
     def announce_scheme(self) -> None:
         s = self.scheme
@@ -289,6 +303,11 @@ class Run:
             self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
             if m["status"] == "interrupted" and self.spec.log.every:
                 self.particles()
+            if self.fracture is None or self.fracture_step != self.step:
+                self.log_fracture()
+            overall, per_body = self.fracture
+            names = [b.name for b in self.spec.scene.bodies]
+            m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
         if m["status"] == "interrupted":
             self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
         steps = self.step
