@@ -7,14 +7,15 @@ Build a :class:`Scene`, turn it into a :class:`Model` and initial
 from .kernels import KERNELS, Kernel
 from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
 from .model import Model, SceneError, State, build
-from .scene import WALL_TYPES, Body, Box, Cylinder, Scene, Sphere
+from .scene import WALL_TYPES, Body, Box, Compound, Cylinder, KinematicRegion, Scene, Sphere
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
 from .solver import Solver, SolverOptions, StepReport
 from .timestep import cfl_dt
 
 __all__ = [
     "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
-    "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Cylinder",
+    "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
+    "KinematicRegion",
     "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
     "StepReport", "cfl_dt",
 ]

@@ -7,9 +7,10 @@ predicts their current separation from their deformation gradients,
 so genuine stretching, bending and rotation are explained by F. A pair is
 *broken* when the actual separation departs from the prediction by more than
 a cell width dx: the particles came apart without the material having
-deformed that much - numerical fracture. The measure is the fraction of
-broken pairs (0: intact, per body and overall). For fluids (F keeps only its
-volume change) it counts rearrangement of the flow, not fracture.
+deformed that much - numerical fracture. Two figures follow: the fraction of
+broken pairs (0: intact), and the number of fragments, the connected pieces
+of each body's graph of intact pairs (1: whole). For fluids (F keeps only its
+volume change) they count rearrangement of the flow, not fracture.
 """
 
 import functools
@@ -18,6 +19,22 @@ import numpy as np
 import warp as wp
 
 from .types import Types
+
+
+def fragments(n: int, p: np.ndarray, q: np.ndarray, intact: np.ndarray) -> np.ndarray:
+    """Component label per particle of the graph on ``n`` nodes whose edges are
+    the intact pairs (label propagation with pointer jumping)."""
+    label = np.arange(n)
+    p, q = p[intact], q[intact]
+    while True:
+        low = np.minimum(label[p], label[q])
+        new = label.copy()
+        np.minimum.at(new, p, low)
+        np.minimum.at(new, q, low)
+        new = new[new]  # pointer jumping
+        if np.array_equal(new, label):
+            return label
+        label = new
 
 
 def neighbour_pairs(x: np.ndarray, body: np.ndarray, radius: np.ndarray | float):
@@ -70,6 +87,7 @@ def make_fracture(t: Types):
         Fsn: wp.array(dtype=t.mat),
         dx: S,
         out: wp.array(dtype=f64),  # broken pairs per body
+        broken: wp.array(dtype=wp.uint8),  # per pair
     ):
         k = wp.tid()
         p = pair_p[k]
@@ -78,5 +96,8 @@ def make_fracture(t: Types):
         gap = (x[q] - x[p]) - F * offset0[k]
         if not (wp.length(gap) <= dx):  # NaN counts as broken
             wp.atomic_add(out, body[p], f64(1.0))
+            broken[k] = wp.uint8(1)
+        else:
+            broken[k] = wp.uint8(0)
 
     return broken_pairs

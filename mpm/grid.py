@@ -1,13 +1,18 @@
-"""Grid velocity update: momentum to velocity, gravity, box walls.
+"""Grid velocity update: momentum to velocity, gravity, boundary conditions.
 
 On every node with mass:
     v_i = (m_i v_i) / m_i + dt g,    q_i = (m_i q_i) / m_i,
 then (after contact, when bodies can touch: mpm.contact) the boundary
-conditions: walls act on nodes whose current position q_i lies within the wall band
-of a face: closer than ``(wall_cells - 1/2) dx`` to it, i.e. the first
-``wall_cells`` lattice nodes of an Eulerian grid. Sticky walls set v_i = 0,
-slip walls remove the velocity component pointing into the wall (separation
-and tangential motion are free), open faces do nothing.
+conditions, evaluated at the node's current position q_i:
+
+* walls act on nodes within the wall band of a face: closer than
+  ``(wall_cells - 1/2) dx`` to it, i.e. the first ``wall_cells`` lattice
+  nodes of an Eulerian grid. Sticky walls set v_i = 0, slip walls remove the
+  velocity component pointing into the wall (separation and tangential motion
+  are free), open faces do nothing;
+* kinematic regions (mpm.scene.KinematicRegion) set the velocity of every
+  node that draws at least half its mass from a region's particles, while the
+  region is active: v_i = u + omega x (q_i - c(t)).
 """
 
 import functools
@@ -56,21 +61,62 @@ def make_walls(t: Types):
 
 
 @functools.cache
-def make_grid_update(t: Types, with_walls: bool):
-    """Momentum to velocity and gravity; the walls too unless ``with_walls`` is
-    False (contact comes first, then :func:`make_boundary`)."""
+def make_kinematic(t: Types):
+    """``kinematic(v, q, m, kin_m, kin_id, time, u, omega, center, window) -> v``."""
+    S = t.scalar
+    vec = t.vec
+    w3 = wp.types.vector(3, S)
+
+    @wp.func
+    def kinematic(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S,
+                  u: wp.array(dtype=t.vec), omega: wp.array(dtype=w3),
+                  center: wp.array(dtype=t.vec), window: wp.array(dtype=wp.types.vector(2, S))):
+        if kin_id == 0 or kin_m < S(0.5) * m:
+            return v
+        r = kin_id - 1
+        if time < window[r][0] or time >= window[r][1]:
+            return v
+        c = center[r] + (time - window[r][0]) * u[r]
+        d = q - c
+        w = omega[r]
+        if wp.static(t.dim == 2):
+            return u[r] + vec(-w[2] * d[1], w[2] * d[0])
+        else:
+            return u[r] + wp.cross(vec(w[0], w[1], w[2]), d)
+
+    return kinematic
+
+
+def region_types(t: Types):
+    """Types of the per-region tables: velocity, angular velocity, centre, (start, end)."""
+    return t.vec, wp.types.vector(3, t.scalar), t.vec, wp.types.vector(2, t.scalar)
+
+
+@functools.cache
+def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
+    """Momentum to velocity and gravity; the boundary conditions too unless
+    ``with_boundary`` is False (contact comes first, then :func:`make_boundary`)."""
     S = t.scalar
     walls = make_walls(t)
+    kinematic = make_kinematic(t)
+    U, W3, Cc, Win = region_types(t)
 
     @wp.kernel(module="unique")
     def grid_update(
         grid_m: wp.array(dtype=S),
         gravity: t.vec,
         dt: S,
+        time: S,
         domain: t.vec,
         band: S,
         wall_lo: t.ivec,
         wall_hi: t.ivec,
+        grid_kin: wp.array(dtype=S),
+        grid_kin_id: wp.array(dtype=wp.int32),
+        region_u: wp.array(dtype=U),
+        region_omega: wp.array(dtype=W3),
+        region_center: wp.array(dtype=Cc),
+        region_window: wp.array(dtype=Win),
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
         grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position, out: position
     ):
@@ -80,8 +126,11 @@ def make_grid_update(t: Types, with_walls: bool):
             return
         vi = grid_v[i] / m + dt * gravity
         qi = grid_q[i] / m
-        if wp.static(with_walls):
+        if wp.static(with_boundary):
             vi = walls(vi, qi, domain, band, wall_lo, wall_hi)
+            if wp.static(with_regions):
+                vi = kinematic(vi, qi, m, grid_kin[i], grid_kin_id[i], time, region_u,
+                               region_omega, region_center, region_window)
         grid_v[i] = vi
         grid_q[i] = qi
 
@@ -89,24 +138,39 @@ def make_grid_update(t: Types, with_walls: bool):
 
 
 @functools.cache
-def make_boundary(t: Types):
-    """The walls as a pass of their own (after contact)."""
+def make_boundary(t: Types, with_regions: bool):
+    """The boundary conditions as a pass of their own (after contact)."""
     S = t.scalar
     walls = make_walls(t)
+    kinematic = make_kinematic(t)
+    U, W3, Cc, Win = region_types(t)
 
     @wp.kernel(module="unique")
     def boundary(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
+        time: S,
         domain: t.vec,
         band: S,
         wall_lo: t.ivec,
         wall_hi: t.ivec,
+        grid_kin: wp.array(dtype=S),
+        grid_kin_id: wp.array(dtype=wp.int32),
+        region_u: wp.array(dtype=U),
+        region_omega: wp.array(dtype=W3),
+        region_center: wp.array(dtype=Cc),
+        region_window: wp.array(dtype=Win),
         grid_v: wp.array(dtype=t.vec),
     ):
         i = wp.tid()
-        if grid_m[i] <= S(0.0):
+        m = grid_m[i]
+        if m <= S(0.0):
             return
-        grid_v[i] = walls(grid_v[i], grid_q[i], domain, band, wall_lo, wall_hi)
+        qi = grid_q[i]
+        vi = walls(grid_v[i], qi, domain, band, wall_lo, wall_hi)
+        if wp.static(with_regions):
+            vi = kinematic(vi, qi, m, grid_kin[i], grid_kin_id[i], time, region_u, region_omega,
+                           region_center, region_window)
+        grid_v[i] = vi
 
     return boundary

@@ -54,6 +54,7 @@ class Model:
     mass: wp.array  # m_p [kg]
     volume: wp.array  # V_p^0 [m^3]
     body: wp.array  # body index per particle (int32)
+    region: wp.array  # kinematic region per particle: 0 none, r + 1 for scene.regions[r]
     body_params: wp.array  # packed material parameters per body
     groups: list[MaterialGroup]
     body_ranges: list[tuple[int, int]]  # (start, count) per body
@@ -147,6 +148,11 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
         raise SceneError("jitter", f"{scene.jitter}; accepted: 0 <= jitter <= 1")
     if not scene.bodies:
         raise SceneError("bodies", "empty; accepted: at least one body")
+    for r, reg in enumerate(scene.regions):
+        if not 0 <= reg.body < len(scene.bodies):
+            raise SceneError(f"regions[{r}].body", f"{reg.body}; accepted: 0 to {len(scene.bodies) - 1}")
+        if not reg.start < reg.end:
+            raise SceneError(f"regions[{r}].end", f"{reg.end} <= start {reg.start}")
     lo = scene.wall_cells * dx
     for i, b in enumerate(scene.bodies):
         key = f"bodies[{i}]"
@@ -222,6 +228,13 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
 
     x = np.concatenate(xs)
     n = len(x)
+    region = np.zeros(n, np.int32)
+    for r, reg in enumerate(scene.regions):
+        start, count = body_ranges[reg.body]
+        inside = reg.select.contains(x[start:start + count])
+        if not inside.any():
+            raise SceneError(f"regions[{r}].select", "selects no particle of its body")
+        region[start:start + count][inside] = r + 1
     S = np.float32 if precision == "float32" else np.float64
     codes = {w: WALL_TYPES.index(w) for w in WALL_TYPES}
     wall_codes = (tuple(codes[w] for w in scene.walls[0::2]), tuple(codes[w] for w in scene.walls[1::2]))
@@ -232,6 +245,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             mass=wp.array(np.concatenate(ms).astype(S), dtype=t.scalar),
             volume=wp.array(np.concatenate(Vs).astype(S), dtype=t.scalar),
             body=wp.array(np.concatenate(ids), dtype=wp.int32),
+            region=wp.array(region, dtype=wp.int32),
             body_params=wp.array(np.array([b.material.packed_padded() for b in scene.bodies], S),
                                  dtype=t.params),
             groups=groups, body_ranges=body_ranges, wall_codes=wall_codes,

@@ -6,7 +6,7 @@ covered by a regular grid of spacing ``dx = domain[0] / resolution``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence, Union
 
 import numpy as np
@@ -72,7 +72,49 @@ class Cylinder:
         return (np.abs(along) <= self.half_height) & (radial2 <= self.radius**2)
 
 
-Shape = Union[Box, Sphere, Cylinder]
+@dataclass(frozen=True)
+class Compound:
+    """Union of shapes, filled as one body (e.g. a bunny hanging from a cord)."""
+
+    parts: tuple
+
+    def bounds(self):
+        lo, hi = zip(*(p.bounds() for p in self.parts))
+        return np.min(lo, axis=0), np.max(hi, axis=0)
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        inside = np.zeros(len(x), bool)
+        for part in self.parts:
+            inside |= part.contains(x)
+        return inside
+
+    @property
+    def center(self):
+        lo, hi = self.bounds()
+        return tuple(0.5 * (lo + hi))
+
+
+Shape = Union[Box, Sphere, Cylinder, Compound]
+
+
+@dataclass
+class KinematicRegion:
+    """Particles of body ``body`` whose initial position lies inside ``select``
+    move rigidly while ``start <= t < end``:
+        v(q, t) = velocity + angular_velocity x (q - c(t)),
+        c(t) = center + velocity (t - start),
+    imposed as the velocity of every grid node that draws at least half its
+    mass from them (mpm.grid). ``angular_velocity`` [rad/s] is a scalar in 2D,
+    a vector in 3D; ``center`` defaults to the centre of ``select``."""
+
+    body: int
+    select: Shape
+    name: str = ""
+    velocity: Sequence[float] | None = None
+    angular_velocity: float | Sequence[float] | None = None
+    center: Sequence[float] | None = None
+    start: float = 0.0
+    end: float = float("inf")
 
 
 @dataclass
@@ -111,6 +153,8 @@ class Scene:
     """random displacement of lattice samples, as a fraction of their spacing"""
     contact: str = "frictionless"
     """between bodies: "frictionless" (mpm.contact) or "none" (they pass through)"""
+    regions: list[KinematicRegion] = field(default_factory=list)
+    """kinematic boundary regions (anchors, prescribed rotation and translation)"""
 
     @property
     def dx(self) -> float:

@@ -18,9 +18,9 @@ import warp as wp
 
 from .configuration import make_update
 from .diagnostics import diagnostic_names, make_measure
-from .fracture import make_fracture, neighbour_pairs
+from .fracture import fragments, make_fracture, neighbour_pairs
 from .contact import make_contact
-from .grid import make_boundary, make_grid_update
+from .grid import make_boundary, make_grid_update, region_types
 from .layout import GridLayout
 from .materials import Fluid
 from .model import Model, State
@@ -87,12 +87,13 @@ class Solver:
         self._epsilon = S(eps if eps is not None and np.isfinite(eps) else 0.0)
 
         # kernels specialised for what the model holds
-        self._p2g = [(make_p2g(t, k, g.cls), g) for g in model.groups]
+        self.regions = len(model.scene.regions) > 0
+        self._p2g = [(make_p2g(t, k, g.cls, self.regions), g) for g in model.groups]
         self._g2p = make_g2p(t, k, self.options.record_dJ, scheme.tracks_marks())
         self.contact = nb > 1 and model.scene.contact != "none"
-        self._grid_update = make_grid_update(t, with_walls=not self.contact)
+        self._grid_update = make_grid_update(t, not self.contact, self.regions)
         self._contact = make_contact(t) if self.contact else ()
-        self._boundary = make_boundary(t) if self.contact else None
+        self._boundary = make_boundary(t, self.regions) if self.contact else None
         self._measure = make_measure(t)
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
@@ -108,6 +109,7 @@ class Solver:
             reset[STATUS_HEADER + nb + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
+            self._regions = self._region_tables()
             if self.contact:  # per-body fields on the global lattice
                 n_global = model.n_nodes
                 self._cells = t.ivec(*model.cells)
@@ -117,7 +119,22 @@ class Solver:
                 self.contact_dV = wp.zeros(nb * n_global, dtype=t.vec)
             self.diagnostics = wp.zeros(len(diagnostic_names(t.dim)), dtype=wp.float64)
         self._capacity = 0
-        self.grid_m = self.grid_v = self.grid_q = None
+        self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
+        self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
+
+    def _region_tables(self) -> list:
+        """Velocity, angular velocity (3 components), centre and (start, end) per region."""
+        t, d = self.model.types, self.model.dim
+        rows = []
+        for reg in self.model.scene.regions or []:
+            w = reg.angular_velocity
+            w3 = (0.0, 0.0, float(w or 0.0)) if d == 2 else tuple(w or (0.0, 0.0, 0.0))
+            c = reg.center if reg.center is not None else 0.5 * np.add(*reg.select.bounds())
+            rows.append((tuple(reg.velocity or (0.0,) * d), w3, tuple(c), (reg.start, reg.end)))
+        U, W3, Cc, Win = region_types(t)
+        if not rows:  # placeholders: the kernels compile the regions out
+            rows = [((0.0,) * d, (0.0,) * 3, (0.0,) * d, (0.0, 0.0))]
+        return [wp.array([r[k] for r in rows], dtype=T) for k, T in enumerate((U, W3, Cc, Win))]
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
@@ -161,6 +178,8 @@ class Solver:
 
     def step(self, state: State, dt: float) -> None:
         """Advance ``state`` by ``dt`` [s] in the current reference configurations."""
+        self._time = self.model.types.scalar(self.time)
+        self.time += dt
         dt = self.model.types.scalar(dt)
         self._clear()
         self._rasterize(state, dt)
@@ -176,6 +195,9 @@ class Solver:
         self.grid_m[:n].zero_()
         self.grid_v[:n].zero_()
         self.grid_q[:n].zero_()
+        if self.regions:
+            self.grid_kin[:n].zero_()
+            self.grid_kin_id[:n].zero_()
         wp.copy(self.status, self._status_reset)
         self.energy.zero_()
 
@@ -188,13 +210,14 @@ class Solver:
                 state.x, state.v, state.C, state.F0s, state.Fsn,
                 state.cache_base, state.cache_fx, state.cache_W,
                 self._dx, self._K, dt, g.start,
-                self.grid_m, self.grid_v, self.grid_q, self.energy])
+                self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
+                self.energy])
 
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
         wp.launch(self._grid_update, self.layout.n_nodes, device=self.model.device, inputs=[
-            self.grid_m, self._gravity, dt, self._domain, self._band, self._wall_lo,
-            self._wall_hi, self.grid_v, self.grid_q])
+            self.grid_m, self._gravity, dt, self._time, self._domain, self._band, self._wall_lo,
+            self._wall_hi, self.grid_kin, self.grid_kin_id, *self._regions, self.grid_v, self.grid_q])
 
     def _resolve_contact(self):
         """Frictionless contact between bodies on the global lattice."""
@@ -217,8 +240,8 @@ class Solver:
     def _apply_boundary(self):
         """Walls, after contact."""
         wp.launch(self._boundary, self.layout.n_nodes, device=self.model.device, inputs=[
-            self.grid_m, self.grid_q, self._domain, self._band, self._wall_lo, self._wall_hi,
-            self.grid_v])
+            self.grid_m, self.grid_q, self._time, self._domain, self._band, self._wall_lo,
+            self._wall_hi, self.grid_kin, self.grid_kin_id, *self._regions, self.grid_v])
 
     def _interpolate(self, state: State, dt):
         """G2P: velocities, affine matrices, positions, F^sn, the criterion."""
@@ -262,6 +285,9 @@ class Solver:
                 self.grid_m = wp.zeros(self._capacity, dtype=t.scalar)
                 self.grid_v = wp.zeros(self._capacity, dtype=t.vec)
                 self.grid_q = wp.zeros(self._capacity, dtype=t.vec)
+                n_kin = self._capacity if self.regions else 1
+                self.grid_kin = wp.zeros(n_kin, dtype=t.scalar)
+                self.grid_kin_id = wp.zeros(n_kin, dtype=wp.int32)
 
     # ------------------------------------------------------------ read back
     def check(self) -> StepReport:
@@ -285,6 +311,7 @@ class Solver:
             self._pair_q = wp.array(q, dtype=wp.int32)
             self._pair_offset = wp.array((x[q] - x[p]).astype(state_dtype(m)), dtype=m.types.vec)
             self._broken = wp.zeros(self.n_bodies, dtype=wp.float64)
+            self._pair_broken = wp.zeros(len(p), dtype=wp.uint8)
 
     def fracture(self, state: State) -> np.ndarray:
         """Fraction of initially neighbouring pairs broken, per body (mpm.fracture)."""
@@ -293,8 +320,16 @@ class Solver:
         if len(self._pair_p):
             wp.launch(self._fracture, len(self._pair_p), device=m.device, inputs=[
                 self._pair_p, self._pair_q, self._pair_offset, m.body, state.x, state.F0s,
-                state.Fsn, self._dx, self._broken])
+                state.Fsn, self._dx, self._broken, self._pair_broken])
         return self._broken.numpy() / np.maximum(self.pair_counts, 1)
+
+    def fragments(self) -> np.ndarray:
+        """Pieces per body (connected components of its intact neighbour
+        pairs) at the last :meth:`fracture` evaluation."""
+        intact = self._pair_broken.numpy() == 0
+        label = fragments(self.model.n_particles, self._pair_p.numpy(), self._pair_q.numpy(), intact)
+        body = self.model.body.numpy()
+        return np.array([len(np.unique(label[body == b])) for b in range(self.n_bodies)])
 
     def step_energy(self) -> float:
         """Elastic energy [J] of the state the last step started from (P2G

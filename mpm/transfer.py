@@ -34,8 +34,9 @@ STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
 
 
 @functools.cache
-def make_p2g(t: Types, kernel: Kernel, material):
-    """P2G for the particles of one material model (``material`` is its class)."""
+def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
+    """P2G for the particles of one material model (``material`` is its class);
+    ``with_regions``: also the mass each node draws from kinematic regions."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks = t.dim, kernel.support
@@ -71,6 +72,9 @@ def make_p2g(t: Types, kernel: Kernel, material):
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
         grid_mq: wp.array(dtype=t.vec),
+        region: wp.array(dtype=wp.int32),
+        grid_kin: wp.array(dtype=S),
+        grid_kin_id: wp.array(dtype=wp.int32),
         # Diagnostics out:
         energy: wp.array(dtype=f64),
     ):
@@ -92,6 +96,9 @@ def make_p2g(t: Types, kernel: Kernel, material):
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
         affine = m * Cp - (dt * volume[p] * K) * P * wp.transpose(F0)
         mv = m * v[p]
+        rid = int(0)
+        if wp.static(with_regions):
+            rid = region[p]
         for a in range(Ks):
             for bb in range(Ks):
                 for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -99,6 +106,10 @@ def make_p2g(t: Types, kernel: Kernel, material):
                     wp.atomic_add(grid_m, i, w * m)
                     wp.atomic_add(grid_mv, i, w * (mv + affine * r))
                     wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
+                    if wp.static(with_regions):
+                        if rid > 0:
+                            wp.atomic_add(grid_kin, i, w * m)
+                            wp.atomic_max(grid_kin_id, i, rid)
 
     return p2g
 

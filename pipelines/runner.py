@@ -308,6 +308,8 @@ class Run:
             overall, per_body = self.fracture
             names = [b.name for b in self.spec.scene.bodies]
             m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
+            pieces = self.solver.fragments()
+            m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
         if m["status"] == "interrupted":
             self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
         steps = self.step

@@ -19,7 +19,8 @@ from mpm.schemes import SCHEMES
 
 PRECISIONS = ("float32", "float64")
 DEVICES = ("cpu", "cuda")
-SHAPES = ("box", "sphere", "cylinder")
+SHAPES = ("box", "sphere", "cylinder", "mesh", "compound")
+CONTACTS = ("frictionless", "none")
 
 
 @dataclass
@@ -31,15 +32,21 @@ class KernelConfig:
 
 @dataclass
 class ShapeConfig:
-    """A primitive: ``box`` (center, half_size), ``sphere`` (center, radius; a
-    disc in 2D) or ``cylinder`` (3D: center, radius, half_height, axis)."""
+    """A shape: ``box`` (center, half_size), ``sphere`` (center, radius; a
+    disc in 2D), ``cylinder`` (3D: center, radius, half_height, axis),
+    ``mesh`` (3D: a closed triangle mesh ``mesh`` - a USD/OBJ path or
+    ``warp:bunny`` - scaled to ``size``, centred at center, ``axis`` up) or
+    ``compound`` (the union of ``parts``, each a shape mapping)."""
 
     type: str = "box"
-    center: List[float] = MISSING  # [m]
+    center: Optional[List[float]] = None  # [m]
     half_size: Optional[List[float]] = None  # [m]
     radius: Optional[float] = None  # [m]
     half_height: Optional[float] = None  # [m]
     axis: Optional[int] = None  # 0, 1 or 2 (default 1: along y)
+    mesh: Optional[str] = None
+    size: Optional[float] = None  # [m] largest side of the mesh's bounding box
+    parts: Optional[List[Any]] = None
 
 
 @dataclass
@@ -53,6 +60,23 @@ class BodyConfig:
     velocity: Optional[List[float]] = None  # [m/s]
     angular_velocity: Optional[Any] = None  # [rad/s]: scalar (2D) or 3-vector (3D)
     ppc: Optional[int] = None  # particles per cell, overrides the scene's
+
+
+@dataclass
+class RegionConfig:
+    """A kinematic boundary region: the particles of ``body`` (index or name)
+    whose initial position is inside ``select`` move rigidly with ``velocity``
+    [m/s] and ``angular_velocity`` [rad/s] about ``center`` (default: the
+    centre of ``select``, moving with the velocity) while start <= t < end [s]."""
+
+    name: str = ""
+    body: Any = 0
+    select: ShapeConfig = field(default_factory=ShapeConfig)
+    velocity: Optional[List[float]] = None
+    angular_velocity: Optional[Any] = None
+    center: Optional[List[float]] = None
+    start: float = 0.0
+    end: Optional[float] = None  # null: forever
 
 
 @dataclass
@@ -70,7 +94,9 @@ class SceneConfig:
     ppc: int = 4  # particles per cell
     jitter: float = 0.0  # random displacement of lattice samples [fraction of spacing]
     log_every: int = 1  # particle logging cadence when log.every is null
+    contact: str = "frictionless"  # between bodies: frictionless | none
     bodies: List[BodyConfig] = field(default_factory=list)
+    regions: List[RegionConfig] = field(default_factory=list)
 
 
 @dataclass

@@ -6,6 +6,7 @@ config key and the accepted values; nothing is compiled or allocated here.
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -13,11 +14,12 @@ from omegaconf import DictConfig, OmegaConf
 
 import mpm
 from mpm.materials import MATERIALS, Material
+from mpm.meshes import MeshShape, asset_path
 from mpm.params import violations
 from mpm.scene import WALL_TYPES
 from mpm.schemes import AFFINE
 
-from .schema import DEVICES, PRECISIONS, SHAPES
+from .schema import CONTACTS, DEVICES, PRECISIONS, SHAPES
 
 
 class ConfigError(ValueError):
@@ -140,31 +142,75 @@ def make_scheme(node, key: str = "scheme"):
     return scheme
 
 
+SHAPE_KEYS = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
+              "cylinder": ["center", "radius", "half_height"], "mesh": ["mesh", "center", "size"],
+              "compound": ["parts"]}
+SHAPE_OPTIONAL = {"cylinder": ["axis"], "mesh": ["axis"]}
+
+
 def make_shape(node, key: str, dim: int):
-    d = dict(_plain(node) or {})
+    d = _plain(node)
+    if not isinstance(d, dict):
+        raise ConfigError(key, f"{d!r}; accepted: a shape mapping with a type key")
     kind = _choice(f"{key}.type", d.get("type"), SHAPES)
-    need = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
-            "cylinder": ["center", "radius", "half_height"]}[kind]
-    allowed = need + (["axis"] if kind == "cylinder" else [])
+    need = SHAPE_KEYS[kind]
+    allowed = need + SHAPE_OPTIONAL.get(kind, [])
     for k, v in d.items():
         if k != "type" and v is not None and k not in allowed:
             raise ConfigError(f"{key}.{k}", f"not used by a {kind}; accepted: {', '.join(allowed)}")
     for k in need:
         if d.get(k) is None:
             raise ConfigError(f"{key}.{k}", f"missing for a {kind}")
+    if kind == "compound":
+        if not isinstance(d["parts"], list) or not d["parts"]:
+            raise ConfigError(f"{key}.parts", "accepted: a non-empty list of shapes")
+        return mpm.Compound(tuple(make_shape(p, f"{key}.parts[{i}]", dim)
+                                  for i, p in enumerate(d["parts"])))
     center = _vector(f"{key}.center", d["center"], dim)
     if kind == "box":
         half = _vector(f"{key}.half_size", d["half_size"], dim)
         for i, h in enumerate(half):
             _number(f"{key}.half_size[{i}]", h, gt=0.0)
         return mpm.Box(center, half)
+    if kind == "mesh":
+        if dim != 3:
+            raise ConfigError(f"{key}.type", "mesh is 3D only; accepted in 2D: box, sphere, compound")
+        if not os.path.exists(asset_path(d["mesh"])):
+            raise ConfigError(f"{key}.mesh", f"{d['mesh']!r}: no such file; accepted: a USD or OBJ "
+                                             "path, or warp:<asset> (e.g. warp:bunny)")
+        up = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
+        return MeshShape(d["mesh"], center, _number(f"{key}.size", d["size"], gt=0.0), up)
     radius = _number(f"{key}.radius", d["radius"], gt=0.0)
     if kind == "sphere":
         return mpm.Sphere(center, radius)
     if dim != 3:
-        raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere")
+        raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere, compound")
     axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
     return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis)
+
+
+def _angular(key: str, w, dim: int):
+    if w is None:
+        return None
+    return _number(key, w) if dim == 2 else _vector(key, w, 3)
+
+
+def make_region(d: dict, key: str, dim: int, body_names: list[str]) -> mpm.KinematicRegion:
+    body = d.get("body")
+    if isinstance(body, str):
+        if body not in body_names:
+            raise ConfigError(f"{key}.body", f"{body!r} unknown; accepted: {', '.join(body_names)}")
+        body = body_names.index(body)
+    else:
+        body = _number(f"{key}.body", body, int, ge=0, le=len(body_names) - 1)
+    start = _number(f"{key}.start", d.get("start", 0.0), ge=0.0)
+    end = _number(f"{key}.end", d.get("end"), gt=start, optional=True)
+    return mpm.KinematicRegion(
+        body=body, select=make_shape(d["select"], f"{key}.select", dim), name=d.get("name") or "",
+        velocity=None if d.get("velocity") is None else _vector(f"{key}.velocity", d["velocity"], dim),
+        angular_velocity=_angular(f"{key}.angular_velocity", d.get("angular_velocity"), dim),
+        center=None if d.get("center") is None else _vector(f"{key}.center", d["center"], dim),
+        start=start, end=float("inf") if end is None else end)
 
 
 def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mpm.Scene, dict]:
@@ -190,10 +236,7 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
         bkey = f"{key}.bodies[{i}]"
         material = default_material if b.get("material") is None else \
             make_material(b["material"], f"{bkey}.material")
-        w = b.get("angular_velocity")
-        if w is not None:
-            w = _number(f"{bkey}.angular_velocity", w) if dim == 2 else \
-                _vector(f"{bkey}.angular_velocity", w, 3)
+        w = _angular(f"{bkey}.angular_velocity", b.get("angular_velocity"), dim)
         bodies.append(mpm.Body(
             shape=make_shape(b["shape"], f"{bkey}.shape", dim), material=material,
             name=b.get("name") or f"body{i}",
@@ -209,6 +252,9 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
         wall_cells=_number(f"{key}.wall_cells", d["wall_cells"], int, ge=1),
         ppc=_number(f"{key}.ppc", d["ppc"], int, ge=1),
         jitter=_number(f"{key}.jitter", d["jitter"], ge=0.0, le=1.0),
+        contact=_choice(f"{key}.contact", d["contact"], CONTACTS),
+        regions=[make_region(r, f"{key}.regions[{i}]", dim, [b.name for b in bodies])
+                 for i, r in enumerate(d.get("regions") or [])],
     )
     return scene, d
 

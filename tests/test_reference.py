@@ -38,7 +38,7 @@ def test_eulerian_step_matches_numpy_reference(dim, device):
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
     solver = mpm.Solver(model)
     solver.prepare(state)
-    
+
     body = model.body.numpy()
     models = [scene.bodies[b].material.name for b in body]
     prms = [scene.bodies[b].material.packed() for b in body]
