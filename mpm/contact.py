@@ -3,21 +3,28 @@ field, frictionless, separation free).
 
 Every body has its own reference grid (mpm.layout), so bodies do not see each
 other in the transfers. After the grid update, each body node i (mass m_i,
-velocity v_i, current position q_i) is splatted with linear weights w_ig onto
-the global lattice g (spacing dx), one field per body b:
-    M_bg = sum_i w_ig m_i,   P_bg = sum_i w_ig m_i v_i.
-At a global node holding two or more bodies, body b's outward normal is
+velocity v_i, current position q_i) is binned to the global lattice node g
+nearest to q_i (spacing dx), one field per body b:
+    M_bg = sum_{i in g} m_i,   P_bg = sum_{i in g} m_i v_i.
+(For the Eulerian scheme q_i is a lattice node; a Lagrangian node's q_i is
+anywhere, and spreading it over several lattice nodes would dilute the
+correction it takes back, letting bodies creep into each other.)
+Bodies are in contact at a global node where two or more are present and
+their volume fractions fill it: sum_b M_bg / (rho_b dx^d) >= ``fill``
+(rho_b the body's rest density). Without this test a node would register
+contact as soon as the faint fringes of two stencils overlap, bodies several
+cells apart. There, body b's outward normal is
     n_b = normalize(grad (M_others - M_b)),   M_others = sum of the other
 bodies present at that node (central differences), which for two bodies is
 the common normal, n_a = -n_b. With the
 centre-of-mass velocity v_cm = sum P / sum M, a body approaching the others,
 (v_b - v_cm) . n_b > 0, loses that normal component:
     dV_bg = -((v_b - v_cm) . n_b) n_b,
-and each body node takes back dv_i = sum_g w_ig dV_bg. The momentum change
+and each body node of that bin takes dv_i = dV_bg. The momentum change
 sum_b M_bg dV_bg at a global node vanishes: for two bodies the normal impulses
 are equal and opposite; where three or more meet, the mass-weighted mean
-correction is taken off every body present. The gather with the splat's
-weights transfers exactly that momentum to the nodes.
+correction is taken off every body present. Each bin hands exactly that
+momentum to its nodes.
 """
 
 import functools
@@ -28,44 +35,18 @@ from .types import Types
 
 
 @functools.cache
-def make_tent(t: Types):
-    """``tent(q, inv_dx, cells) -> (base, fx)``: linear-interpolation cell of q."""
-    S = t.scalar
-    ivec, vec = t.ivec, t.vec
-
-    @wp.func
-    def tent(q: t.vec, inv_dx: S, cells: t.ivec):
-        g = q * inv_dx
-        base = ivec()
-        fx = vec()
-        for d in range(wp.static(t.dim)):
-            b = wp.clamp(int(wp.floor(g[d])), 0, cells[d] - 1)
-            base[d] = b
-            fx[d] = wp.clamp(g[d] - S(b), S(0.0), S(1.0))
-        return base, fx
-
-    return tent
-
-
-@functools.cache
-def make_corner(t: Types):
-    """``corner(k, base, fx, strides) -> (w, flat)`` for corner k of 2^d."""
+def make_nearest(t: Types):
+    """``nearest(q, inv_dx, cells, strides) -> flat``: the global node closest to q."""
     S = t.scalar
 
     @wp.func
-    def corner(k: int, base: t.ivec, fx: t.vec, strides: t.ivec):
-        w = S(1.0)
+    def nearest(q: t.vec, inv_dx: S, cells: t.ivec, strides: t.ivec):
         flat = int(0)
         for d in range(wp.static(t.dim)):
-            bit = (k >> d) & 1
-            if bit == 1:
-                w *= fx[d]
-            else:
-                w *= S(1.0) - fx[d]
-            flat += (base[d] + bit) * strides[d]
-        return w, flat
+            flat += wp.clamp(int(wp.round(q[d] * inv_dx)), 0, cells[d]) * strides[d]
+        return flat
 
-    return corner
+    return nearest
 
 
 @functools.cache
@@ -83,14 +64,12 @@ def make_node_body(t: Types):
 
 @functools.cache
 def make_contact(t: Types):
-    """The three contact passes: splat (body nodes), resolve (global nodes),
-    gather (body nodes)."""
+    """The three contact passes: bin (body nodes), resolve (global nodes),
+    take back (body nodes)."""
     S = t.scalar
     vec = t.vec
     dim = t.dim
-    corners = 2**dim
-    tent = make_tent(t)
-    corner = make_corner(t)
+    nearest = make_nearest(t)
     node_body = make_node_body(t)
 
     @wp.kernel(module="unique")
@@ -112,12 +91,9 @@ def make_contact(t: Types):
         if m <= S(0.0):
             return
         b = node_body(i, offset, n_bodies)
-        base, fx = tent(grid_q[i], inv_dx, cells)
-        mv = m * grid_v[i]
-        for k in range(corners):
-            w, g = corner(k, base, fx, strides)
-            wp.atomic_add(M, b * n_global + g, w * m)
-            wp.atomic_add(P, b * n_global + g, w * mv)
+        g = nearest(grid_q[i], inv_dx, cells, strides)
+        wp.atomic_add(M, b * n_global + g, m)
+        wp.atomic_add(P, b * n_global + g, m * grid_v[i])
 
     @wp.kernel(module="unique")
     def resolve(
@@ -125,6 +101,8 @@ def make_contact(t: Types):
         cells: t.ivec,
         strides: t.ivec,
         n_global: int,
+        rest_mass: wp.array(dtype=S),  # rho_b dx^d per body
+        fill: S,
         M: wp.array(dtype=S),
         P: wp.array(dtype=t.vec),
         dV: wp.array(dtype=t.vec),
@@ -133,13 +111,15 @@ def make_contact(t: Types):
         present = int(0)
         m_tot = S(0.0)
         p_tot = vec()
+        volume = S(0.0)
         for b in range(n_bodies):
             m = M[b * n_global + g]
             if m > S(0.0):
                 present += 1
                 m_tot += m
                 p_tot += P[b * n_global + g]
-        if present < 2:
+                volume += m / rest_mass[b]
+        if present < 2 or volume < fill:
             return
         v_cm = p_tot / m_tot
         dp = vec()  # momentum the corrections add at this node
@@ -198,11 +178,7 @@ def make_contact(t: Types):
         if grid_m[i] <= S(0.0):
             return
         b = node_body(i, offset, n_bodies)
-        base, fx = tent(grid_q[i], inv_dx, cells)
-        dv = vec()
-        for k in range(corners):
-            w, g = corner(k, base, fx, strides)
-            dv += w * dV[b * n_global + g]
-        grid_v[i] = grid_v[i] + dv
+        g = nearest(grid_q[i], inv_dx, cells, strides)
+        grid_v[i] = grid_v[i] + dV[b * n_global + g]
 
     return splat, resolve, gather

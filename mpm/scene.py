@@ -153,6 +153,8 @@ class Scene:
     """random displacement of lattice samples, as a fraction of their spacing"""
     contact: str = "frictionless"
     """between bodies: "frictionless" (mpm.contact) or "none" (they pass through)"""
+    contact_fill: float = 0.5
+    """volume fraction of a global node that the bodies present must fill for contact"""
     regions: list[KinematicRegion] = field(default_factory=list)
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
 

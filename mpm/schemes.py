@@ -8,7 +8,10 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
 * EMPM (s = n): update every step - Eulerian MLS-MPM (Hu et al. 2018).
 * TLMPM (s = 0): never update - total Lagrangian MPM (de Vaucorbeil 2020).
 * AULMPM: update a body when the fraction of its particles with
-  dJ_p >= epsilon reaches eta.
+  dJ_p >= epsilon reaches eta, or when any of its particles reaches
+  dJ_p >= dJ_max (a safeguard: the fraction alone lets a handful of particles,
+  a splash's thin jet, invert their reference cells between updates and blow
+  up; dJ_max is never below epsilon, so epsilon = inf still never updates).
 
 At an update X <- x, F^0s <- F^sn F^0s, F^sn <- I, and the cached stencil
 weights are recomputed. The affine matrix C is a velocity gradient with
@@ -39,7 +42,7 @@ class EMPM:
     def affine(self) -> str:
         return "keep"
 
-    def updates(self, marked: int, count: int) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
         return True
 
     def tracks_marks(self) -> bool:
@@ -56,7 +59,7 @@ class TLMPM:
     def affine(self) -> str:
         return "keep"
 
-    def updates(self, marked: int, count: int) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
         return False
 
     def tracks_marks(self) -> bool:
@@ -75,17 +78,20 @@ class AULMPM:
     name: str = "aulmpm"
     epsilon: float | None = param(None, "mark particles with dJ >= epsilon [-]", ge=0.0, inf=True)
     eta: float | None = param(None, "update when marked / n >= eta [-]", ge=0.0, le=1.0)
+    dJ_max: float = param(0.5, "also update when any particle has dJ >= max(dJ_max, epsilon) [-]",
+                          gt=0.0, inf=True)
     affine: str = "transform"
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
         eps, eta = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
         return AULMPM(name=self.name, epsilon=eps if self.epsilon is None else self.epsilon,
-                      eta=eta if self.eta is None else self.eta, affine=self.affine)
+                      eta=eta if self.eta is None else self.eta, dJ_max=self.dJ_max,
+                      affine=self.affine)
 
-    def updates(self, marked: int, count: int) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
         if math.isinf(self.epsilon):
             return False
-        return marked >= self.eta * count
+        return marked >= self.eta * count or max_dJ >= max(self.dJ_max, self.epsilon)
 
     def tracks_marks(self) -> bool:
         return not math.isinf(self.epsilon)

@@ -43,6 +43,7 @@ class StepReport:
     nonfinite: int  # particles with a non-finite position, velocity or F^sn
     outside: int  # particles that left the domain interior
     marked: np.ndarray  # per body: particles with dJ >= epsilon (A-ULMPM), else 0
+    max_dJ: np.ndarray  # per body: the largest dJ (A-ULMPM), else 0
     updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
     update_time: float = 0.0  # [s] deciding and updating
 
@@ -102,11 +103,12 @@ class Solver:
 
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev)
         with wp.ScopedDevice(dev):
-            n_status = STATUS_HEADER + nb + 2 * nb * t.dim
+            box = STATUS_HEADER + 2 * nb  # marked counts and largest dJ per body come first
+            n_status = box + 2 * nb * t.dim
             self.status = wp.zeros(n_status, dtype=wp.float64)
             reset = np.zeros(n_status)
-            reset[STATUS_HEADER + nb: STATUS_HEADER + nb + nb * t.dim] = np.inf
-            reset[STATUS_HEADER + nb + nb * t.dim:] = -np.inf
+            reset[box: box + nb * t.dim] = np.inf
+            reset[box + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
             self._regions = self._region_tables()
@@ -117,6 +119,9 @@ class Solver:
                 self.contact_M = wp.zeros(nb * n_global, dtype=t.scalar)
                 self.contact_P = wp.zeros(nb * n_global, dtype=t.vec)
                 self.contact_dV = wp.zeros(nb * n_global, dtype=t.vec)
+                self._rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
+                                           dtype=t.scalar)
+                self._fill = t.scalar(model.scene.contact_fill)
             self.diagnostics = wp.zeros(len(diagnostic_names(t.dim)), dtype=wp.float64)
         self._capacity = 0
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
@@ -170,7 +175,8 @@ class Solver:
         if report.reason is None:
             t0 = time.perf_counter()
             report.updated = [b for b in range(self.n_bodies)
-                              if self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]))]
+                              if self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
+                                                     float(report.max_dJ[b]))]
             if report.updated:
                 self.update_configuration(state, report.updated)
             report.update_time = time.perf_counter() - t0
@@ -232,8 +238,8 @@ class Solver:
         wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
             self.grid_m, self.grid_v, self.grid_q, *common, self.contact_M, self.contact_P])
         wp.launch(resolve, n_global, device=m.device, inputs=[
-            self.n_bodies, self._cells, self._global_strides, n_global,
-            self.contact_M, self.contact_P, self.contact_dV])
+            self.n_bodies, self._cells, self._global_strides, n_global, self._rest_mass,
+            self._fill, self.contact_M, self.contact_P, self.contact_dV])
         wp.launch(gather, lay.n_nodes, device=m.device, inputs=[
             self.grid_m, self.grid_q, *common, self.contact_dV, self.grid_v])
 
@@ -258,8 +264,9 @@ class Solver:
         (their new boxes come from the bounding boxes G2P measured)."""
         nb, d = self.n_bodies, self.model.dim
         s = self.status.numpy()
-        lo = s[STATUS_HEADER + nb: STATUS_HEADER + nb + nb * d].reshape(nb, d)
-        hi = s[STATUS_HEADER + nb + nb * d:].reshape(nb, d)
+        box = STATUS_HEADER + 2 * nb
+        lo = s[box: box + nb * d].reshape(nb, d)
+        hi = s[box + nb * d:].reshape(nb, d)
         for b in bodies:
             self.layout.fit(b, lo[b], hi[b])
         self._commit_layout()
@@ -297,7 +304,8 @@ class Solver:
         return StepReport(
             max_speed=float(np.sqrt(s[STATUS_MAX_V2])), nonfinite=int(s[STATUS_NONFINITE]),
             outside=int(s[STATUS_OUTSIDE]),
-            marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64))
+            marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64),
+            max_dJ=s[STATUS_HEADER + self.n_bodies:STATUS_HEADER + 2 * self.n_bodies].copy())
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

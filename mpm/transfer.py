@@ -119,8 +119,9 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
     """G2P for all particles.
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
-    then per body the marked count (``count_marked``: dJ_p >= epsilon) and the
-    bounding box of the new positions (min per axis, then max per axis).
+    then per body the marked count (``count_marked``: dJ_p >= epsilon), the
+    largest dJ_p, and the bounding box of the new positions (min per axis,
+    then max per axis).
     """
     S = t.scalar
     f64 = wp.float64
@@ -185,6 +186,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
         if wp.static(count_marked):
             if dj >= epsilon:
                 wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
+            wp.atomic_max(status, STATUS_HEADER + n_bodies + b, f64(dj))
 
         # stability monitor and bounding box of the new positions
         wp.atomic_max(status, STATUS_MAX_V2, f64(wp.dot(vp, vp)))
@@ -192,7 +194,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:
             outside = False
-            box = STATUS_HEADER + n_bodies + b * dim
+            box = STATUS_HEADER + 2 * n_bodies + b * dim
             for d in range(wp.static(dim)):
                 if xp[d] < inside_lo[d] or xp[d] > inside_hi[d]:
                     outside = True

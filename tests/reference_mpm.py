@@ -120,3 +120,85 @@ def energy(model, F, prm):
         K, gamma, _ = prm
         return K * (J ** (1 - gamma) / (gamma - 1) + J - gamma / (gamma - 1))
     raise ValueError(model)
+
+
+def lagrangian_step(s, mass, vol, models, prms, body, dx, cells, domain, gravity, walls, dt,
+                    wall_cells=3):
+    """One step of the reference-configuration formulation (A-ULMPM paper,
+    eq. 10-31), each body on a grid of its own in its reference configuration.
+
+    ``s``: dict of arrays x, v, C, F0s, Fsn, X (updated in place). Walls act on
+    nodes whose current position q_i = sum W m (x_p + Fsn r) / m_i is within
+    (wall_cells - 1/2) dx of a face.
+    """
+    n, d = s["x"].shape
+    offsets = np.stack(np.meshgrid(*([np.arange(3)] * d), indexing="ij"), -1).reshape(-1, d)
+    K = 4.0 / dx**2
+    band = (wall_cells - 0.5) * dx
+    new_v = np.zeros_like(s["v"])
+    new_C = np.zeros_like(s["C"])
+    for b in np.unique(body):
+        nodes = {}  # (node index tuple) -> [m, mv, mq]
+        ps = np.flatnonzero(body == b)
+        for p in ps:
+            base = np.floor(s["X"][p] / dx - 0.5).astype(int)
+            fx = s["X"][p] / dx - base
+            w = quadratic_weights(fx)
+            Fs, F0 = s["Fsn"][p], s["F0s"][p]
+            L = s["C"][p] @ np.linalg.inv(Fs)
+            P = stress(models[p], Fs @ F0, L, prms[p])
+            affine = mass[p] * s["C"][p] - dt * vol[p] * K * P @ F0.T
+            for off in offsets:
+                weight = np.prod([w[off[a], a] for a in range(d)])
+                r = (off - fx) * dx
+                acc = nodes.setdefault(tuple(base + off), [0.0, np.zeros(d), np.zeros(d)])
+                acc[0] += weight * mass[p]
+                acc[1] += weight * (mass[p] * s["v"][p] + affine @ r)
+                acc[2] += weight * mass[p] * (s["x"][p] + Fs @ r)
+        vel = {}
+        for key, (m, mv, mq) in nodes.items():
+            if m <= 0:
+                continue
+            v = mv / m + dt * np.asarray(gravity)
+            q = mq / m
+            for a in range(d):
+                for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+                    near = q[a] < band if side == 0 else q[a] > domain[a] - band
+                    if not near or kind == "open":
+                        continue
+                    if kind == "sticky":
+                        v = np.zeros(d)
+                    elif (side == 0 and v[a] < 0) or (side == 1 and v[a] > 0):
+                        v[a] = 0.0
+            vel[key] = v
+        for p in ps:
+            base = np.floor(s["X"][p] / dx - 0.5).astype(int)
+            fx = s["X"][p] / dx - base
+            w = quadratic_weights(fx)
+            for off in offsets:
+                weight = np.prod([w[off[a], a] for a in range(d)])
+                r = (off - fx) * dx
+                g = vel.get(tuple(base + off), np.zeros(d))
+                new_v[p] += weight * g
+                new_C[p] += K * weight * np.outer(g, r)
+    s["v"] = new_v
+    s["C"] = new_C
+    s["x"] = s["x"] + dt * new_v
+    s["Fsn"] = s["Fsn"] + dt * new_C
+    return s
+
+
+def update_configuration(s, sel, models, affine="keep"):
+    """X <- x, F0s <- project(Fsn F0s), Fsn <- I (and C <- C Fsn^-1 if
+    ``affine == "transform"``) for the particles selected by ``sel``."""
+    d = s["x"].shape[1]
+    for p in np.flatnonzero(sel):
+        F = s["Fsn"][p] @ s["F0s"][p]
+        if models[p] == "fluid":
+            F = np.linalg.det(F) ** (1.0 / d) * np.eye(d)
+        if affine == "transform":
+            s["C"][p] = s["C"][p] @ np.linalg.inv(s["Fsn"][p])
+        s["X"][p] = s["x"][p]
+        s["F0s"][p] = F
+        s["Fsn"][p] = np.eye(d)
+    return s

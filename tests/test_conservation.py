@@ -12,17 +12,17 @@ def colliding_scene(dim):
     """Two spinning bodies of different materials flying into each other; no
     gravity, no walls."""
     if dim == 2:
-        a = mpm.Body(mpm.Sphere((0.35, 0.5), 0.1), mpm.FixedCorotated(E=5e4, nu=0.3),
+        a = mpm.Body(mpm.Sphere((0.39, 0.5), 0.1), mpm.FixedCorotated(E=5e4, nu=0.3),
                      velocity=(1.5, 0.2), angular_velocity=4.0)
-        b = mpm.Body(mpm.Box((0.62, 0.47), (0.08, 0.1)), mpm.NeoHookean(E=8e4, nu=0.35, rho=700),
+        b = mpm.Body(mpm.Box((0.59, 0.47), (0.08, 0.1)), mpm.NeoHookean(E=8e4, nu=0.35, rho=700),
                      velocity=(-1.0, 0.0), angular_velocity=-2.0)
-        c = mpm.Body(mpm.Sphere((0.5, 0.75), 0.06), mpm.Fluid(K=2e4, viscosity=1.0),
+        c = mpm.Body(mpm.Sphere((0.5, 0.69), 0.06), mpm.Fluid(K=2e4, viscosity=1.0),
                      velocity=(0.0, -1.0))
         return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, bodies=[a, b, c],
                          gravity=(0.0, 0.0), walls=("open",) * 4, ppc=4)
-    a = mpm.Body(mpm.Sphere((0.38, 0.5, 0.5), 0.1), mpm.FixedCorotated(E=5e4, nu=0.3),
+    a = mpm.Body(mpm.Sphere((0.4, 0.5, 0.5), 0.1), mpm.FixedCorotated(E=5e4, nu=0.3),
                  velocity=(1.5, 0.2, 0.0), angular_velocity=(1.0, 3.0, -2.0))
-    b = mpm.Body(mpm.Box((0.62, 0.47, 0.5), (0.08, 0.1, 0.08)), mpm.Fluid(K=2e4, viscosity=1.0),
+    b = mpm.Body(mpm.Box((0.6, 0.47, 0.5), (0.08, 0.1, 0.08)), mpm.Fluid(K=2e4, viscosity=1.0),
                  velocity=(-1.0, 0.0, 0.3))
     return mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=20, bodies=[a, b],
                      gravity=(0.0, 0.0, 0.0), walls=("open",) * 6, ppc=8)

@@ -32,7 +32,9 @@ def _stress_energy(t: Types):
         viscosity = params[2]
         J = wp.determinant(F)
         p = K * (wp.pow(J, -gamma) - S(1.0))
-        sigma = -p * wp.identity(n=dim, dtype=S) + viscosity * (L + wp.transpose(L))
+        sigma = -p * wp.identity(n=dim, dtype=S)
+        if viscosity > S(0.0):  # (an inviscid fluid never reads L, which may not be finite)
+            sigma += viscosity * (L + wp.transpose(L))
         P = J * sigma * wp.transpose(wp.inverse(F))
         psi = K * (wp.pow(J, S(1.0) - gamma) / (gamma - S(1.0)) + J - gamma / (gamma - S(1.0)))
         return P, psi

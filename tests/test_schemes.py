@@ -1,0 +1,103 @@
+"""The three schemes of one formulation: against an independent NumPy
+reference of the reference-configuration step, the identities between them,
+and the update criterion."""
+
+import numpy as np
+import pytest
+
+import mpm
+from reference_mpm import lagrangian_step, update_configuration
+from test_reference import assert_no_contact, tiny_scene
+
+
+def run_reference(scene, model, state, scheme, steps, dt):
+    """The NumPy reference with the scheme's update rule; yields after each step."""
+    body = model.body.numpy()
+    models = [scene.bodies[b].material.name for b in body]
+    prms = [scene.bodies[b].material.packed() for b in body]
+    s = {k: v.copy() for k, v in state.numpy().items()}
+    mass, vol = model.mass.numpy(), model.volume.numpy()
+    counts = np.bincount(body)
+    for _ in range(steps):
+        lagrangian_step(s, mass, vol, models, prms, body, model.dx, model.cells, model.domain,
+                        scene.gravity, scene.walls, dt)
+        dJ = np.abs(np.linalg.det(s["Fsn"]) - 1.0)
+        updated = []
+        for b in range(len(counts)):
+            if scheme.name == "aulmpm":  # paper eq. 33
+                marked = int(np.sum(dJ[body == b] >= scheme.epsilon))
+                update = marked >= scheme.eta * counts[b]
+            else:
+                update = scheme.name == "empm"
+            if update:
+                updated.append(b)
+                update_configuration(s, body == b, models, scheme.affine)
+        yield s, updated
+
+
+SCHEMES = [mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM(affine="transform"), mpm.AULMPM(affine="keep")]
+# thresholds at which the tiny scenes update at some steps and not at others
+# (dJ grows by about 1e-4 per step in 2D, 1e-6 in 3D)
+EPSILON = {2: 2e-4, 3: 2e-6}
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("scheme", SCHEMES, ids=lambda s: f"{s.name}-{s.affine}")
+def test_schemes_match_numpy_reference(scheme, dim, device):
+    """Particle by particle, float64, with walls, gravity, several bodies and
+    materials; A-ULMPM thresholds chosen so that some steps update and others
+    do not."""
+    scene = tiny_scene(dim)
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
+    if scheme.name == "aulmpm":
+        scheme = mpm.AULMPM(epsilon=EPSILON[dim], eta=0.3, affine=scheme.affine)
+    solver = mpm.Solver(model, scheme)
+    solver.prepare(state)
+    steps, dt = (10, 2e-4) if dim == 2 else (5, 2e-4)
+    updates_seen = set()
+    for k, (ref, updated) in enumerate(run_reference(scene, model, state, solver.scheme, steps, dt)):
+        report = solver.advance(state, dt)
+        assert_no_contact(solver)
+        assert report.updated == updated, f"step {k}"
+        updates_seen.add(len(updated) > 0)
+        got = state.numpy()
+        for key, tol in (("x", 1e-12), ("v", 1e-9), ("C", 1e-7), ("F0s", 1e-11), ("Fsn", 1e-11),
+                         ("X", 1e-12)):
+            np.testing.assert_allclose(got[key], ref[key], rtol=0, atol=tol, err_msg=f"{key}, step {k}")
+    if scheme.name == "aulmpm":
+        assert updates_seen == {True, False}  # the criterion did switch
+
+
+def run(scene, scheme, steps, dt, precision="float64"):
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, "cpu")
+    solver = mpm.Solver(model, scheme)
+    solver.prepare(state)
+    reports = [solver.advance(state, dt) for _ in range(steps)]
+    return state.numpy(), reports
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_aulmpm_limits_are_empm_and_tlmpm(dim):
+    """epsilon = 0 (affine kept): every particle is marked, every step updates
+    - the Eulerian scheme; epsilon = inf: never - the total Lagrangian scheme.
+    Same floating-point operations, so equal bit for bit."""
+    scene = tiny_scene(dim)
+    steps = 30 if dim == 2 else 8
+    ref_e, _ = run(scene, mpm.EMPM(), steps, 2e-4)
+    got_e, rep = run(scene, mpm.AULMPM(epsilon=0.0, eta=1.0, affine="keep"), steps, 2e-4)
+    assert all(len(r.updated) == len(scene.bodies) for r in rep)
+    ref_t, _ = run(scene, mpm.TLMPM(), steps, 2e-4)
+    got_t, rep = run(scene, mpm.AULMPM(epsilon=float("inf"), eta=0.0), steps, 2e-4)
+    assert not any(r.updated for r in rep)
+    for key in ("x", "v", "C", "F"):
+        np.testing.assert_array_equal(got_e[key], ref_e[key], err_msg=key)
+        np.testing.assert_array_equal(got_t[key], ref_t[key], err_msg=key)
+    # and the two limits do differ
+    assert np.abs(ref_e["x"] - ref_t["x"]).max() > 1e-9
+
+
+def test_aulmpm_defaults_follow_the_materials():
+    solid = mpm.AULMPM().resolved(fluid_present=False)
+    fluid = mpm.AULMPM().resolved(fluid_present=True)
+    assert (solid.epsilon, solid.eta) == (0.5, 0.1) and (fluid.epsilon, fluid.eta) == (0.01, 0.01)
+    assert mpm.AULMPM(epsilon=0.2).resolved(True).epsilon == 0.2
