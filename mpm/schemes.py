@@ -8,10 +8,13 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
 * EMPM (s = n): update every step - Eulerian MLS-MPM (Hu et al. 2018).
 * TLMPM (s = 0): never update - total Lagrangian MPM (de Vaucorbeil 2020).
 * AULMPM: update a body when the fraction of its particles with
-  dJ_p >= epsilon reaches eta, or when any of its particles reaches
-  dJ_p >= dJ_max (a safeguard: the fraction alone lets a handful of particles,
-  a splash's thin jet, invert their reference cells between updates and blow
-  up; dJ_max is never below epsilon, so epsilon = inf still never updates).
+  dJ_p >= epsilon reaches eta (the paper's criterion), or - safeguards - when
+  any of its particles reaches dJ_p >= dJ_max, or has its reference cell
+  squeezed below ``stretch_min`` of its width in some direction (smallest
+  singular value of F^sn). The fraction alone lets a handful of particles, a
+  splash's thin jet, tangle their reference cells between updates (a fluid
+  resists no shear, so nothing stops it) and blow up. epsilon = inf turns all
+  updates off (TLMPM), epsilon = 0 makes every step update (EMPM).
 
 At an update X <- x, F^0s <- F^sn F^0s, F^sn <- I, and the cached stencil
 weights are recomputed. The affine matrix C is a velocity gradient with
@@ -42,7 +45,7 @@ class EMPM:
     def affine(self) -> str:
         return "keep"
 
-    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         return True
 
     def tracks_marks(self) -> bool:
@@ -59,7 +62,7 @@ class TLMPM:
     def affine(self) -> str:
         return "keep"
 
-    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         return False
 
     def tracks_marks(self) -> bool:
@@ -80,18 +83,21 @@ class AULMPM:
     eta: float | None = param(None, "update when marked / n >= eta [-]", ge=0.0, le=1.0)
     dJ_max: float = param(0.5, "also update when any particle has dJ >= max(dJ_max, epsilon) [-]",
                           gt=0.0, inf=True)
+    stretch_min: float = param(0.5, "also update when a reference cell is squeezed below this [-]",
+                               ge=0.0, lt=1.0)
     affine: str = "transform"
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
         eps, eta = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
         return AULMPM(name=self.name, epsilon=eps if self.epsilon is None else self.epsilon,
                       eta=eta if self.eta is None else self.eta, dJ_max=self.dJ_max,
-                      affine=self.affine)
+                      stretch_min=self.stretch_min, affine=self.affine)
 
-    def updates(self, marked: int, count: int, max_dJ: float) -> bool:
+    def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         if math.isinf(self.epsilon):
             return False
-        return marked >= self.eta * count or max_dJ >= max(self.dJ_max, self.epsilon)
+        return (marked >= self.eta * count or max_dJ >= max(self.dJ_max, self.epsilon)
+                or min_stretch < self.stretch_min)
 
     def tracks_marks(self) -> bool:
         return not math.isinf(self.epsilon)

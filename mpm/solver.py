@@ -25,7 +25,9 @@ from .layout import GridLayout
 from .materials import Fluid
 from .model import Model, State
 from .schemes import AULMPM, EMPM
-from .transfer import STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, make_g2p, make_p2g
+from .timestep import cfl_dt
+from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
+                       STATUS_PER_BODY, make_g2p, make_p2g)
 
 
 @dataclass
@@ -44,6 +46,9 @@ class StepReport:
     outside: int  # particles that left the domain interior
     marked: np.ndarray  # per body: particles with dJ >= epsilon (A-ULMPM), else 0
     max_dJ: np.ndarray  # per body: the largest dJ (A-ULMPM), else 0
+    min_J: np.ndarray  # per body: the smallest det F (compression, for the time step)
+    min_stretch: np.ndarray  # per body: the smallest singular value of F^sn (for the time step)
+    max_rate: np.ndarray  # per body: the largest velocity gradient |L| [1/s] (for the time step)
     updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
     update_time: float = 0.0  # [s] deciding and updating
 
@@ -54,6 +59,9 @@ class StepReport:
         if self.outside:
             return f"{self.outside} particles left the domain"
         return None
+
+
+STRAIN_STEP = 0.25  # dt |L| <= STRAIN_STEP * cfl: the strain increment of one step
 
 
 class Solver:
@@ -103,10 +111,11 @@ class Solver:
 
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev)
         with wp.ScopedDevice(dev):
-            box = STATUS_HEADER + 2 * nb  # marked counts and largest dJ per body come first
+            box = STATUS_HEADER + STATUS_PER_BODY * nb  # per-body figures, then the boxes
             n_status = box + 2 * nb * t.dim
             self.status = wp.zeros(n_status, dtype=wp.float64)
             reset = np.zeros(n_status)
+            reset[STATUS_HEADER + 2 * nb: STATUS_HEADER + 4 * nb] = np.inf  # smallest J and stretch
             reset[box: box + nb * t.dim] = np.inf
             reset[box + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
@@ -176,7 +185,8 @@ class Solver:
             t0 = time.perf_counter()
             report.updated = [b for b in range(self.n_bodies)
                               if self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
-                                                     float(report.max_dJ[b]))]
+                                                     float(report.max_dJ[b]),
+                                                     float(report.min_stretch[b]))]
             if report.updated:
                 self.update_configuration(state, report.updated)
             report.update_time = time.perf_counter() - t0
@@ -256,7 +266,7 @@ class Solver:
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
             state.cache_base, state.cache_fx, state.cache_W,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
-            state.x, state.v, state.C, state.Fsn, state.dJ, self.status])
+            state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status])
 
     # -------------------------------------------------- configuration update
     def update_configuration(self, state: State, bodies: list[int]) -> None:
@@ -264,7 +274,7 @@ class Solver:
         (their new boxes come from the bounding boxes G2P measured)."""
         nb, d = self.n_bodies, self.model.dim
         s = self.status.numpy()
-        box = STATUS_HEADER + 2 * nb
+        box = STATUS_HEADER + STATUS_PER_BODY * nb
         lo = s[box: box + nb * d].reshape(nb, d)
         hi = s[box + nb * d:].reshape(nb, d)
         for b in bodies:
@@ -296,6 +306,27 @@ class Solver:
                 self.grid_kin = wp.zeros(n_kin, dtype=t.scalar)
                 self.grid_kin_id = wp.zeros(n_kin, dtype=wp.int32)
 
+    def stable_dt(self, cfl: float, report: StepReport | None = None, max_speed: float = 0.0) -> float:
+        """The explicit step limit [s] after ``report``'s step (at rest without one):
+        per body, dt = cfl s_min dx / (c(J_min) + max|v|), with s_min the smallest
+        stretch of F^sn (the narrowest reference cell, now) and c the wave speed
+        at the most compressed particle; viscous diffusion bounds it too."""
+        m = self.model
+        dts = []
+        for b, body in enumerate(m.scene.bodies):
+            J, s = 1.0, 1.0
+            if report is not None:
+                J = float(report.min_J[b]) if np.isfinite(report.min_J[b]) else 1.0
+                s = float(report.min_stretch[b]) if np.isfinite(report.min_stretch[b]) else 1.0
+            speed = report.max_speed if report is not None else max_speed
+            c = body.material.wave_speed(min(max(J, 1e-3), 1.0))
+            dt = cfl_dt(m.dx * min(max(s, 1e-3), 1.0), c, speed, cfl,
+                        body.material.kinematic_viscosity(), m.dim)
+            if report is not None and report.max_rate[b] > 0:
+                dt = min(dt, STRAIN_STEP * cfl / report.max_rate[b])
+            dts.append(dt)
+        return min(dts)
+
     # ------------------------------------------------------------ read back
     def check(self) -> StepReport:
         """Stability figures and criterion counts of the last step (one small
@@ -305,7 +336,10 @@ class Solver:
             max_speed=float(np.sqrt(s[STATUS_MAX_V2])), nonfinite=int(s[STATUS_NONFINITE]),
             outside=int(s[STATUS_OUTSIDE]),
             marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64),
-            max_dJ=s[STATUS_HEADER + self.n_bodies:STATUS_HEADER + 2 * self.n_bodies].copy())
+            max_dJ=s[STATUS_HEADER + self.n_bodies:STATUS_HEADER + 2 * self.n_bodies].copy(),
+            min_J=s[STATUS_HEADER + 2 * self.n_bodies:STATUS_HEADER + 3 * self.n_bodies].copy(),
+            min_stretch=s[STATUS_HEADER + 3 * self.n_bodies:STATUS_HEADER + 4 * self.n_bodies].copy(),
+            max_rate=s[STATUS_HEADER + 4 * self.n_bodies:STATUS_HEADER + 5 * self.n_bodies].copy())
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

@@ -31,6 +31,29 @@ from .types import Types
 
 # layout of the per-step status buffer (float64): see Solver.check
 STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
+STATUS_PER_BODY = 5  # marked count, largest dJ, smallest J, smallest stretch, largest |C F^sn-1|
+
+
+@functools.cache
+def make_min_stretch(t: Types):
+    """``min_stretch(F)``: the smallest singular value of F, exact in 2D; in
+    3D the lower bound |det F| / |cof F|_F, scaled to 1 at F = I (it never
+    exceeds the true value by more than that factor, sqrt 3)."""
+    S = t.scalar
+
+    @wp.func
+    def min_stretch(F: t.mat):
+        if wp.static(t.dim == 2):
+            f2 = wp.ddot(F, F)
+            d = wp.determinant(F)
+            disc = wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))
+            return wp.sqrt(wp.max(S(0.5) * (f2 - wp.sqrt(disc)), S(0.0)))
+        else:
+            G = wp.transpose(wp.inverse(F)) * wp.determinant(F)  # cofactor matrix
+            return wp.min(wp.abs(wp.determinant(F)) * wp.sqrt(S(3.0)) / wp.sqrt(wp.ddot(G, G)),
+                          S(1.0))
+
+    return min_stretch
 
 
 @functools.cache
@@ -120,8 +143,11 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
-    largest dJ_p, and the bounding box of the new positions (min per axis,
-    then max per axis).
+    largest dJ_p, the smallest J = det F^{0n} (for the time step of materials
+    that stiffen under compression), the smallest stretch of F^{sn} (a
+    reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
+    step must shrink with it), and the bounding box of the new positions (min
+    per axis, then max per axis).
     """
     S = t.scalar
     f64 = wp.float64
@@ -130,6 +156,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
     node = make_node(t, kernel)
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
+    min_stretch = make_min_stretch(t)
 
     @wp.kernel(module="unique")
     def g2p(
@@ -155,6 +182,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
         v: wp.array(dtype=t.vec),
         C: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
+        F0s: wp.array(dtype=t.mat),
         dJ: wp.array(dtype=S),
         status: wp.array(dtype=f64),
     ):
@@ -187,6 +215,11 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
             if dj >= epsilon:
                 wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
             wp.atomic_max(status, STATUS_HEADER + n_bodies + b, f64(dj))
+        wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
+                      f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
+        wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(min_stretch(Fs)))
+        L = Cp * wp.inverse(Fs)  # velocity gradient in current coordinates
+        wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(wp.sqrt(wp.ddot(L, L))))
 
         # stability monitor and bounding box of the new positions
         wp.atomic_max(status, STATUS_MAX_V2, f64(wp.dot(vp, vp)))
@@ -194,7 +227,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:
             outside = False
-            box = STATUS_HEADER + 2 * n_bodies + b * dim
+            box = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
             for d in range(wp.static(dim)):
                 if xp[d] < inside_lo[d] or xp[d] > inside_hi[d]:
                     outside = True

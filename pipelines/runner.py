@@ -231,13 +231,14 @@ class Run:
         return extra
 
     # ------------------------------------------------------------ loop
-    def next_dt(self, max_speed: float, duration: float | None) -> float:
-        run, model = self.spec.run, self.model
+    def next_dt(self, report: mpm.StepReport | None, duration: float | None) -> float:
+        """The solver's stable step (mpm.Solver.stable_dt) capped by run.dt_max,
+        unless run.dt fixes it."""
+        run = self.spec.run
         if run.dt is not None:
             dt = run.dt
         else:
-            dt = min(run.dt_max, mpm.cfl_dt(model.dx, self._wave, max_speed, run.cfl,
-                                             self._visc, model.dim))
+            dt = min(run.dt_max, self.solver.stable_dt(run.cfl, report, self._v0))
         return dt if duration is None else min(dt, duration - self.t)
 
     def loop(self) -> None:
@@ -248,15 +249,15 @@ class Run:
             self.particles()
         self.announce_scheme()
         progress = Progress(steps_end, duration, log.progress)
-        max_speed = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
-        self._wave, self._visc = self.model.wave_speed(), self.model.kinematic_viscosity()
+        self._v0 = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
+        report = None
         self.metrics["status"], self.metrics["reason"] = "running", ""
 
         def done() -> bool:
             return self.step >= steps_end if steps_end is not None else self.t >= duration * (1 - 1e-12)
 
         while not done():
-            dt = self.next_dt(max_speed, duration)
+            dt = self.next_dt(report, duration)
             t0 = time.perf_counter()
             report = self.solver.advance(self.state, dt)
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
@@ -270,7 +271,6 @@ class Run:
                 self.unstable(report)
                 break
             self.record_updates(report)
-            max_speed = report.max_speed
             t1 = time.perf_counter()
             last = done()
             if log.scalars or last:

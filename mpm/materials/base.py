@@ -61,8 +61,9 @@ class Material:
         assert len(p) <= N_MATERIAL_PARAMS
         return p + (0.0,) * (N_MATERIAL_PARAMS - len(p))
 
-    def wave_speed(self) -> float:
-        """Speed of the fastest small-amplitude wave at rest [m/s] (for the CFL limit)."""
+    def wave_speed(self, J: float = 1.0) -> float:
+        """Speed of the fastest small-amplitude wave [m/s] (for the CFL limit)
+        at volume ratio J; solids take their value at rest."""
         raise NotImplementedError
 
     def kinematic_viscosity(self) -> float:

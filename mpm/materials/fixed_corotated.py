@@ -47,5 +47,5 @@ class FixedCorotated(Material):
     def packed(self):
         return lame(self.E, self.nu)
 
-    def wave_speed(self):
+    def wave_speed(self, J: float = 1.0):
         return elastic_wave_speed(self.E, self.nu, self.rho)

@@ -72,9 +72,10 @@ class Fluid(Material):
     def packed(self):
         return (self.K, self.gamma, self.viscosity)
 
-    def wave_speed(self):
-        # bulk modulus at rest: -J dp/dJ = K gamma
-        return math.sqrt(self.K * self.gamma / self.rho)
+    def wave_speed(self, J: float = 1.0):
+        # c^2 = dp/drho with rho = rho0 / J: K gamma J^(1 - gamma) / rho0, which
+        # grows fast under compression (J^-6 for gamma = 7)
+        return math.sqrt(self.K * self.gamma * J ** (1.0 - self.gamma) / self.rho)
 
     def kinematic_viscosity(self):
         return self.viscosity / self.rho
