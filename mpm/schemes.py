@@ -31,8 +31,12 @@ from dataclasses import dataclass
 from .params import param
 
 AFFINE = ("keep", "transform")
-DEFAULT_SOLID = (0.5, 0.1)  # (epsilon, eta) the paper uses for solids
-DEFAULT_FLUID = (0.01, 0.01)  # ... and for fluid-like scenes
+# (epsilon, eta) the paper uses for solids and for fluid-like scenes, with the
+# safeguards (dJ_max, stretch_min): off for solids, whose large elastic
+# deformations the Lagrangian reference handles and an update would only
+# expose to numerical fracture; on for fluids, which resist no shear
+DEFAULT_SOLID = (0.5, 0.1, math.inf, 0.0)
+DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5)
 
 
 @dataclass
@@ -73,25 +77,27 @@ class TLMPM:
 class AULMPM:
     """Adaptively updated Lagrangian MPM (A-ULMPM paper, eq. 33).
 
-    ``epsilon``/``eta`` null: 0.01/0.01 when a fluid is present, else 0.5/0.1
-    (the paper's choices for fluid-like and solid scenes);
+    Null parameters take the defaults of the scene's kind: with a fluid
+    present epsilon = eta = 0.01, dJ_max = 0.5, stretch_min = 0.5; solids only
+    epsilon = 0.5, eta = 0.1 (the paper's choices) and no safeguards.
     ``epsilon = inf`` never updates (TLMPM), ``epsilon = 0`` always (EMPM).
     """
 
     name: str = "aulmpm"
     epsilon: float | None = param(None, "mark particles with dJ >= epsilon [-]", ge=0.0, inf=True)
     eta: float | None = param(None, "update when marked / n >= eta [-]", ge=0.0, le=1.0)
-    dJ_max: float = param(0.5, "also update when any particle has dJ >= max(dJ_max, epsilon) [-]",
-                          gt=0.0, inf=True)
-    stretch_min: float = param(0.5, "also update when a reference cell is squeezed below this [-]",
-                               ge=0.0, lt=1.0)
+    dJ_max: float | None = param(None, "also update when any particle has dJ >= max(dJ_max, "
+                                       "epsilon) [-]", gt=0.0, inf=True)
+    stretch_min: float | None = param(None, "also update when a reference cell is squeezed below "
+                                            "this fraction of its width [-]", ge=0.0, lt=1.0)
     affine: str = "transform"
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
-        eps, eta = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
-        return AULMPM(name=self.name, epsilon=eps if self.epsilon is None else self.epsilon,
-                      eta=eta if self.eta is None else self.eta, dJ_max=self.dJ_max,
-                      stretch_min=self.stretch_min, affine=self.affine)
+        defaults = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
+        given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min)
+        eps, eta, dJ_max, stretch_min = (d if v is None else v for v, d in zip(given, defaults))
+        return AULMPM(name=self.name, epsilon=eps, eta=eta, dJ_max=dJ_max,
+                      stretch_min=stretch_min, affine=self.affine)
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         if math.isinf(self.epsilon):

@@ -99,5 +99,6 @@ def test_aulmpm_limits_are_empm_and_tlmpm(dim):
 def test_aulmpm_defaults_follow_the_materials():
     solid = mpm.AULMPM().resolved(fluid_present=False)
     fluid = mpm.AULMPM().resolved(fluid_present=True)
-    assert (solid.epsilon, solid.eta) == (0.5, 0.1) and (fluid.epsilon, fluid.eta) == (0.01, 0.01)
+    assert (solid.epsilon, solid.eta, solid.dJ_max, solid.stretch_min) == (0.5, 0.1, float("inf"), 0.0)
+    assert (fluid.epsilon, fluid.eta, fluid.dJ_max, fluid.stretch_min) == (0.01, 0.01, 0.5, 0.5)
     assert mpm.AULMPM(epsilon=0.2).resolved(True).epsilon == 0.2
