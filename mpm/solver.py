@@ -98,7 +98,9 @@ class Solver:
         # kernels specialised for what the model holds
         self.regions = len(model.scene.regions) > 0
         self._p2g = [(make_p2g(t, k, g.cls, self.regions), g) for g in model.groups]
-        self._g2p = make_g2p(t, k, self.options.record_dJ, scheme.tracks_marks())
+        self._g2p = make_g2p(t, k, self.options.record_dJ, scheme.tracks_marks(),
+                             lagrangian=not isinstance(scheme, EMPM),
+                             track_compression=any(b.material.stiffens for b in model.scene.bodies))
         self.contact = nb > 1 and model.scene.contact != "none"
         self._grid_update = make_grid_update(t, not self.contact, self.regions)
         self._contact = make_contact(t) if self.contact else ()
@@ -338,8 +340,8 @@ class Solver:
             marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64),
             max_dJ=s[STATUS_HEADER + self.n_bodies:STATUS_HEADER + 2 * self.n_bodies].copy(),
             min_J=s[STATUS_HEADER + 2 * self.n_bodies:STATUS_HEADER + 3 * self.n_bodies].copy(),
-            min_stretch=s[STATUS_HEADER + 3 * self.n_bodies:STATUS_HEADER + 4 * self.n_bodies].copy(),
-            max_rate=s[STATUS_HEADER + 4 * self.n_bodies:STATUS_HEADER + 5 * self.n_bodies].copy())
+            min_stretch=np.sqrt(s[STATUS_HEADER + 3 * self.n_bodies:STATUS_HEADER + 4 * self.n_bodies]),
+            max_rate=np.sqrt(s[STATUS_HEADER + 4 * self.n_bodies:STATUS_HEADER + 5 * self.n_bodies]))
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

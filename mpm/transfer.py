@@ -31,29 +31,29 @@ from .types import Types
 
 # layout of the per-step status buffer (float64): see Solver.check
 STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
-STATUS_PER_BODY = 5  # marked count, largest dJ, smallest J, smallest stretch, largest |C F^sn-1|
+STATUS_PER_BODY = 5  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2
 
 
 @functools.cache
-def make_min_stretch(t: Types):
-    """``min_stretch(F)``: the smallest singular value of F, exact in 2D; in
-    3D the lower bound |det F| / |cof F|_F, scaled to 1 at F = I (it never
-    exceeds the true value by more than that factor, sqrt 3)."""
+def make_min_stretch2(t: Types):
+    """``min_stretch2(F)``: the square of the smallest singular value of F,
+    exact in 2D (the stable root 2 det^2 / (|F|^2 + sqrt(|F|^4 - 4 det^2)));
+    in 3D the lower bound 3 det^2 / |cof F|^2, equal to 1 at F = I and never
+    below a third of the true value."""
     S = t.scalar
 
     @wp.func
-    def min_stretch(F: t.mat):
+    def min_stretch2(F: t.mat):
+        d = wp.determinant(F)
         if wp.static(t.dim == 2):
             f2 = wp.ddot(F, F)
-            d = wp.determinant(F)
-            disc = wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))
-            return wp.sqrt(wp.max(S(0.5) * (f2 - wp.sqrt(disc)), S(0.0)))
+            return S(2.0) * d * d / wp.max(f2 + wp.sqrt(wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))),
+                                           S(1.0e-30))
         else:
-            G = wp.transpose(wp.inverse(F)) * wp.determinant(F)  # cofactor matrix
-            return wp.min(wp.abs(wp.determinant(F)) * wp.sqrt(S(3.0)) / wp.sqrt(wp.ddot(G, G)),
-                          S(1.0))
+            G = wp.transpose(wp.inverse(F)) * d  # cofactor matrix
+            return wp.min(S(3.0) * d * d / wp.max(wp.ddot(G, G), S(1.0e-30)), S(1.0))
 
-    return min_stretch
+    return min_stretch2
 
 
 @functools.cache
@@ -138,8 +138,14 @@ def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
 
 
 @functools.cache
-def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
+def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagrangian: bool,
+             track_compression: bool):
     """G2P for all particles.
+
+    ``lagrangian``: the reference may lag behind (not EMPM), so track the
+    narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
+    EMPM F^sn = I at the start of every step: it is C);
+    ``track_compression``: a material stiffens under compression (a fluid).
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
@@ -156,7 +162,7 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
     node = make_node(t, kernel)
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
-    min_stretch = make_min_stretch(t)
+    min_stretch2 = make_min_stretch2(t)
 
     @wp.kernel(module="unique")
     def g2p(
@@ -215,11 +221,17 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool):
             if dj >= epsilon:
                 wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
             wp.atomic_max(status, STATUS_HEADER + n_bodies + b, f64(dj))
-        wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
-                      f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
-        wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(min_stretch(Fs)))
-        L = Cp * wp.inverse(Fs)  # velocity gradient in current coordinates
-        wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(wp.sqrt(wp.ddot(L, L))))
+        if wp.static(track_compression):
+            wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
+                          f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
+        # |L|^2 of the velocity gradient in current coordinates, L = C (F^sn)^-1;
+        # for EMPM F^sn was I: L = C; otherwise bounded by |C|^2 / sigma_min^2
+        rate2 = wp.ddot(Cp, Cp)
+        if wp.static(lagrangian):
+            s2 = min_stretch2(Fs)
+            wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))
+            rate2 = rate2 / wp.max(s2, S(1.0e-12))
+        wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))
 
         # stability monitor and bounding box of the new positions
         wp.atomic_max(status, STATUS_MAX_V2, f64(wp.dot(vp, vp)))

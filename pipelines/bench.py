@@ -1,13 +1,23 @@
-"""Speed of the solver and of logging: ``python -m pipelines.bench``.
+"""Speed of the solver, of logging and of configuration updates:
+``python -m pipelines.bench``.
 
-Each case runs through the same code path as ``pipelines.run``
-(:func:`pipelines.runner.execute`), after a warm-up run, twice:
-  * step only: no particles, no scalars (log.every=0, log.scalars=false);
-  * logged: particles and dJ every step, scalars every step.
-Reported per case: particles, grid nodes, compile (or cache load) time,
-median ms per step, particle-steps per second, and the logging overhead
-(logged step + logging time against the step-only time, same process).
-``--cold`` compiles into an empty kernel cache to time a first compile.
+Everything runs through the same code path as ``pipelines.run``
+(:func:`pipelines.runner.execute`), after a warm-up run, in one process:
+
+1. speed (EMPM): the 2D elastic ball (128^2 grid) and a 3D elastic sphere
+   (64^3), each twice: step only (no particles, no scalars) and logged
+   (particles, dJ and scalars every step). Particles, grid nodes, compile (or
+   cache load) time, median ms per step, particle-steps per second, logging
+   overhead (logged step + logging time against the step-only time).
+2. schemes: EMPM, TLMPM and A-ULMPM on the same 2D ball, step only.
+3. update cost: the 2D droplet at the paper's size (about 5K particles on
+   128^2) with EMPM and A-ULMPM: configuration updates per 10^4 steps (the
+   paper's tau) and the mean update cost per step, and their ratio (the
+   paper claims 4.27x to 31.52x less update overhead for A-ULMPM).
+
+Each timed configuration runs five times and the fastest median counts
+(the machine's noise only ever adds time). ``--cold`` compiles into an empty
+kernel cache to time a first compile.
 """
 
 from __future__ import annotations
@@ -32,6 +42,8 @@ CASES = {
     "ball_3d": ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated"],
 }
 STEPS = {"ball_2d": 400, "ball_3d": 60}
+SCHEMES = ("empm", "tlmpm", "aulmpm")
+DROPLET = ["scene=droplet_2d", "scene.resolution=128", "run.duration=0.5"]
 
 
 def spec_for(overrides: list[str]):
@@ -39,14 +51,26 @@ def spec_for(overrides: list[str]):
         return resolve(compose(config_name="config", overrides=overrides))
 
 
+REPEATS = 5  # timed runs of each configuration; the fastest median is reported
+
+
+def timed(overrides: list[str], workdir: Path, repeats: int = REPEATS) -> dict:
+    """Run ``repeats`` times; the metrics of the run with the smallest median
+    step time (the machine's noise only ever adds time)."""
+    runs = []
+    for k in range(repeats):
+        m = execute(spec_for(overrides), workdir / f"run{k}")
+        if m["status"] != "completed":
+            raise RuntimeError(f"{' '.join(overrides)}: {m['status']}: {m['reason']}")
+        runs.append(m)
+    return min(runs, key=lambda m: m["step_time_ms"] + (m["log_time_ms"] or 0.0))
+
+
 def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> dict:
     common = overrides + [f"run.steps={steps}", "log.progress=false"]
     warm = execute(spec_for(overrides + ["run.steps=5", "log.every=1"]), workdir / f"{name}_warm")
-    plain = execute(spec_for(common + ["log.every=0", "log.scalars=false"]), workdir / f"{name}_plain")
-    logged = execute(spec_for(common + ["log.every=1", "log.scalars=true"]), workdir / f"{name}_logged")
-    for m in (warm, plain, logged):
-        if m["status"] != "completed":
-            raise RuntimeError(f"{name}: {m['status']}: {m['reason']}")
+    plain = timed(common + ["log.every=0", "log.scalars=false"], workdir / f"{name}_plain")
+    logged = timed(common + ["log.every=1", "log.scalars=true"], workdir / f"{name}_logged")
     t0 = plain["step_time_ms"]
     t1 = logged["step_time_ms"] + logged["log_time_ms"]
     return {
@@ -60,12 +84,47 @@ def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> di
     }
 
 
+def bench_schemes(workdir: Path, steps: int) -> list[dict]:
+    """The schemes in turn, REPEATS rounds (so that drifts of the machine's
+    speed hit all alike); the fastest median of each."""
+    best: dict[str, dict] = {}
+    overrides = {s: CASES["ball_2d"] + [f"scheme={s}", f"run.steps={steps}", "log.every=0",
+                                        "log.scalars=false", "log.progress=false"] for s in SCHEMES}
+    for scheme in SCHEMES:
+        execute(spec_for(CASES["ball_2d"] + [f"scheme={scheme}", "run.steps=5", "log.every=0"]),
+                workdir / f"{scheme}_warm")
+    for k in range(REPEATS):
+        for scheme in SCHEMES:
+            m = timed(overrides[scheme], workdir / f"scheme_{scheme}_{k}", repeats=1)
+            if scheme not in best or m["step_time_ms"] < best[scheme]["step_time_ms"]:
+                best[scheme] = m
+    return [{"scheme": s, "particles": m["particles"], "step_ms": m["step_time_ms"],
+             "update_ms": m["update_time_ms"], "updates": m["config_updates"]["total"]}
+            for s, m in best.items()]
+
+
+def bench_updates(workdir: Path) -> list[dict]:
+    rows = []
+    for scheme in ("empm", "aulmpm"):
+        over = DROPLET + [f"scheme={scheme}", "log.every=0", "log.scalars=false", "log.progress=false"]
+        m = execute(spec_for(over), workdir / f"droplet_{scheme}")
+        if m["status"] != "completed":
+            raise RuntimeError(f"droplet {scheme}: {m['status']}: {m['reason']}")
+        rows.append({"scheme": scheme, "particles": m["particles"], "steps": m["steps"],
+                     "tau": m["updates_per_1e4_steps"], "update_ms": m["update_time_ms"],
+                     "step_ms": m["step_time_ms"], "wall_s": m["wall_time_s"]})
+    return rows
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
     p.add_argument("--steps", type=int, default=None, help="steps per timed run")
     p.add_argument("--cold", action="store_true", help="compile into an empty kernel cache")
     p.add_argument("--json", type=Path, default=None, help="also write the results here")
+    p.add_argument("--no-schemes", dest="schemes", action="store_false", help="skip the scheme table")
+    p.add_argument("--no-updates", dest="updates", action="store_false",
+                   help="skip the update-cost table")
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
@@ -82,15 +141,34 @@ def main(argv=None) -> None:
         print(f"warp {wp.__version__}, device cpu, float32; median over the timed steps",
               file=sys.stderr)
         rows = [bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
-    header = (f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
-              f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
-    print(header)
+        schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
+        updates = bench_updates(Path(tmp)) if args.updates else []
+    print("speed (EMPM, float32, CPU)")
+    print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
+          f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
     for r in rows:
         print(f"{r['case']:<9} {r['particles']:>9,} {r['grid_nodes']:>8,} {r['compile_time_s']:>9.2f} "
               f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} "
               f"{r['logged_step_ms']:>9.3f} {r['log_ms']:>8.3f} {100 * r['log_overhead']:>11.0f}%")
+    if schemes:
+        base = schemes[0]["step_ms"]
+        print("\nschemes on the 2D ball (128^2), step only")
+        print(f"{'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} {'updates':>8}")
+        for r in schemes:
+            print(f"{r['scheme']:<8} {r['step_ms']:>8.3f} {r['step_ms'] / base:>8.2f} "
+                  f"{r['update_ms']:>15.4f} {r['updates']:>8}")
+    if updates:
+        e, a = updates
+        print("\nconfiguration-update cost, 2D droplet (128^2, 0.5 s)")
+        print(f"{'scheme':<8} {'particles':>9} {'steps':>6} {'tau':>8} {'update ms/step':>15} "
+              f"{'ms/step':>8} {'wall s':>7}")
+        for r in updates:
+            print(f"{r['scheme']:<8} {r['particles']:>9,} {r['steps']:>6} {r['tau']:>8.1f} "
+                  f"{r['update_ms']:>15.4f} {r['step_ms']:>8.3f} {r['wall_s']:>7.1f}")
+        print(f"update overhead EMPM / A-ULMPM: {e['update_ms'] / a['update_ms']:.2f}x")
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates},
+                                        indent=2) + "\n")
 
 
 if __name__ == "__main__":

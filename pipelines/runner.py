@@ -174,13 +174,12 @@ class Run:
         self._pending.clear()
 
     def particles(self) -> None:
-        """Particles, dJ and the fracture measure of the current state."""
+        """Particles and dJ of the current state."""
         # copies: on the CPU .numpy() is a view of memory the next step
         # overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
         self.sink.particles(self.step, self.t, x, dJ)
-        self.log_fracture()
 
     def log_fracture(self) -> np.ndarray:
         frac = self.solver.fracture(self.state)
@@ -247,6 +246,7 @@ class Run:
         self.measure({"config_updates": 0.0})
         if log.every:
             self.particles()
+        self.log_fracture()
         self.announce_scheme()
         progress = Progress(steps_end, duration, log.progress)
         self._v0 = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
@@ -278,6 +278,8 @@ class Run:
             if log.every and (self.step % log.every == 0 or last):
                 self.particles()
                 self.log_ms.append(1e3 * (time.perf_counter() - t1))
+            if self.step % log.fracture_every == 0:
+                self.log_fracture()
             progress.update(self.step, self.t, self.step_ms[-1])
         else:
             self.metrics["status"], self.metrics["reason"] = "completed", ""

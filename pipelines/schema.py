@@ -118,6 +118,7 @@ class LogConfig:
 
     every: Optional[int] = None  # particles every N steps; 0: none; null: the scene's
     dJ: bool = True  # the per-particle dJ field with the particles
+    fracture_every: int = 20  # steps between evaluations of the fracture measure (and at the end)
     scalars: bool = True  # physics scalars every step
     flush_every: int = 500  # steps between batched scalar sends
     progress: Optional[bool] = None  # progress bar; null: on a terminal

@@ -45,6 +45,7 @@ class RunSettings:
 class LogSettings:
     every: int  # 0: no particles
     dJ: bool
+    fracture_every: int
     scalars: bool
     flush_every: int
     progress: bool | None
@@ -294,6 +295,7 @@ def resolve(cfg) -> RunSpec:
         every = _number("scene.log_every", sd["log_every"], int, ge=0)
     log = LogSettings(
         every=every, dJ=bool(lg["dJ"]), scalars=bool(lg["scalars"]),
+        fracture_every=_number("log.fracture_every", lg["fracture_every"], int, ge=1),
         flush_every=_number("log.flush_every", lg["flush_every"], int, ge=1),
         progress=lg["progress"], recording=str(lg["recording"]))
     if run.device == "cuda":

@@ -47,6 +47,7 @@ class Material:
     stress_energy: ClassVar[Callable[[Types], Callable]]
     project: ClassVar[Callable[[Types], Callable] | None] = None
     needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
+    stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?
 
     def __post_init__(self):
         if not self.model:
