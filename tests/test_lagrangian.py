@@ -2,7 +2,6 @@
 adaptive updates that follow a fluid, conservation, kinematic regions,
 contact between bodies."""
 
-import json
 
 import numpy as np
 import pytest
