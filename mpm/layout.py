@@ -51,14 +51,3 @@ class GridLayout:
         self.lo_d.assign(self.lo)
         self.shape_d.assign(self.shape)
         self.offset_d.assign(self.offset)
-
-    def body_of_nodes(self) -> np.ndarray:
-        return np.repeat(np.arange(len(self.offset)), np.prod(self.shape, axis=1))
-
-    def node_positions(self) -> np.ndarray:
-        """Reference positions X_i of all nodes [m] (for tests and tools)."""
-        out = []
-        for lo, shape in zip(self.lo, self.shape):
-            idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1)
-            out.append((idx.reshape(-1, self.t.dim) + lo) * self.dx)
-        return np.concatenate(out)

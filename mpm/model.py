@@ -86,11 +86,8 @@ class Model:
         return tuple(c * self.dx for c in self.cells)
 
     def wave_speed(self) -> float:
-        """Fastest elastic/acoustic wave speed of all bodies [m/s]."""
+        """Fastest elastic/acoustic wave speed of all bodies at rest [m/s]."""
         return max(b.material.wave_speed() for b in self.scene.bodies)
-
-    def kinematic_viscosity(self) -> float:
-        return max(b.material.kinematic_viscosity() for b in self.scene.bodies)
 
 
 @dataclass
@@ -114,10 +111,6 @@ class State:
     cache_base: wp.array  # flat index of the first stencil node
     cache_fx: wp.array  # X / dx - base
     cache_W: wp.array  # per-axis kernel weights
-
-    def F(self) -> np.ndarray:
-        """The full deformation gradient F^{0n} = F^{sn} F^{0s} (host copy)."""
-        return self.Fsn.numpy() @ self.F0s.numpy()
 
     def numpy(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s", "Fsn", "X", "dJ")}

@@ -40,36 +40,32 @@ DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5)
 
 
 @dataclass
-class EMPM:
-    """Eulerian MLS-MPM: every body's configuration is updated every step."""
+class _FixedRule:
+    """A scheme whose update rule ignores the criterion; C is kept."""
 
-    name: str = "empm"
-
-    @property
-    def affine(self) -> str:
-        return "keep"
-
-    def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
-        return True
+    affine = "keep"
 
     def tracks_marks(self) -> bool:
         return False
 
 
 @dataclass
-class TLMPM:
+class EMPM(_FixedRule):
+    """Eulerian MLS-MPM: every body's configuration is updated every step."""
+
+    name: str = "empm"
+
+    def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
+        return True
+
+
+@dataclass
+class TLMPM(_FixedRule):
     """Total Lagrangian MPM: the reference configuration is the initial one."""
 
     name: str = "tlmpm"
 
-    @property
-    def affine(self) -> str:
-        return "keep"
-
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
-        return False
-
-    def tracks_marks(self) -> bool:
         return False
 
 
