@@ -52,11 +52,12 @@ def make_nearest(t: Types):
 @functools.cache
 def make_node_body(t: Types):
     @wp.func
-    def node_body(i: int, offset: wp.array(dtype=wp.int32), n_bodies: int):
+    def node_body(i: int, offset: wp.array(dtype=wp.int32), n_bodies: int, n_grids: int):
+        """Body of flat node i (box b * n_grids + g starts at offset[box])."""
         b = int(0)
-        for k in range(n_bodies):
+        for k in range(n_bodies * n_grids):
             if i >= offset[k]:
-                b = k
+                b = k // n_grids
         return b
 
     return node_body
@@ -79,6 +80,7 @@ def make_contact(t: Types):
         grid_q: wp.array(dtype=t.vec),
         offset: wp.array(dtype=wp.int32),
         n_bodies: int,
+        n_grids: int,
         inv_dx: S,
         cells: t.ivec,
         strides: t.ivec,
@@ -90,8 +92,9 @@ def make_contact(t: Types):
         m = grid_m[i]
         if m <= S(0.0):
             return
-        b = node_body(i, offset, n_bodies)
+        b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
+        m = m / S(n_grids)  # every kernel grid carries the body's full mass
         wp.atomic_add(M, b * n_global + g, m)
         wp.atomic_add(P, b * n_global + g, m * grid_v[i])
 
@@ -167,6 +170,7 @@ def make_contact(t: Types):
         grid_q: wp.array(dtype=t.vec),
         offset: wp.array(dtype=wp.int32),
         n_bodies: int,
+        n_grids: int,
         inv_dx: S,
         cells: t.ivec,
         strides: t.ivec,
@@ -177,7 +181,7 @@ def make_contact(t: Types):
         i = wp.tid()
         if grid_m[i] <= S(0.0):
             return
-        b = node_body(i, offset, n_bodies)
+        b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
         grid_v[i] = grid_v[i] + dV[b * n_global + g]
 

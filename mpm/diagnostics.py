@@ -4,16 +4,17 @@ Measured quantities (names from :func:`diagnostic_names`):
   mass            sum m_p [kg]
   momentum        sum m_p v_p [kg m/s]
   angular_momentum  APIC angular momentum about the origin [kg m^2/s]
-                  sum m_p x_p x v_p + m_p D axial(A_p),  A_p = C_p F^sn_p^T,
-                  D = moment dx^2 (Jiang et al. 2015): the angular momentum of
-                  the nodal field sum_i q_i x m_i v_i each particle rasterises;
-                  in 2D the scalar m (x0 v1 - x1 v0) + m D (A10 - A01)
+                  sum m_p x_p x v_p + m_p axial(A_p),  A_p = C_p D_p F^sn_p^T,
+                  D_p = K_p^-1 the kernel's second moment (dx^2/4 I for the
+                  quadratic B-spline; Jiang et al. 2015): the angular momentum
+                  of the nodal field sum_i q_i x m_i v_i each particle
+                  rasterises; in 2D the scalar m (x0 v1 - x1 v0) + m (A10 - A01)
   kinetic_energy  sum 1/2 m_p |v_p|^2 [J]
   elastic_energy  sum V_p^0 psi(F_p) [J]; evaluated by the P2G pass, which
                   decomposes F for the stress anyway (see mpm.transfer)
   potential_energy  -sum m_p g . x_p [J] (zero at the origin)
   momentum_scale  sum m_p |v_p|: the scale of relative momentum drifts
-  angular_momentum_scale  sum m_p (|x_p| |v_p| + D |C_p|): same for angular
+  angular_momentum_scale  sum m_p (|x_p| |v_p| + |A_p|): same for angular
 """
 
 import functools
@@ -32,8 +33,9 @@ def diagnostic_names(dim: int) -> list[str]:
 
 
 @functools.cache
-def make_measure(t: Types):
-    """Everything but the elastic energy, for all particles at once."""
+def make_measure(t: Types, per_particle_K: bool):
+    """Everything but the elastic energy, for all particles at once;
+    ``per_particle_K``: the kernel's moment D_p = K_p^-1 varies per particle."""
     S = t.scalar
     vec = t.vec
     dim = t.dim
@@ -50,6 +52,7 @@ def make_measure(t: Types):
         C: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
         D: S,
+        cache_K: wp.array(dtype=t.mat),
         gravity: t.vec,
         out: wp.array(dtype=f64),
     ):
@@ -58,15 +61,17 @@ def make_measure(t: Types):
         xp = x[p]
         vp = v[p]
         Cp = C[p]
-        A = Cp * wp.transpose(Fsn[p])
+        A = D * Cp * wp.transpose(Fsn[p])  # C D_p F^sn,T with D_p = D I
+        if wp.static(per_particle_K):
+            A = Cp * wp.inverse(cache_K[p]) * wp.transpose(Fsn[p])
         wp.atomic_add(out, 0, f64(m))
         for d in range(wp.static(dim)):
             wp.atomic_add(out, 1 + d, f64(m * vp[d]))
         if wp.static(dim == 2):
-            L = m * (xp[0] * vp[1] - xp[1] * vp[0]) + m * D * (A[1, 0] - A[0, 1])
+            L = m * (xp[0] * vp[1] - xp[1] * vp[0]) + m * (A[1, 0] - A[0, 1])
             wp.atomic_add(out, iL, f64(L))
         else:
-            L3 = m * wp.cross(xp, vp) + m * D * vec(
+            L3 = m * wp.cross(xp, vp) + m * vec(
                 A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1])
             for d in range(3):
                 wp.atomic_add(out, iL + d, f64(L3[d]))
@@ -74,6 +79,6 @@ def make_measure(t: Types):
         wp.atomic_add(out, iE + 2, f64(-m * wp.dot(gravity, xp)))
         speed = wp.length(vp)
         wp.atomic_add(out, iE + 3, f64(m * speed))
-        wp.atomic_add(out, iE + 4, f64(m * (wp.length(xp) * speed + D * wp.sqrt(wp.ddot(Cp, Cp)))))
+        wp.atomic_add(out, iE + 4, f64(m * (wp.length(xp) * speed + wp.sqrt(wp.ddot(A, A)))))
 
     return measure

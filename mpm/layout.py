@@ -1,11 +1,13 @@
 """Per-body reference grids ("configuration maps").
 
-Each body has its own grid in its reference configuration: the nodes of the
-global lattice (spacing dx, node 0 at the origin) inside a box that covers
-the stencils of its reference positions X. The boxes of all bodies are stored
-one after another in flat arrays; a box is recomputed when its body's
-configuration is updated (every step for the Eulerian scheme). Two bodies
-never share a node, so they interact only through contact.
+Each body has its own grid in its reference configuration - one per grid of
+the kernel (two staggered ones for the compact kernel): the nodes of the
+global lattice (spacing dx, node i of kernel grid g at (i + o_g) dx) inside a
+box that covers the stencils of its reference positions X. Box b * G + g is
+grid g of body b; all boxes are stored one after another in flat arrays; a
+body's boxes are recomputed when its configuration is updated (every step for
+the Eulerian scheme). Two bodies never share a node, so they interact only
+through contact.
 """
 
 from __future__ import annotations
@@ -18,30 +20,36 @@ from .types import Types
 
 
 class GridLayout:
-    """Boxes of the bodies' reference grids and the device tables (first node, nodes
-    per axis, offset into the flat arrays) per body."""
+    """Boxes of the bodies' reference grids and the device tables (first node,
+    nodes per axis, offset into the flat arrays) per box b * G + g."""
 
     def __init__(self, t: Types, kernel: Kernel, dx: float, cells: tuple[int, ...],
                  n_bodies: int, device: str):
         self.t, self.kernel, self.dx = t, kernel, dx
         self.cells = np.asarray(cells)
-        self.lo = np.zeros((n_bodies, t.dim), np.int32)  # first node (global lattice index)
-        self.shape = np.ones((n_bodies, t.dim), np.int32)  # nodes per axis
-        self.offset = np.zeros(n_bodies, np.int32)
+        n_boxes = n_bodies * kernel.n_grids
+        self.lo = np.zeros((n_boxes, t.dim), np.int32)  # first node (lattice index)
+        self.shape = np.ones((n_boxes, t.dim), np.int32)  # nodes per axis
+        self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
         with wp.ScopedDevice(device):
-            self.lo_d = wp.zeros(n_bodies, dtype=t.ivec)
-            self.shape_d = wp.zeros(n_bodies, dtype=t.ivec)
-            self.offset_d = wp.zeros(n_bodies, dtype=wp.int32)
+            self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
+            self.shape_d = wp.zeros(n_boxes, dtype=t.ivec)
+            self.offset_d = wp.zeros(n_boxes, dtype=wp.int32)
 
     def fit(self, body: int, xmin: np.ndarray, xmax: np.ndarray) -> None:
-        """Make ``body``'s box cover every stencil of positions in [xmin, xmax]."""
+        """Make ``body``'s boxes cover every stencil of positions in [xmin, xmax]
+        (left as they are if the bounds are not finite)."""
+        if not (np.all(np.isfinite(xmin)) and np.all(np.isfinite(xmax))):
+            return
         k = self.kernel
         last = self.cells - (k.support - 1)
-        lo = np.clip(np.floor(np.asarray(xmin) / self.dx - k.offset).astype(np.int64), 0, last)
-        hi = np.clip(np.floor(np.asarray(xmax) / self.dx - k.offset).astype(np.int64), 0, last)
-        self.lo[body] = lo
-        self.shape[body] = hi - lo + k.support
+        for g, o in enumerate(k.grids):
+            lo = np.clip(np.floor(np.asarray(xmin) / self.dx - o - k.offset).astype(np.int64), 0, last)
+            hi = np.clip(np.floor(np.asarray(xmax) / self.dx - o - k.offset).astype(np.int64), 0, last)
+            box = body * k.n_grids + g
+            self.lo[box] = lo
+            self.shape[box] = hi - lo + k.support
 
     def commit(self) -> None:
         """Recompute offsets and upload the tables (after one or more ``fit``)."""

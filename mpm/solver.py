@@ -27,13 +27,15 @@ from .model import Model, State
 from .schemes import AULMPM, EMPM
 from .timestep import cfl_dt
 from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
-                       STATUS_PER_BODY, make_g2p, make_p2g)
+                       STATUS_PER_BODY, TRANSFERS, make_g2p, make_p2g)
 
 
 @dataclass
 class SolverOptions:
     record_dJ: bool = False
     """write the per-particle dJ field every step (for logging)"""
+    transfer: str = "mls"
+    """mls | apic | pic (mpm.transfer.TRANSFERS)"""
 
 
 @dataclass
@@ -83,7 +85,12 @@ class Solver:
         # constants of the launches
         self._dx = S(model.dx)
         self._inv_dx = S(1.0 / model.dx)
-        self._K = S(1.0 / (k.moment * model.dx**2))  # MLS moment inverse K_p
+        # MLS moment inverse K_p when the kernel's moment is constant (else cached per particle)
+        self._K = S(1.0 / (k.moment * model.dx**2) if k.moment is not None else 0.0)
+        self._grid_offsets = wp.types.vector(k.n_grids, S)(*k.grids)
+        if self.options.transfer not in TRANSFERS:
+            raise ValueError(f"transfer {self.options.transfer!r}; accepted: {', '.join(TRANSFERS)}")
+        transfer = self.options.transfer
         self._gravity = t.vec(*model.gravity)
         self._domain = t.vec(*model.domain)
         self._band = S((model.scene.wall_cells - 0.5) * model.dx)
@@ -97,18 +104,19 @@ class Solver:
 
         # kernels specialised for what the model holds
         self.regions = len(model.scene.regions) > 0
-        self._p2g = [(make_p2g(t, k, g.cls, self.regions), g) for g in model.groups]
-        self._g2p = make_g2p(t, k, self.options.record_dJ, scheme.tracks_marks(),
+        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions), g) for g in model.groups]
+        self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies))
         self.contact = nb > 1 and model.scene.contact != "none"
         self._grid_update = make_grid_update(t, not self.contact, self.regions)
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t, self.regions) if self.contact else None
-        self._measure = make_measure(t)
+        self._measure = make_measure(t, per_particle_K=k.moment is None)
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
-        self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform)
+        self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform,
+                                       gradients=transfer != "mls" or k.gradient_affine)
                         for b in range(nb)}
 
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev)
@@ -226,7 +234,7 @@ class Solver:
             wp.launch(kernel, g.count, device=m.device, inputs=[
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
                 state.x, state.v, state.C, state.F0s, state.Fsn,
-                state.cache_base, state.cache_fx, state.cache_W,
+                state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K,
                 self._dx, self._K, dt, g.start,
                 self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
                 self.energy])
@@ -245,8 +253,8 @@ class Solver:
         self.contact_M.zero_()
         self.contact_P.zero_()
         self.contact_dV.zero_()
-        common = [lay.offset_d, self.n_bodies, self._inv_dx, self._cells, self._global_strides,
-                  n_global]
+        common = [lay.offset_d, self.n_bodies, self.model.kernel.n_grids, self._inv_dx, self._cells,
+                  self._global_strides, n_global]
         wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
             self.grid_m, self.grid_v, self.grid_q, *common, self.contact_M, self.contact_P])
         wp.launch(resolve, n_global, device=m.device, inputs=[
@@ -266,7 +274,7 @@ class Solver:
         m = self.model
         wp.launch(self._g2p, m.n_particles, device=m.device, inputs=[
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
-            state.cache_base, state.cache_fx, state.cache_W,
+            state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
             state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status])
 
@@ -290,8 +298,8 @@ class Solver:
         start, count = m.body_ranges[b]
         wp.launch(self._update[b], count, device=m.device, inputs=[
             m.body, m.body_params, self.layout.lo_d, self.layout.shape_d, self.layout.offset_d,
-            self._inv_dx, start, state.x, state.X, state.C, state.F0s, state.Fsn,
-            state.cache_base, state.cache_fx, state.cache_W])
+            self._grid_offsets, self._dx, start, state.x, state.X, state.C, state.F0s, state.Fsn,
+            state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K])
 
     def _commit_layout(self) -> None:
         """Upload the boxes; grow the grid arrays (by half again) if they no longer fit."""
@@ -388,9 +396,10 @@ class Solver:
         steps)."""
         m = self.model
         self.diagnostics.zero_()
-        D = m.types.scalar(m.kernel.moment * m.dx**2)
+        D = m.types.scalar(m.kernel.moment * m.dx**2 if m.kernel.moment is not None else 0.0)
         wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
-            m.mass, state.x, state.v, state.C, state.Fsn, D, self._gravity, self.diagnostics])
+            m.mass, state.x, state.v, state.C, state.Fsn, D, state.cache_K, self._gravity,
+            self.diagnostics])
         out = self.diagnostics.numpy().copy()
         i = self.diagnostic_names().index("elastic_energy")
         if elastic:

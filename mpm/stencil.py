@@ -1,12 +1,16 @@
-"""Locating a particle in its body's reference grid and walking its stencil.
+"""Locating a particle in its body's reference grids and walking its stencil.
 
-``locate`` (used when a configuration is updated) gives the flat index of the
-first stencil node in the body's box, the local coordinate
-``fx = X / dx - base`` and the per-axis kernel weights ``W`` (row d: the 1-D
-weights along axis d); the transfers read these from the cache and call
-``node(a, b, c, ...)`` for the weight ``w``, the offset ``r = X_i - X_p`` [m]
-and the flat index of the stencil node at offset (a, b[, c]). Loops over
-``range(kernel.support)`` have compile-time bounds and are unrolled.
+A kernel has one grid (B-splines) or two staggered ones (the compact kernel);
+grid g of body b is box ``b * G + g`` of the layout (mpm.layout). ``locate``
+(used when a configuration is updated) gives, on one grid, the flat index of
+the first stencil node, the local coordinate ``fx = X / dx - o_g - base`` and
+the per-axis kernel weights ``W`` (row d: the 1-D weights along axis d) and,
+for gradient-based transfers, their t-derivatives ``dW``; the transfers read
+these from the cache (entry ``p * G + g``) and call ``node(a, b, c, ...)``
+for the weight ``w``, the offset ``r = X_i - X_p`` [m] and the flat index of
+the stencil node at offset (a, b[, c]), and ``node_gradient`` for the
+reference-space weight gradient. Loops over ``range(kernel.support)`` and
+over the grids have compile-time bounds and are unrolled.
 """
 
 import functools
@@ -39,33 +43,36 @@ def make_strides(t: Types):
 
 @functools.cache
 def make_locate(t: Types, kernel: Kernel):
-    """``locate(X, inv_dx, lo, shape, offset) -> (flat, fx, W)`` in a body's box.
-
-    The stencil is clamped to the box, so that a runaway particle never
-    addresses memory outside it (G2P flags such particles)."""
+    """``locate(X, inv_dx, grid_offset, lo, shape, offset) -> (flat, fx, W, dW)``
+    in one grid's box. The stencil is clamped to the box, so that a runaway
+    particle never addresses memory outside it (G2P flags such particles)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)
-    weights = kernel.weights(t)
+    weights, gradients = kernel.weights(t), kernel.gradients(t)
     strides = make_strides(t)
     k_offset = kernel.offset
     support = kernel.support
     vec = t.vec
 
     @wp.func
-    def locate(X: t.vec, inv_dx: S, lo: t.ivec, shape: t.ivec, offset: int):
+    def locate(X: t.vec, inv_dx: S, grid_offset: S, lo: t.ivec, shape: t.ivec, offset: int):
         g = X * inv_dx
         st = strides(shape)
         fx = vec()
         W = Wm()
+        dW = Wm()
         flat = offset
         for d in range(wp.static(t.dim)):
-            b = wp.clamp(int(wp.floor(g[d] - S(k_offset))), lo[d], lo[d] + shape[d] - support)
+            u = g[d] - grid_offset
+            b = wp.clamp(int(wp.floor(u - S(k_offset))), lo[d], lo[d] + shape[d] - support)
             flat += (b - lo[d]) * st[d]
-            fx[d] = g[d] - S(b)
+            fx[d] = u - S(b)
             w = weights(fx[d])
+            dw = gradients(fx[d])
             for s in range(wp.static(support)):
                 W[d, s] = w[s]
-        return flat, fx, W
+                dW[d, s] = dw[s]
+        return flat, fx, W, dW
 
     return locate
 
@@ -90,3 +97,25 @@ def make_node(t: Types, kernel: Kernel):
         return w, r, i
 
     return node
+
+
+@functools.cache
+def make_node_gradient(t: Types, kernel: Kernel):
+    """``node_gradient(a, b, c, W, dW, inv_dx) -> grad w_ip`` [1/m]: the
+    gradient of the node's weight with respect to the particle's reference
+    position X_p (the MPM force f_i = -sum_p V_p^0 P F^{0s,T} grad w_ip; MLS
+    approximates it by K_p (X_i - X_p) w_ip)."""
+    vec = t.vec
+    Wm = weight_matrix_type(t, kernel)
+    S = t.scalar
+
+    @wp.func
+    def node_gradient(a: int, b: int, c: int, W: Wm, dW: Wm, inv_dx: S):
+        # t = X_p / dx - base: d t / d X_p = 1 / dx
+        if wp.static(t.dim == 2):
+            return inv_dx * vec(dW[0, a] * W[1, b], W[0, a] * dW[1, b])
+        else:
+            return inv_dx * vec(dW[0, a] * W[1, b] * W[2, c], W[0, a] * dW[1, b] * W[2, c],
+                                W[0, a] * W[1, b] * dW[2, c])
+
+    return node_gradient

@@ -1,5 +1,5 @@
-"""Particle-to-grid and grid-to-particle transfers (MLS-MPM with APIC), in
-each body's reference configuration.
+"""Particle-to-grid and grid-to-particle transfers, in each body's reference
+configuration, on every grid of the kernel.
 
 Notation (REFERENCE.md §1, A-ULMPM paper eq. 10-33): ``X_p`` reference
 particle positions, ``X_i`` reference node positions, ``r = X_i - X_p``,
@@ -8,17 +8,22 @@ particle positions, ``X_i`` reference node positions, ``r = X_i - X_p``,
 gradient at the last update, ``F^{sn}`` the deformation since then,
 ``F^{0n} = F^{sn} F^{0s}``.
 
-P2G (eq. 10-12, 20, 23; force and momentum fused as in MLS-MPM):
+P2G (eq. 10-12, 20, 23), on every grid g of the kernel, which receives the
+particle's full mass:
     m_i      = sum_p W_ip m_p
-    m_i v_i  = sum_p W_ip [m_p v_p + (m_p C_p - dt V_p^0 P(F^{0n}) F^{0s,T} K_p) r]
+    m_i v_i  = sum_p W_ip [m_p v_p + m_p C_p r] - dt V_p^0 P(F^{0n}) F^{0s,T} grad_ip
     m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
-after division by m_i the nodal velocity holds the internal-force impulse.
-The stored energy sum_p V_p^0 psi(F^{0n}_p) of the state the step starts from
-is accumulated on the way (one decomposition of F for stress and energy).
+with grad_ip = K_p r W_ip for the MLS transfer (force and momentum fused as in
+MLS-MPM) and the kernel's own weight gradient for APIC and PIC (no affine
+term for PIC). After division by m_i the nodal velocity holds the internal-
+force impulse. The stored energy sum_p V_p^0 psi(F^{0n}_p) of the state the
+step starts from is accumulated on the way (one decomposition of F for
+stress and energy).
 
-G2P (eq. 28, 30, 31; APIC form):
-    v_p = sum_i W_ip v_i,   C_p = sum_i W_ip v_i r^T K_p,
-    x_p += dt v_p,          F^{sn} += dt C_p,   dJ_p = |det F^{sn} - 1|.
+G2P (eq. 28, 30, 31), averaged over the G grids:
+    v_p = 1/G sum_g sum_i W_ip v_i,   C_p = 1/G sum_g sum_i W_ip v_i r^T K_p (MLS, APIC),
+    x_p += dt v_p,   F^{sn} += dt grad v,   dJ_p = |det F^{sn} - 1|,
+grad v = C_p for MLS, 1/G sum v_i grad_ip^T for APIC and PIC.
 """
 
 import functools
@@ -26,8 +31,13 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_node, make_strides, weight_matrix_type
+from .stencil import make_node, make_node_gradient, make_strides, weight_matrix_type
 from .types import Types
+
+TRANSFERS = ("mls", "apic", "pic")
+"""mls: affine momentum with C, MLS force K_p r w (Hu et al. 2018); apic:
+affine momentum, force and F from the kernel gradient (Jiang et al. 2015);
+pic: no affine term, force and F from the kernel gradient."""
 
 # layout of the per-step status buffer (float64): see Solver.check
 STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
@@ -57,17 +67,21 @@ def make_min_stretch2(t: Types):
 
 
 @functools.cache
-def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
+def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions."""
     f64 = wp.float64
     S = t.scalar
-    dim, Ks = t.dim, kernel.support
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
+    node_gradient = make_node_gradient(t, kernel)
     strides = make_strides(t)
     stress_energy = material.stress_energy(t)
     Wm = weight_matrix_type(t, kernel)
     needs_L = material.needs_velocity_gradient
+    per_particle_K = kernel.moment is None
+    mls = transfer == "mls" and not kernel.gradient_affine
+    affine = transfer != "pic"
 
     @wp.kernel(module="unique")
     def p2g(
@@ -86,6 +100,8 @@ def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
         cache_base: wp.array(dtype=wp.int32),
         cache_fx: wp.array(dtype=t.vec),
         cache_W: wp.array(dtype=Wm),
+        cache_dW: wp.array(dtype=Wm),
+        cache_K: wp.array(dtype=t.mat),
         # Step:
         dx: S,
         K: S,
@@ -103,10 +119,6 @@ def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
     ):
         p = wp.tid() + start
         b = body[p]
-        st = strides(shape[b])
-        flat = cache_base[p]
-        fx = cache_fx[p]
-        W = cache_W[p]
         m = mass[p]
         xp = x[p]
         Cp = C[p]
@@ -117,29 +129,51 @@ def make_p2g(t: Types, kernel: Kernel, material, with_regions: bool):
             L = Cp * wp.inverse(Fs)
         P, psi = stress_energy(Fs * F0, L, body_params[b])
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
-        affine = m * Cp - (dt * volume[p] * K) * P * wp.transpose(F0)
+        stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
         mv = m * v[p]
+        mC = m * Cp
+        if wp.static(mls):
+            if wp.static(per_particle_K):
+                mC = mC - stress * cache_K[p]
+            else:
+                mC = mC - K * stress
         rid = int(0)
         if wp.static(with_regions):
             rid = region[p]
-        for a in range(Ks):
-            for bb in range(Ks):
-                for c in range(wp.static(Ks if dim == 3 else 1)):
-                    w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                    wp.atomic_add(grid_m, i, w * m)
-                    wp.atomic_add(grid_mv, i, w * (mv + affine * r))
-                    wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
-                    if wp.static(with_regions):
-                        if rid > 0:
-                            wp.atomic_add(grid_kin, i, w * m)
-                            wp.atomic_max(grid_kin_id, i, rid)
+        for g in range(G):
+            k = p * G + g
+            st = strides(shape[b * G + g])
+            flat = cache_base[k]
+            fx = cache_fx[k]
+            W = cache_W[k]
+            dW = Wm()
+            if wp.static(not mls):
+                dW = cache_dW[k]
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        wp.atomic_add(grid_m, i, w * m)
+                        if wp.static(mls):
+                            wp.atomic_add(grid_mv, i, w * (mv + mC * r))
+                        elif wp.static(affine):
+                            wp.atomic_add(grid_mv, i, w * (mv + mC * r)
+                                          - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                        else:
+                            wp.atomic_add(grid_mv, i, w * mv
+                                          - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                        wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
+                        if wp.static(with_regions):
+                            if rid > 0:
+                                wp.atomic_add(grid_kin, i, w * m)
+                                wp.atomic_max(grid_kin_id, i, rid)
 
     return p2g
 
 
 @functools.cache
-def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagrangian: bool,
-             track_compression: bool):
+def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
+             lagrangian: bool, track_compression: bool):
     """G2P for all particles.
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
@@ -150,19 +184,26 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagr
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
     largest dJ_p, the smallest J = det F^{0n} (for the time step of materials
-    that stiffen under compression), the smallest stretch of F^{sn} (a
+    that stiffen under compression), the smallest stretch of F^sn (a
     reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
-    step must shrink with it), and the bounding box of the new positions (min
-    per axis, then max per axis).
+    step must shrink with it), the largest velocity gradient |L| (the strain
+    increment dt |L| of a step must stay small), and the bounding box of the
+    new positions (min per axis, then max per axis).
     """
     S = t.scalar
     f64 = wp.float64
     vec, mat = t.vec, t.mat
-    dim, Ks = t.dim, kernel.support
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
+    node_gradient = make_node_gradient(t, kernel)
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
     min_stretch2 = make_min_stretch2(t)
+    per_particle_K = kernel.moment is None
+    mls = transfer == "mls" and not kernel.gradient_affine
+    affine = transfer != "pic"
+    affine_from_gradient = affine and kernel.gradient_affine
+    inv_G = 1.0 / G
 
     @wp.kernel(module="unique")
     def g2p(
@@ -176,6 +217,8 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagr
         cache_base: wp.array(dtype=wp.int32),
         cache_fx: wp.array(dtype=t.vec),
         cache_W: wp.array(dtype=Wm),
+        cache_dW: wp.array(dtype=Wm),
+        cache_K: wp.array(dtype=t.mat),
         # Step:
         dx: S,
         K: S,
@@ -194,22 +237,48 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagr
     ):
         p = wp.tid()
         b = body[p]
-        st = strides(shape[b])
-        flat = cache_base[p]
-        fx = cache_fx[p]
-        W = cache_W[p]
         vp = vec()
         B = mat()
-        for a in range(Ks):
-            for bb in range(Ks):
-                for c in range(wp.static(Ks if dim == 3 else 1)):
-                    w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                    wv = w * grid_v[i]
-                    vp += wv
-                    B += wp.outer(wv, r)
-        Cp = B * K
+        grad_v = mat()
+        for g in range(G):
+            k = p * G + g
+            st = strides(shape[b * G + g])
+            flat = cache_base[k]
+            fx = cache_fx[k]
+            W = cache_W[k]
+            dW = Wm()
+            if wp.static(not mls):
+                dW = cache_dW[k]
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        vi = grid_v[i]
+                        wv = w * vi
+                        vp += wv
+                        if wp.static(affine and not affine_from_gradient):
+                            B += wp.outer(wv, r)
+                        if wp.static(not mls):
+                            grad_v += wp.outer(vi, node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+        vp = S(inv_G) * vp
+        Cp = mat()
+        if wp.static(mls):
+            if wp.static(per_particle_K):
+                Cp = S(inv_G) * B * cache_K[p]
+            else:
+                Cp = (S(inv_G) * K) * B
+            grad_v = Cp
+        else:
+            grad_v = S(inv_G) * grad_v
+            if wp.static(affine_from_gradient):
+                Cp = grad_v
+            elif wp.static(affine):
+                if wp.static(per_particle_K):
+                    Cp = S(inv_G) * B * cache_K[p]
+                else:
+                    Cp = (S(inv_G) * K) * B
         xp = x[p] + dt * vp
-        Fs = Fsn[p] + dt * Cp
+        Fs = Fsn[p] + dt * grad_v
         x[p] = xp
         v[p] = vp
         C[p] = Cp
@@ -224,9 +293,9 @@ def make_g2p(t: Types, kernel: Kernel, record_dJ: bool, count_marked: bool, lagr
         if wp.static(track_compression):
             wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
                           f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
-        # |L|^2 of the velocity gradient in current coordinates, L = C (F^sn)^-1;
-        # for EMPM F^sn was I: L = C; otherwise bounded by |C|^2 / sigma_min^2
-        rate2 = wp.ddot(Cp, Cp)
+        # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1;
+        # for EMPM F^sn was I: L = grad_v; otherwise bounded by |grad_v|^2 / sigma_min^2
+        rate2 = wp.ddot(grad_v, grad_v)
         if wp.static(lagrangian):
             s2 = min_stretch2(Fs)
             wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))

@@ -132,7 +132,8 @@ class Run:
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
         self.record_dJ = log.every > 0 and log.dJ
-        self.solver = mpm.Solver(self.model, spec.scheme, mpm.SolverOptions(record_dJ=self.record_dJ))
+        self.solver = mpm.Solver(self.model, spec.scheme,
+                                 mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer))
         self.scheme = self.solver.scheme  # defaults resolved
         self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes)
         self.metrics["compile_time_s"] = self.solver.load()
@@ -149,7 +150,8 @@ class Run:
         scene, model = self.spec.scene, self.model
         ppc = [b.ppc or scene.ppc for b in scene.bodies]
         return RunMeta(
-            name=f"{self.spec.scene_name} / {self.scheme.name} / {self.spec.kernel.name}",
+            name=f"{self.spec.scene_name} / {self.scheme.name} / {self.spec.kernel.name} "
+                 f"({self.spec.transfer})",
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * model.dx / max(ppc) ** (1.0 / scene.dim),
@@ -323,7 +325,8 @@ class Run:
         if self.solver is not None:
             names = [b.name for b in self.spec.scene.bodies]
             m.update(
-                scheme=self.scheme.name, grid_nodes=self.solver.layout.n_nodes,
+                scheme=self.scheme.name, kernel=self.spec.kernel.name, transfer=self.spec.transfer,
+                grid_nodes=self.solver.layout.n_nodes,
                 config_updates={"total": int(self.updates.sum()),
                                 **{n: int(c) for n, c in zip(names, self.updates)}},
                 updates_per_1e4_steps=1e4 * self.update_steps / steps if steps else None,

@@ -25,9 +25,10 @@ CONTACTS = ("frictionless", "none")
 
 @dataclass
 class KernelConfig:
-    """Interpolation kernel."""
+    """Interpolation kernel and the transfer that uses it."""
 
     name: str = "quadratic"
+    transfer: str = "mls"  # mls | apic | pic
 
 
 @dataclass

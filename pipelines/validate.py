@@ -18,6 +18,7 @@ from mpm.meshes import MeshShape, asset_path
 from mpm.params import violations
 from mpm.scene import WALL_TYPES
 from mpm.schemes import AFFINE
+from mpm.transfer import TRANSFERS
 
 from .schema import CONTACTS, DEVICES, PRECISIONS, SHAPES
 
@@ -60,6 +61,7 @@ class RunSpec:
     scene_name: str
     scheme: Any
     kernel: mpm.Kernel
+    transfer: str
     run: RunSettings
     log: LogSettings
     seed: int
@@ -281,6 +283,7 @@ def resolve(cfg) -> RunSpec:
     run = make_run(cfg.run)
     scheme = make_scheme(cfg.scheme)
     kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
+    transfer = _choice("kernel.transfer", cfg.kernel.transfer, TRANSFERS)
     material = make_material(cfg.material, "material")
     scene, sd = make_scene(cfg.scene, material)
     try:
@@ -305,4 +308,4 @@ def resolve(cfg) -> RunSpec:
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
     seed = _number("seed", cfg.seed, int)
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
-                   kernel=mpm.KERNELS[kernel_name], run=run, log=log, seed=seed)
+                   kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed)

@@ -1,5 +1,7 @@
-"""Interpolation kernels: partition of unity, linear reproduction, second
-moment, gradient against a centred difference, stencil size."""
+"""Interpolation kernels: partition of unity, linear-field reproduction (for
+the compact kernel: on the pair of grids, not on one), second moment,
+gradient against a centred difference, weights vanishing outside the
+stencil, stencil sizes."""
 
 import functools
 
@@ -28,58 +30,90 @@ def evaluator(kernel):
     return run, Wv
 
 
-def weights_at(kernel, x):
-    """1-D weights and t-derivatives of the stencil of particles at x (dx = 1)."""
-    base = np.floor(x - kernel.offset)
-    u = x - base
+def weights_at(kernel, x, g=0):
+    """1-D weights and t-derivatives on grid g of particles at x (dx = 1):
+    node positions, weights, derivatives."""
+    o = kernel.grids[g]
+    base = np.floor(x - o - kernel.offset)
+    u = x - o - base
     run, Wv = evaluator(kernel)
     w = wp.zeros(len(x), dtype=Wv)
     dw = wp.zeros(len(x), dtype=Wv)
     wp.launch(run, len(x), inputs=[wp.array(u, dtype=wp.float64), w, dw])
-    nodes = base[:, None] + np.arange(kernel.support)[None, :]
+    nodes = base[:, None] + np.arange(kernel.support)[None, :] + o
     return nodes, w.numpy(), dw.numpy()
 
 
 @pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.name)
-def test_moments(kernel):
+def test_partition_of_unity_and_linear_reproduction(kernel):
     x = np.random.default_rng(0).uniform(3.0, 9.0, 1000)
-    nodes, w, _ = weights_at(kernel, x)
-    r = nodes - x[:, None]
-    np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-14)  # partition of unity
-    np.testing.assert_allclose((w * r).sum(1), 0.0, atol=1e-14)  # linear reproduction
-    np.testing.assert_allclose((w * r * r).sum(1), kernel.moment, atol=1e-14)  # K_p
-    assert np.all(w >= 0.0)
+    first = np.zeros_like(x)
+    second = np.zeros_like(x)
+    for g in range(kernel.n_grids):
+        nodes, w, _ = weights_at(kernel, x, g)
+        r = nodes - x[:, None]
+        np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-14)  # each grid: full mass
+        assert np.all(w >= -1e-15)
+        first += (w * r).sum(1) / kernel.n_grids
+        second += (w * r * r).sum(1) / kernel.n_grids
+        if kernel.n_grids == 1:  # a single B-spline grid reproduces linear fields
+            np.testing.assert_allclose((w * r).sum(1), 0.0, atol=1e-14)
+    np.testing.assert_allclose(first, 0.0, atol=1e-14)  # the grids together do
+    if kernel.moment is not None:
+        np.testing.assert_allclose(second, kernel.moment, atol=1e-14)  # constant K_p
+    else:
+        assert np.ptp(second) > 1e-3  # varies: K_p per particle
+
+
+def test_compact_grid_alone_does_not_reproduce_linear_fields():
+    k = mpm.KERNELS["compact"]
+    x = np.random.default_rng(1).uniform(3.0, 9.0, 100)
+    nodes, w, _ = weights_at(k, x, 0)
+    assert np.abs((w * (nodes - x[:, None])).sum(1)).max() > 1e-2
 
 
 @pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.name)
 def test_gradient_against_centred_difference(kernel):
-    """dN/dx at fixed nodes, N(x) = sum over the stencil; central difference
-    with h = 1e-6 has error O(h^2) + O(eps / h)."""
+    """dw/dx at fixed nodes by central differences, h = 1e-6: error O(h^2)
+    where the kernel is smooth (the linear kernel only away from nodes)."""
     x = np.random.default_rng(1).uniform(3.0, 9.0, 200)
     h = 1e-6
-    nodes, _, dw = weights_at(kernel, x)
+    for g in range(kernel.n_grids):
+        nodes, _, dw = weights_at(kernel, x, g)
 
-    def weight_of(node, xs):
-        n2, w2, _ = weights_at(kernel, xs)
-        return np.where(n2 == node[:, None], w2, 0.0).sum(1)
+        def weight_of(node, xs, g=g):
+            n2, w2, _ = weights_at(kernel, xs, g)
+            return np.where(np.isclose(n2, node[:, None]), w2, 0.0).sum(1)
 
-    for s in range(kernel.support):
-        fd = (weight_of(nodes[:, s], x + h) - weight_of(nodes[:, s], x - h)) / (2 * h)
-        np.testing.assert_allclose(dw[:, s], fd, atol=1e-8)
+        for s in range(kernel.support):
+            fd = (weight_of(nodes[:, s], x + h) - weight_of(nodes[:, s], x - h)) / (2 * h)
+            np.testing.assert_allclose(dw[:, s], fd, atol=1e-7)
 
 
 @pytest.mark.parametrize("kernel", KERNELS, ids=lambda k: k.name)
 def test_weights_vanish_outside_the_stencil(kernel):
-    """The kernel is continuous: nodes entering or leaving the stencil as a
-    particle crosses a cell boundary carry zero weight."""
-    x = np.arange(3, 9) + kernel.offset  # exactly at a stencil switch
-    nodes_hi, w_hi, _ = weights_at(kernel, x)
-    nodes_lo, w_lo, _ = weights_at(kernel, x - 1e-12)
-    assert np.all(nodes_hi[:, 0] == nodes_lo[:, 0] + 1)
-    np.testing.assert_allclose(w_lo[:, 0], 0.0, atol=1e-10)  # leaving node
-    np.testing.assert_allclose(w_hi[:, -1], 0.0, atol=1e-10)  # entering node
+    """Continuity: a node entering or leaving the stencil as the particle
+    crosses a cell boundary carries zero weight there."""
+    for g, o in enumerate(kernel.grids):
+        x = np.arange(3, 9) + o + kernel.offset  # exactly at a stencil switch
+        nodes_hi, w_hi, _ = weights_at(kernel, x, g)
+        nodes_lo, w_lo, _ = weights_at(kernel, x - 1e-12, g)
+        assert np.allclose(nodes_hi[:, 0], nodes_lo[:, 0] + 1)
+        np.testing.assert_allclose(w_lo[:, 0], 0.0, atol=1e-10)  # leaving node
+        np.testing.assert_allclose(w_hi[:, -1], 0.0, atol=1e-10)  # entering node
+
+
+def test_compact_kernel_is_c2():
+    """K(x) = 1 - |x| + sin(2 pi |x|)/(2 pi): value, slope and curvature
+    vanish at |x| = 1 and the slope at 0 (C^2 across 0 and 1)."""
+    k = mpm.KERNELS["compact"]
+    _, w, dw = weights_at(k, np.array([4.75 + 1e-9, 5.25]))  # t = 0 and 0.5 on grid 0 (nodes at i - 1/4)
+    assert w[0, 0] == pytest.approx(1.0) and dw[0, 0] == pytest.approx(0.0, abs=1e-6)
+    assert w[1, 0] == pytest.approx(0.5)  # K(t) + K(1 - t) = 1
 
 
 def test_stencil_sizes():
-    assert mpm.KERNELS["quadratic"].support ** 2 == 9
-    assert mpm.KERNELS["quadratic"].support ** 3 == 27
+    assert mpm.KERNELS["compact"].stencil_nodes(3) == 16
+    assert mpm.KERNELS["quadratic"].stencil_nodes(3) == 27
+    assert mpm.KERNELS["cubic"].stencil_nodes(3) == 64
+    assert mpm.KERNELS["linear"].stencil_nodes(3) == 8

@@ -1,8 +1,11 @@
 """Interpolation kernels, one module each; :data:`KERNELS` maps names to kernels."""
 
 from .base import Kernel
+from .compact import COMPACT
+from .cubic import CUBIC
+from .linear import LINEAR
 from .quadratic import QUADRATIC
 
-KERNELS: dict[str, Kernel] = {k.name: k for k in (QUADRATIC,)}
+KERNELS: dict[str, Kernel] = {k.name: k for k in (LINEAR, QUADRATIC, CUBIC, COMPACT)}
 
-__all__ = ["KERNELS", "Kernel", "QUADRATIC"]
+__all__ = ["KERNELS", "Kernel", "LINEAR", "QUADRATIC", "CUBIC", "COMPACT"]

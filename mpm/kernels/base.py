@@ -1,15 +1,26 @@
 """What an interpolation kernel provides to the transfers.
 
-A kernel is a tensor product of a 1-D function on a regular grid of spacing
-dx. For a particle at ``x`` the stencil starts at node
-``base = floor(x / dx - offset)`` and spans ``support`` nodes per axis; with
-``t = x / dx - base`` the factory ``weights(types)`` returns a Warp function
-``t -> (w_0 .. w_{support-1})`` and ``gradients(types)`` its derivative in t
-(divide by dx for the spatial gradient).
+A kernel is a tensor product of a 1-D function on one or more regular grids
+of spacing dx. Grid g has its nodes at ``(i + grids[g]) dx``: one grid at the
+lattice for the B-splines, two grids shifted by -dx/4 and +dx/4 for the
+compact kernel (CK-MPM). On each grid the stencil of a particle at ``x``
+starts at node ``base = floor(x / dx - grids[g] - offset)`` and spans
+``support`` nodes per axis; with ``t = x / dx - grids[g] - base`` the factory
+``weights(types)`` returns a Warp function ``t -> (w_0 .. w_{support-1})``
+and ``gradients(types)`` its derivative in t (divide by dx for the spatial
+gradient). Every grid receives the particle's full mass; what comes back is
+averaged over the grids.
 
-``moment``: the kernel's second moment, ``sum_i w_ip (x_i - x_p)(x_i - x_p)^T =
-moment dx^2 I``; the MLS/APIC moment inverse is then ``K_p = I / (moment dx^2)``
-(1/4 for the quadratic B-spline, 1/3 for the cubic).
+``moment``: when the kernel's second moment is the same for every particle,
+``1/G sum_g sum_i w_ip (x_i - x_p)(x_i - x_p)^T = moment dx^2 I`` and the
+MLS/APIC moment inverse is ``K_p = I / (moment dx^2)`` (1/4 for the quadratic
+B-spline, 1/3 for the cubic); ``None`` when it varies with the particle's
+position (linear, compact) and ``K_p`` is built and inverted per particle.
+
+``gradient_affine``: the moment matrix is singular somewhere (the linear
+kernel on its nodes), so the affine matrix and the force come from the kernel
+gradient, C_p = sum_i v_i grad w_ip^T, as the APIC paper does for multilinear
+weights; the MLS and APIC transfers then coincide.
 
 ``margin`` [cells]: a particle closer than this to the domain edge reaches
 outside the grid.
@@ -26,10 +37,20 @@ class Kernel:
     name: str
     support: int
     offset: float
-    moment: float
+    moment: float | None
     margin: float
     weights: Callable = None
     gradients: Callable = None
+    grids: tuple[float, ...] = (0.0,)
+    gradient_affine: bool = False
+
+    @property
+    def n_grids(self) -> int:
+        return len(self.grids)
+
+    def stencil_nodes(self, dim: int) -> int:
+        """Nodes a particle touches, all grids together."""
+        return self.n_grids * self.support**dim
 
     def __repr__(self) -> str:
         return f"Kernel({self.name})"
