@@ -6,11 +6,15 @@ For the particles of the bodies being updated:
 and the stencil cache is recomputed in the body's new reference grids: per
 grid the first node, the local coordinate, the weights (and their
 derivatives for gradient-based transfers), and, when the kernel's second
-moment varies with the particle (linear, compact), the MLS/APIC moment inverse
+moment varies with the particle (compact; linear too, unused there), the
+MLS/APIC moment inverse
     K_p = (1/G sum_g sum_i w_ip r r^T + delta dx^2 I)^-1,   r = X_i - X_p,
-with delta = 1e-6 keeping it finite where the linear kernel's moment vanishes
-(a particle on a node). For B-splines with a full stencil K_p = I/(moment dx^2)
-is a constant of the solver and not cached.
+with delta = 1e-6 keeping it finite where a moment vanishes. The weights are
+tensor products whose 1-D factors sum to one, so per grid
+    sum_i w r_a r_b = m2_a (a = b),  m1_a m1_b (a != b),
+with the 1-D moments m1_a = sum_s w_as r_as, m2_a = sum_s w_as r_as^2: d
+support terms instead of support^d. For B-splines with a full stencil
+K_p = I/(moment dx^2) is a constant of the solver and not cached.
 """
 
 import functools
@@ -18,7 +22,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_locate, make_node, make_strides, weight_matrix_type
+from .stencil import make_locate, weight_matrix_type
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
@@ -31,8 +35,6 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     locate = make_locate(t, kernel)
-    node = make_node(t, kernel)
-    strides = make_strides(t)
     proj = project(t) if project is not None else None
     Wm = weight_matrix_type(t, kernel)
     Gv = wp.types.vector(G, S)
@@ -87,12 +89,16 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
             if wp.static(gradients):
                 cache_dW[k] = dW
             if wp.static(per_particle_K):
-                st = strides(shape[box])
-                for a in range(Ks):
-                    for bb in range(Ks):
-                        for c in range(wp.static(Ks if dim == 3 else 1)):
-                            w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                            D += w * wp.outer(r, r)
+                m1 = t.vec()
+                m2 = t.vec()
+                for a in range(dim):
+                    for s in range(Ks):
+                        r = (S(s) - fx[a]) * dx
+                        m1[a] += W[a, s] * r
+                        m2[a] += W[a, s] * r * r
+                D += wp.outer(m1, m1)
+                for a in range(dim):
+                    D[a, a] += m2[a] - m1[a] * m1[a]
         if wp.static(per_particle_K):
             cache_K[p] = wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx
                                     * wp.identity(n=dim, dtype=S))

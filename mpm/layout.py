@@ -24,8 +24,10 @@ class GridLayout:
     nodes per axis, offset into the flat arrays) per box b * G + g."""
 
     def __init__(self, t: Types, kernel: Kernel, dx: float, cells: tuple[int, ...],
-                 n_bodies: int, device: str):
-        self.t, self.kernel, self.dx = t, kernel, dx
+                 n_bodies: int, device: str, shared: bool = False):
+        """``shared``: every body uses the same boxes (one grid for all, as in
+        standard MPM); ``fit`` then grows them to cover all bodies."""
+        self.t, self.kernel, self.dx, self.shared = t, kernel, dx, shared
         self.cells = np.asarray(cells)
         n_boxes = n_bodies * kernel.n_grids
         self.lo = np.zeros((n_boxes, t.dim), np.int32)  # first node (lattice index)
@@ -44,18 +46,30 @@ class GridLayout:
             return
         k = self.kernel
         last = self.cells - (k.support - 1)
+        if self.shared:
+            self._fitted = getattr(self, "_fitted", {})
+            self._fitted[body] = (np.asarray(xmin, float), np.asarray(xmax, float))
+            xmin = np.min([a for a, _ in self._fitted.values()], axis=0)
+            xmax = np.max([b for _, b in self._fitted.values()], axis=0)
         for g, o in enumerate(k.grids):
             lo = np.clip(np.floor(np.asarray(xmin) / self.dx - o - k.offset).astype(np.int64), 0, last)
             hi = np.clip(np.floor(np.asarray(xmax) / self.dx - o - k.offset).astype(np.int64), 0, last)
-            box = body * k.n_grids + g
-            self.lo[box] = lo
-            self.shape[box] = hi - lo + k.support
+            boxes = range(g, len(self.lo), k.n_grids) if self.shared else [body * k.n_grids + g]
+            for box in boxes:
+                self.lo[box] = lo
+                self.shape[box] = hi - lo + k.support
 
     def commit(self) -> None:
         """Recompute offsets and upload the tables (after one or more ``fit``)."""
         sizes = np.prod(self.shape.astype(np.int64), axis=1)
-        self.offset[:] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        self.n_nodes = int(sizes.sum())
+        if self.shared:  # the grids of body 0, for everyone
+            G = self.kernel.n_grids
+            first = np.concatenate([[0], np.cumsum(sizes[:G])[:-1]])
+            self.offset[:] = np.tile(first, len(self.offset) // G)
+            self.n_nodes = int(sizes[:G].sum())
+        else:
+            self.offset[:] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            self.n_nodes = int(sizes.sum())
         self.lo_d.assign(self.lo)
         self.shape_d.assign(self.shape)
         self.offset_d.assign(self.offset)

@@ -14,7 +14,7 @@ import numpy as np
 from .materials import Material
 
 WALL_TYPES = ("sticky", "slip", "open")
-CONTACT_TYPES = ("frictionless", "none")
+CONTACT_TYPES = ("frictionless", "none", "shared")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
 
@@ -52,12 +52,14 @@ class Sphere:
 
 @dataclass(frozen=True)
 class Cylinder:
-    """Solid circular cylinder along coordinate axis ``axis`` (3D only)."""
+    """Circular cylinder along coordinate axis ``axis`` (3D only); hollow
+    (a tube) when ``inner_radius`` > 0."""
 
     center: tuple[float, ...]
     radius: float
     half_height: float
     axis: int = 1
+    inner_radius: float = 0.0
 
     def bounds(self):
         c = np.asarray(self.center, float)
@@ -69,7 +71,8 @@ class Cylinder:
         d = x - np.asarray(self.center)
         along = d[:, self.axis]
         radial2 = np.sum(d**2, axis=1) - along**2
-        return (np.abs(along) <= self.half_height) & (radial2 <= self.radius**2)
+        return ((np.abs(along) <= self.half_height) & (radial2 <= self.radius**2)
+                & (radial2 >= self.inner_radius**2))
 
 
 @dataclass(frozen=True)
@@ -152,7 +155,9 @@ class Scene:
     jitter: float = 0.0
     """random displacement of lattice samples, as a fraction of their spacing"""
     contact: str = "frictionless"
-    """between bodies: "frictionless" (mpm.contact) or "none" (they pass through)"""
+    """between bodies: "frictionless" (mpm.contact), "none" (they pass through)
+    or "shared" (Eulerian scheme only: all bodies on one grid, as in standard
+    MPM, where bodies whose stencils overlap move together)"""
     contact_fill: float = 0.5
     """volume fraction of a global node that the bodies present must fill for contact"""
     regions: list[KinematicRegion] = field(default_factory=list)

@@ -108,7 +108,10 @@ class Solver:
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies))
-        self.contact = nb > 1 and model.scene.contact != "none"
+        shared = model.scene.contact == "shared"
+        if shared and not isinstance(scheme, EMPM):
+            raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
+        self.contact = nb > 1 and model.scene.contact == "frictionless"
         self._grid_update = make_grid_update(t, not self.contact, self.regions)
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t, self.regions) if self.contact else None
@@ -119,7 +122,7 @@ class Solver:
                                        gradients=transfer != "mls" or k.gradient_affine)
                         for b in range(nb)}
 
-        self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev)
+        self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=shared)
         with wp.ScopedDevice(dev):
             box = STATUS_HEADER + STATUS_PER_BODY * nb  # per-body figures, then the boxes
             n_status = box + 2 * nb * t.dim

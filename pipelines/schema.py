@@ -20,7 +20,7 @@ from mpm.schemes import SCHEMES
 PRECISIONS = ("float32", "float64")
 DEVICES = ("cpu", "cuda")
 SHAPES = ("box", "sphere", "cylinder", "mesh", "compound")
-CONTACTS = ("frictionless", "none")
+from mpm.scene import CONTACT_TYPES as CONTACTS  # noqa: E402
 
 
 @dataclass
@@ -45,6 +45,7 @@ class ShapeConfig:
     radius: Optional[float] = None  # [m]
     half_height: Optional[float] = None  # [m]
     axis: Optional[int] = None  # 0, 1 or 2 (default 1: along y)
+    inner_radius: Optional[float] = None  # [m] cylinder: hollow inside this radius
     mesh: Optional[str] = None
     size: Optional[float] = None  # [m] largest side of the mesh's bounding box
     parts: Optional[List[Any]] = None
@@ -95,7 +96,8 @@ class SceneConfig:
     ppc: int = 4  # particles per cell
     jitter: float = 0.0  # random displacement of lattice samples [fraction of spacing]
     log_every: int = 1  # particle logging cadence when log.every is null
-    contact: str = "frictionless"  # between bodies: frictionless | none
+    contact: str = "frictionless"  # between bodies: frictionless | none | shared (one grid, EMPM)
+    contact_fill: float = 0.5  # node volume fraction the bodies must fill for contact
     bodies: List[BodyConfig] = field(default_factory=list)
     regions: List[RegionConfig] = field(default_factory=list)
 

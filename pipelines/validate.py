@@ -148,7 +148,7 @@ def make_scheme(node, key: str = "scheme"):
 SHAPE_KEYS = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
               "cylinder": ["center", "radius", "half_height"], "mesh": ["mesh", "center", "size"],
               "compound": ["parts"]}
-SHAPE_OPTIONAL = {"cylinder": ["axis"], "mesh": ["axis"]}
+SHAPE_OPTIONAL = {"cylinder": ["axis", "inner_radius"], "mesh": ["axis"]}
 
 
 def make_shape(node, key: str, dim: int):
@@ -189,7 +189,12 @@ def make_shape(node, key: str, dim: int):
     if dim != 3:
         raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere, compound")
     axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
-    return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis)
+    inner = 0.0 if d.get("inner_radius") is None else \
+        _number(f"{key}.inner_radius", d["inner_radius"], ge=0.0)
+    if inner >= radius:
+        raise ConfigError(f"{key}.inner_radius", f"{inner} >= radius {radius}; accepted: below the radius")
+    return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis,
+                        inner)
 
 
 def _angular(key: str, w, dim: int):
@@ -256,6 +261,7 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
         ppc=_number(f"{key}.ppc", d["ppc"], int, ge=1),
         jitter=_number(f"{key}.jitter", d["jitter"], ge=0.0, le=1.0),
         contact=_choice(f"{key}.contact", d["contact"], CONTACTS),
+        contact_fill=_number(f"{key}.contact_fill", d["contact_fill"], gt=0.0),
         regions=[make_region(r, f"{key}.regions[{i}]", dim, [b.name for b in bodies])
                  for i, r in enumerate(d.get("regions") or [])],
     )
@@ -290,6 +296,9 @@ def resolve(cfg) -> RunSpec:
         mpm.model.check_scene(scene, mpm.KERNELS[kernel_name])
     except mpm.SceneError as e:
         raise ConfigError(f"scene.{e.key}", e.message) from None
+    if scene.contact == "shared" and scheme.name != "empm":
+        raise ConfigError("scene.contact", "'shared' (one grid for all bodies) needs scheme=empm; "
+                                           "accepted with other schemes: frictionless, none")
     if run.steps is None and run.duration is None:
         run.duration = _number("scene.duration", sd["duration"], gt=0.0)
     lg = _plain(cfg.log)

@@ -202,3 +202,94 @@ def update_configuration(s, sel, models, affine="keep"):
         s["F0s"][p] = F
         s["Fsn"][p] = np.eye(d)
     return s
+
+
+# ---------------------------------------------------------------------------
+# The compact kernel of CK-MPM on two staggered grids, written independently:
+# nodes of grid g at (i + o_g) dx, o = -1/4, +1/4, two nodes per axis with
+# weights K(t), 1 - K(t), K(t) = 1 - t + sin(2 pi t) / (2 pi).
+
+def compact_1d(u):
+    """(nodes offsets, weights, d weights / d u) of the 2 stencil nodes, t = u - floor(u)."""
+    base = np.floor(u)
+    t = u - base
+    K = 1 - t + np.sin(2 * np.pi * t) / (2 * np.pi)
+    dK = np.cos(2 * np.pi * t) - 1
+    return base, np.array([K, 1 - K]), np.array([dK, -dK])
+
+
+def compact_step(x, v, C, F, mass, vol, models, prms, dx, domain, gravity, walls, dt,
+                 transfer="mls", wall_cells=3):
+    """One Eulerian step with the compact kernel; returns new (x, v, C, F).
+    Every grid receives the full mass; G2P averages the two grids."""
+    n, d = x.shape
+    grids = (-0.25, 0.25)
+    band = (wall_cells - 0.5) * dx
+    corners = np.stack(np.meshgrid(*([np.arange(2)] * d), indexing="ij"), -1).reshape(-1, d)
+
+    def stencil(p, o):
+        """[(node key, weight, r = X_i - X_p, grad w)] on grid o."""
+        out = []
+        b, w, dw = zip(*(compact_1d(x[p, a] / dx - o) for a in range(d)))
+        b = np.array(b)
+        for c in corners:
+            weight = np.prod([w[a][c[a]] for a in range(d)])
+            grad = np.array([dw[a][c[a]] * np.prod([w[e][c[e]] for e in range(d) if e != a])
+                             for a in range(d)]) / dx
+            node = b + c
+            r = (node + o) * dx - x[p]
+            out.append(((o, tuple(node)), weight, r, grad))
+        return out
+
+    # per-particle moment matrix D_p = 1/2 sum_g sum_i w r r^T
+    Kp = []
+    for p in range(n):
+        D = sum(w * np.outer(r, r) for o in grids for _, w, r, _ in stencil(p, o)) / len(grids)
+        Kp.append(np.linalg.inv(D + 1e-6 * dx * dx * np.eye(d)))
+    m_i, mv_i = {}, {}
+    for p in range(n):
+        P = stress(models[p], F[p], C[p], prms[p])
+        S = dt * vol[p] * P @ F[p].T
+        for o in grids:
+            for key, w, r, grad in stencil(p, o):
+                m_i[key] = m_i.get(key, 0.0) + w * mass[p]
+                if transfer == "mls":
+                    mom = w * (mass[p] * v[p] + (mass[p] * C[p] - S @ Kp[p]) @ r)
+                elif transfer == "apic":
+                    mom = w * (mass[p] * v[p] + mass[p] * C[p] @ r) - S @ grad
+                else:
+                    mom = w * mass[p] * v[p] - S @ grad
+                mv_i[key] = mv_i.get(key, 0.0) + mom
+    v_i = {}
+    for key, m in m_i.items():
+        if m <= 0:  # a node the particles reach with zero weight
+            v_i[key] = np.zeros(d)
+            continue
+        vel = mv_i[key] / m + dt * np.asarray(gravity)
+        q = (np.array(key[1]) + key[0]) * dx  # Eulerian: the node's own position
+        for a in range(d):
+            for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+                near = q[a] < band if side == 0 else q[a] > domain[a] - band
+                if not near or kind == "open":
+                    continue
+                if kind == "sticky":
+                    vel = np.zeros(d)
+                elif (side == 0 and vel[a] < 0) or (side == 1 and vel[a] > 0):
+                    vel[a] = 0.0
+        v_i[key] = vel
+    xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
+    for p in range(n):
+        B = np.zeros((d, d))
+        G = np.zeros((d, d))
+        for o in grids:
+            for key, w, r, grad in stencil(p, o):
+                vn[p] += w * v_i[key] / len(grids)
+                B += w * np.outer(v_i[key], r) / len(grids)
+                G += np.outer(v_i[key], grad) / len(grids)
+        Cn[p] = B @ Kp[p] if transfer != "pic" else 0.0
+        grad_v = Cn[p] if transfer == "mls" else G
+        xn[p] = x[p] + dt * vn[p]
+        Fn[p] = (np.eye(d) + dt * grad_v) @ F[p]
+        if models[p] == "fluid":
+            Fn[p] = np.linalg.det(Fn[p]) ** (1.0 / d) * np.eye(d)
+    return xn, vn, Cn, Fn
