@@ -15,12 +15,13 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from mpm.materials import MATERIALS
+from mpm.scene import CONTACT_TYPES as CONTACTS
 from mpm.schemes import SCHEMES
 
 PRECISIONS = ("float32", "float64")
 DEVICES = ("cpu", "cuda")
 SHAPES = ("box", "sphere", "cylinder", "mesh", "compound")
-from mpm.scene import CONTACT_TYPES as CONTACTS  # noqa: E402
+__all__ = ["CONTACTS", "DEVICES", "PRECISIONS", "SHAPES", "register"]
 
 
 @dataclass
