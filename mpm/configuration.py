@@ -34,7 +34,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     cache the weight derivatives too (APIC and PIC transfers)."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    locate = make_locate(t, kernel)
+    locate = make_locate(t, kernel, gradients)
     proj = project(t) if project is not None else None
     Wm = weight_matrix_type(t, kernel)
     Gv = wp.types.vector(G, S)

@@ -42,10 +42,11 @@ def make_strides(t: Types):
 
 
 @functools.cache
-def make_locate(t: Types, kernel: Kernel):
+def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
     """``locate(X, inv_dx, grid_offset, lo, shape, offset) -> (flat, fx, W, dW)``
-    in one grid's box. The stencil is clamped to the box, so that a runaway
-    particle never addresses memory outside it (G2P flags such particles)."""
+    in one grid's box (dW left zero unless ``with_gradients``). The stencil is
+    clamped to the box, so that a runaway particle never addresses memory
+    outside it (G2P flags such particles)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)
     weights, gradients = kernel.weights(t), kernel.gradients(t)
@@ -68,10 +69,12 @@ def make_locate(t: Types, kernel: Kernel):
             flat += (b - lo[d]) * st[d]
             fx[d] = u - S(b)
             w = weights(fx[d])
-            dw = gradients(fx[d])
             for s in range(wp.static(support)):
                 W[d, s] = w[s]
-                dW[d, s] = dw[s]
+            if wp.static(with_gradients):
+                dw = gradients(fx[d])
+                for s in range(wp.static(support)):
+                    dW[d, s] = dw[s]
         return flat, fx, W, dW
 
     return locate

@@ -14,6 +14,12 @@ Everything runs through the same code path as ``pipelines.run``
    128^2) with EMPM and A-ULMPM: configuration updates per 10^4 steps (the
    paper's tau) and the mean update cost per step, and their ratio (the
    paper claims 4.27x to 31.52x less update overhead for A-ULMPM).
+4. kernels: the compact kernel against the quadratic B-spline on the 3D
+   sphere (same particles, same dx), neo-Hookean (so that the transfers, not
+   a 3x3 SVD, carry the cost), with the PIC transfer (like the CK-MPM paper's
+   Taichi pipeline) and MLS, under TLMPM (weights cached at the initial
+   configuration) and EMPM (weights, and the compact kernel's per-particle
+   moment matrix, rebuilt every step).
 
 Each timed configuration runs five times and the fastest median counts
 (the machine's noise only ever adds time). ``--cold`` compiles into an empty
@@ -44,6 +50,7 @@ CASES = {
 STEPS = {"ball_2d": 400, "ball_3d": 60}
 SCHEMES = ("empm", "tlmpm", "aulmpm")
 DROPLET = ["scene=droplet_2d", "scene.resolution=128", "run.duration=0.5"]
+KERNEL_CASE = ["scene=elastic_ball_3d", "scene.resolution=64", "material=neo_hookean"]
 
 
 def spec_for(overrides: list[str]):
@@ -116,6 +123,29 @@ def bench_updates(workdir: Path) -> list[dict]:
     return rows
 
 
+def bench_kernels(workdir: Path, steps: int) -> list[dict]:
+    """Quadratic against compact per transfer and scheme, in turns (as bench_schemes)."""
+    combos = [(tr, s, k) for tr in ("pic", "mls") for s in ("tlmpm", "empm")
+              for k in ("quadratic", "compact")]
+
+    def overrides(tr, scheme, kernel, n):
+        return KERNEL_CASE + [f"scheme={scheme}", f"kernel={kernel}", f"kernel.transfer={tr}",
+                              f"run.steps={n}", "log.every=0", "log.scalars=false",
+                              "log.progress=false"]
+
+    for c in combos:
+        execute(spec_for(overrides(*c, 3)), workdir / f"k_{'_'.join(c)}_warm")
+    best: dict[tuple, dict] = {}
+    for k in range(REPEATS):
+        for c in combos:
+            m = timed(overrides(*c, steps), workdir / f"k_{'_'.join(c)}_{k}", repeats=1)
+            if c not in best or m["step_time_ms"] < best[c]["step_time_ms"]:
+                best[c] = m
+    return [{"transfer": tr, "scheme": s, "kernel": k, "particles": m["particles"],
+             "grid_nodes": m["grid_nodes"], "step_ms": m["step_time_ms"]}
+            for (tr, s, k), m in best.items()]
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
@@ -125,6 +155,8 @@ def main(argv=None) -> None:
     p.add_argument("--no-schemes", dest="schemes", action="store_false", help="skip the scheme table")
     p.add_argument("--no-updates", dest="updates", action="store_false",
                    help="skip the update-cost table")
+    p.add_argument("--no-kernels", dest="kernels", action="store_false",
+                   help="skip the kernel table")
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
@@ -143,6 +175,7 @@ def main(argv=None) -> None:
         rows = [bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
         schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
+        kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
     print("speed (EMPM, float32, CPU)")
     print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
           f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
@@ -166,9 +199,18 @@ def main(argv=None) -> None:
             print(f"{r['scheme']:<8} {r['particles']:>9,} {r['steps']:>6} {r['tau']:>8.1f} "
                   f"{r['update_ms']:>15.4f} {r['step_ms']:>8.3f} {r['wall_s']:>7.1f}")
         print(f"update overhead EMPM / A-ULMPM: {e['update_ms'] / a['update_ms']:.2f}x")
+    if kernels:
+        print("\nkernels on the 3D sphere (64^3, neo-Hookean), step only")
+        print(f"{'transfer':<9} {'scheme':<7} {'kernel':<10} {'particles':>9} {'nodes':>8} "
+              f"{'ms/step':>8} {'speed-up':>9}")
+        for r in kernels:
+            quad = next(q for q in kernels if (q["transfer"], q["scheme"], q["kernel"])
+                        == (r["transfer"], r["scheme"], "quadratic"))
+            print(f"{r['transfer']:<9} {r['scheme']:<7} {r['kernel']:<10} {r['particles']:>9,} "
+                  f"{r['grid_nodes']:>8,} {r['step_ms']:>8.3f} {quad['step_ms'] / r['step_ms']:>8.2f}x")
     if args.json:
-        args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates},
-                                        indent=2) + "\n")
+        args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
+                                         "kernels": kernels}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
