@@ -81,6 +81,28 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
 
 
 @functools.cache
+def make_cached(t: Types, kernel: Kernel, with_gradients: bool):
+    """``cached(p, g, body, shape, cache_base, cache_fx, cache_W, cache_dW)
+    -> (strides, flat, fx, W, dW)``: particle p's stencil on kernel grid g, as
+    the last configuration update left it (dW zero unless ``with_gradients``)."""
+    G = kernel.n_grids
+    strides = make_strides(t)
+    Wm = weight_matrix_type(t, kernel)
+
+    @wp.func
+    def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec),
+               cache_base: wp.array(dtype=wp.int32), cache_fx: wp.array(dtype=t.vec),
+               cache_W: wp.array(dtype=Wm), cache_dW: wp.array(dtype=Wm)):
+        k = p * G + g
+        dW = Wm()
+        if wp.static(with_gradients):
+            dW = cache_dW[k]
+        return strides(shape[body * G + g]), cache_base[k], cache_fx[k], cache_W[k], dW
+
+    return cached
+
+
+@functools.cache
 def make_node(t: Types, kernel: Kernel):
     """``node(a, b, c, flat, fx, W, strides, dx) -> (w, r, i)``; c is ignored in 2D."""
     S = t.scalar

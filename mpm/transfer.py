@@ -31,7 +31,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_node, make_node_gradient, make_strides, weight_matrix_type
+from .stencil import make_cached, make_node, make_node_gradient, weight_matrix_type
 from .types import Types
 
 TRANSFERS = ("mls", "apic", "pic")
@@ -75,13 +75,13 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
-    strides = make_strides(t)
     stress_energy = material.stress_energy(t)
     Wm = weight_matrix_type(t, kernel)
     needs_L = material.needs_velocity_gradient
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
+    cached = make_cached(t, kernel, not mls)
 
     @wp.kernel(module="unique")
     def p2g(
@@ -141,14 +141,7 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         if wp.static(with_regions):
             rid = region[p]
         for g in range(G):
-            k = p * G + g
-            st = strides(shape[b * G + g])
-            flat = cache_base[k]
-            fx = cache_fx[k]
-            W = cache_W[k]
-            dW = Wm()
-            if wp.static(not mls):
-                dW = cache_dW[k]
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache_base, cache_fx, cache_W, cache_dW)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -196,13 +189,13 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
-    strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
     min_stretch2 = make_min_stretch2(t)
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
     affine_from_gradient = affine and kernel.gradient_affine
+    cached = make_cached(t, kernel, not mls)
     inv_G = 1.0 / G
 
     @wp.kernel(module="unique")
@@ -241,14 +234,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         B = mat()
         grad_v = mat()
         for g in range(G):
-            k = p * G + g
-            st = strides(shape[b * G + g])
-            flat = cache_base[k]
-            fx = cache_fx[k]
-            W = cache_W[k]
-            dW = Wm()
-            if wp.static(not mls):
-                dW = cache_dW[k]
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache_base, cache_fx, cache_W, cache_dW)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):

@@ -122,6 +122,21 @@ def energy(model, F, prm):
     raise ValueError(model)
 
 
+def apply_walls(vel, q, domain, walls, band):
+    """Wall conditions on one node velocity at its current position q."""
+    d = len(vel)
+    for a in range(d):
+        for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+            near = q[a] < band if side == 0 else q[a] > domain[a] - band
+            if not near or kind == "open":
+                continue
+            if kind == "sticky":
+                vel = np.zeros(d)
+            elif (side == 0 and vel[a] < 0) or (side == 1 and vel[a] > 0):
+                vel[a] = 0.0
+    return vel
+
+
 def lagrangian_step(s, mass, vol, models, prms, body, dx, cells, domain, gravity, walls, dt,
                     wall_cells=3):
     """One step of the reference-configuration formulation (A-ULMPM paper,
@@ -159,18 +174,7 @@ def lagrangian_step(s, mass, vol, models, prms, body, dx, cells, domain, gravity
         for key, (m, mv, mq) in nodes.items():
             if m <= 0:
                 continue
-            v = mv / m + dt * np.asarray(gravity)
-            q = mq / m
-            for a in range(d):
-                for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
-                    near = q[a] < band if side == 0 else q[a] > domain[a] - band
-                    if not near or kind == "open":
-                        continue
-                    if kind == "sticky":
-                        v = np.zeros(d)
-                    elif (side == 0 and v[a] < 0) or (side == 1 and v[a] > 0):
-                        v[a] = 0.0
-            vel[key] = v
+            vel[key] = apply_walls(mv / m + dt * np.asarray(gravity), mq / m, domain, walls, band)
         for p in ps:
             base = np.floor(s["X"][p] / dx - 0.5).astype(int)
             fx = s["X"][p] / dx - base
@@ -265,18 +269,8 @@ def compact_step(x, v, C, F, mass, vol, models, prms, dx, domain, gravity, walls
         if m <= 0:  # a node the particles reach with zero weight
             v_i[key] = np.zeros(d)
             continue
-        vel = mv_i[key] / m + dt * np.asarray(gravity)
         q = (np.array(key[1]) + key[0]) * dx  # Eulerian: the node's own position
-        for a in range(d):
-            for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
-                near = q[a] < band if side == 0 else q[a] > domain[a] - band
-                if not near or kind == "open":
-                    continue
-                if kind == "sticky":
-                    vel = np.zeros(d)
-                elif (side == 0 and vel[a] < 0) or (side == 1 and vel[a] > 0):
-                    vel[a] = 0.0
-        v_i[key] = vel
+        v_i[key] = apply_walls(mv_i[key] / m + dt * np.asarray(gravity), q, domain, walls, band)
     xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
     for p in range(n):
         B = np.zeros((d, d))
