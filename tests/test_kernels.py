@@ -117,3 +117,28 @@ def test_stencil_sizes():
     assert mpm.KERNELS["quadratic"].stencil_nodes(3) == 27
     assert mpm.KERNELS["cubic"].stencil_nodes(3) == 64
     assert mpm.KERNELS["linear"].stencil_nodes(3) == 8
+
+
+def test_compact_weights_are_accurate_next_to_a_node_in_float32():
+    """A particle within 1e-6..1e-2 of a node: the far node's weight t -
+    sin(2 pi t)/(2 pi) ~ 6.58 t^3 and the slope -2 sin^2(pi t) keep their
+    relative accuracy in float32 (by subtraction they were round-off, and a
+    PIC run blew up on them)."""
+    k = mpm.KERNELS["compact"]
+    t32 = make_types(1 + 1, "float32")
+    weights, gradients = k.weights(t32), k.gradients(t32)
+    W = wp.types.vector(2, wp.float32)
+
+    @wp.kernel(module="unique")
+    def run(u: wp.array(dtype=wp.float32), w: wp.array(dtype=W), dw: wp.array(dtype=W)):
+        i = wp.tid()
+        w[i] = weights(u[i])
+        dw[i] = gradients(u[i])
+
+    t = np.logspace(-6, -2, 30)
+    w, dw = wp.zeros(len(t), dtype=W), wp.zeros(len(t), dtype=W)
+    wp.launch(run, len(t), inputs=[wp.array(t.astype(np.float32), dtype=wp.float32), w, dw])
+    x = 2 * np.pi * t.astype(np.float32).astype(np.float64)
+    exact = (x**3 / 6 - x**5 / 120 + x**7 / 5040) / (2 * np.pi)  # far node, t - sin(2 pi t)/(2 pi)
+    np.testing.assert_allclose(w.numpy()[:, 1], exact, rtol=1e-5)
+    np.testing.assert_allclose(dw.numpy()[:, 1], 2 * np.sin(x / 2) ** 2, rtol=1e-5)
