@@ -77,3 +77,21 @@ def test_ball_in_cylinder_falls_with_the_compact_kernel_only(tmp_path):
         drop[k] = (x0[ball, 1].mean() - x1[ball, 1].mean()) / (0.5 * 9.81 * t * t)
     assert drop["compact"] == pytest.approx(1.0, abs=0.02)
     assert drop["quadratic"] < 0.5
+
+
+def test_jelly_cube_vibrates_longer_with_the_compact_kernel(tmp_path):
+    """CK-MPM: less numerical diffusion with the compact kernel. With the PIC
+    transfer (the paper's pipeline) the jelly cube keeps vibrating after it
+    lands on the sticky floor; measured mean kinetic energy over 0.5-0.8 s:
+    0.0023 J (quadratic) against 0.0176 J (compact), and over 0.8-1.2 s
+    2e-5 J against 8e-4 J."""
+    ke = {}
+    for k in ("quadratic", "compact"):
+        run(["scene=jelly_cube", f"kernel={k}", "kernel.transfer=pic", "run.duration=0.8",
+             "log.every=0"], tmp_path, k)
+        _, scalars, _ = read_recording(tmp_path / k / "recording.rrd")
+        steps, KE = scalars["kinetic_energy"]
+        _, dt = scalars["dt"]
+        t = np.concatenate([[0.0], np.cumsum(dt)])[:len(steps)]
+        ke[k] = KE[(t >= 0.5) & (t < 0.8)].mean()
+    assert ke["compact"] > 3 * ke["quadratic"] > 0
