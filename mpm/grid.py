@@ -93,13 +93,50 @@ def region_types(t: Types):
 
 
 @functools.cache
+def make_boundary_data(t: Types):
+    """What the boundary conditions read: the walls and the kinematic regions."""
+    U, W3, Cc, Win = region_types(t)
+
+    @wp.struct
+    class BoundaryData:
+        domain: t.vec  # domain size [m]
+        band: t.scalar  # wall band [m]: (wall_cells - 1/2) dx
+        wall_lo: t.ivec  # wall type of the low face per axis (mpm.scene.WALL_TYPES)
+        wall_hi: t.ivec
+        region_u: wp.array(dtype=U)  # per region: velocity [m/s]
+        region_omega: wp.array(dtype=W3)  # angular velocity [rad/s]
+        region_center: wp.array(dtype=Cc)  # centre at start [m]
+        region_window: wp.array(dtype=Win)  # (start, end) [s]
+
+    return BoundaryData
+
+
+@functools.cache
+def make_conditions(t: Types, with_regions: bool):
+    """``conditions(v, q, m, kin_m, kin_id, time, data) -> v``: walls, then regions."""
+    S = t.scalar
+    walls = make_walls(t)
+    kinematic = make_kinematic(t)
+    Data = make_boundary_data(t)
+
+    @wp.func
+    def conditions(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S, data: Data):
+        v = walls(v, q, data.domain, data.band, data.wall_lo, data.wall_hi)
+        if wp.static(with_regions):
+            v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_omega,
+                          data.region_center, data.region_window)
+        return v
+
+    return conditions
+
+
+@functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
     """Momentum to velocity and gravity; the boundary conditions too unless
     ``with_boundary`` is False (contact comes first, then :func:`make_boundary`)."""
     S = t.scalar
-    walls = make_walls(t)
-    kinematic = make_kinematic(t)
-    U, W3, Cc, Win = region_types(t)
+    conditions = make_conditions(t, with_regions)
+    Data = make_boundary_data(t)
 
     @wp.kernel(module="unique")
     def grid_update(
@@ -107,16 +144,9 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
         gravity: t.vec,
         dt: S,
         time: S,
-        domain: t.vec,
-        band: S,
-        wall_lo: t.ivec,
-        wall_hi: t.ivec,
+        data: Data,
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
-        region_u: wp.array(dtype=U),
-        region_omega: wp.array(dtype=W3),
-        region_center: wp.array(dtype=Cc),
-        region_window: wp.array(dtype=Win),
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
         grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position, out: position
     ):
@@ -127,10 +157,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
         vi = grid_v[i] / m + dt * gravity
         qi = grid_q[i] / m
         if wp.static(with_boundary):
-            vi = walls(vi, qi, domain, band, wall_lo, wall_hi)
-            if wp.static(with_regions):
-                vi = kinematic(vi, qi, m, grid_kin[i], grid_kin_id[i], time, region_u,
-                               region_omega, region_center, region_window)
+            vi = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
         grid_v[i] = vi
         grid_q[i] = qi
 
@@ -141,36 +168,23 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
 def make_boundary(t: Types, with_regions: bool):
     """The boundary conditions as a pass of their own (after contact)."""
     S = t.scalar
-    walls = make_walls(t)
-    kinematic = make_kinematic(t)
-    U, W3, Cc, Win = region_types(t)
+    conditions = make_conditions(t, with_regions)
+    Data = make_boundary_data(t)
 
     @wp.kernel(module="unique")
     def boundary(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
         time: S,
-        domain: t.vec,
-        band: S,
-        wall_lo: t.ivec,
-        wall_hi: t.ivec,
+        data: Data,
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
-        region_u: wp.array(dtype=U),
-        region_omega: wp.array(dtype=W3),
-        region_center: wp.array(dtype=Cc),
-        region_window: wp.array(dtype=Win),
         grid_v: wp.array(dtype=t.vec),
     ):
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
-        qi = grid_q[i]
-        vi = walls(grid_v[i], qi, domain, band, wall_lo, wall_hi)
-        if wp.static(with_regions):
-            vi = kinematic(vi, qi, m, grid_kin[i], grid_kin_id[i], time, region_u, region_omega,
-                           region_center, region_window)
-        grid_v[i] = vi
+        grid_v[i] = conditions(grid_v[i], grid_q[i], m, grid_kin[i], grid_kin_id[i], time, data)
 
     return boundary

@@ -20,7 +20,7 @@ from .configuration import make_update
 from .diagnostics import diagnostic_names, make_measure
 from .fracture import fragments, make_fracture, neighbour_pairs
 from .contact import make_contact
-from .grid import make_boundary, make_grid_update, region_types
+from .grid import make_boundary, make_boundary_data, make_grid_update, region_types
 from .layout import GridLayout
 from .materials import Fluid
 from .model import Model, State
@@ -51,6 +51,8 @@ class StepReport:
     min_J: np.ndarray  # per body: the smallest det F (compression, for the time step)
     min_stretch: np.ndarray  # per body: the smallest singular value of F^sn (for the time step)
     max_rate: np.ndarray  # per body: the largest velocity gradient |L| [1/s] (for the time step)
+    box_lo: np.ndarray  # per body: bounding box of the new positions [m] (the next reference grids)
+    box_hi: np.ndarray
     updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
     update_time: float = 0.0  # [s] deciding and updating
 
@@ -92,10 +94,6 @@ class Solver:
             raise ValueError(f"transfer {self.options.transfer!r}; accepted: {', '.join(TRANSFERS)}")
         transfer = self.options.transfer
         self._gravity = t.vec(*model.gravity)
-        self._domain = t.vec(*model.domain)
-        self._band = S((model.scene.wall_cells - 0.5) * model.dx)
-        self._wall_lo = t.ivec(*model.wall_codes[0])
-        self._wall_hi = t.ivec(*model.wall_codes[1])
         margin = k.margin * model.dx
         self._inside_lo = t.vec(*([margin] * t.dim))
         self._inside_hi = t.vec(*[L - margin for L in model.domain])
@@ -133,7 +131,7 @@ class Solver:
             reset[box + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
-            self._regions = self._region_tables()
+            self._boundary_data = self._make_boundary_data()
             if self.contact:  # per-body fields on the global lattice
                 n_global = model.n_nodes
                 self._cells = t.ivec(*model.cells)
@@ -149,19 +147,27 @@ class Solver:
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
 
-    def _region_tables(self) -> list:
-        """Velocity, angular velocity (3 components), centre and (start, end) per region."""
-        t, d = self.model.types, self.model.dim
+    def _make_boundary_data(self):
+        """Walls and kinematic regions (velocity, angular velocity with 3
+        components, centre, (start, end) per region) for the boundary kernels."""
+        m = self.model
+        t, d = m.types, m.dim
         rows = []
-        for reg in self.model.scene.regions or []:
+        for reg in m.scene.regions:
             w = reg.angular_velocity
             w3 = (0.0, 0.0, float(w or 0.0)) if d == 2 else tuple(w or (0.0, 0.0, 0.0))
             c = reg.center if reg.center is not None else 0.5 * np.add(*reg.select.bounds())
             rows.append((tuple(reg.velocity or (0.0,) * d), w3, tuple(c), (reg.start, reg.end)))
-        U, W3, Cc, Win = region_types(t)
         if not rows:  # placeholders: the kernels compile the regions out
             rows = [((0.0,) * d, (0.0,) * 3, (0.0,) * d, (0.0, 0.0))]
-        return [wp.array([r[k] for r in rows], dtype=T) for k, T in enumerate((U, W3, Cc, Win))]
+        data = make_boundary_data(t)()
+        data.domain = t.vec(*m.domain)
+        data.band = t.scalar((m.scene.wall_cells - 0.5) * m.dx)
+        data.wall_lo = t.ivec(*m.wall_codes[0])
+        data.wall_hi = t.ivec(*m.wall_codes[1])
+        tables = [wp.array([r[k] for r in rows], dtype=T) for k, T in enumerate(region_types(t))]
+        data.region_u, data.region_omega, data.region_center, data.region_window = tables
+        return data
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
@@ -201,7 +207,7 @@ class Solver:
                                                      float(report.max_dJ[b]),
                                                      float(report.min_stretch[b]))]
             if report.updated:
-                self.update_configuration(state, report.updated)
+                self.update_configuration(state, report.updated, report.box_lo, report.box_hi)
             report.update_time = time.perf_counter() - t0
         return report
 
@@ -245,8 +251,8 @@ class Solver:
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
         wp.launch(self._grid_update, self.layout.n_nodes, device=self.model.device, inputs=[
-            self.grid_m, self._gravity, dt, self._time, self._domain, self._band, self._wall_lo,
-            self._wall_hi, self.grid_kin, self.grid_kin_id, *self._regions, self.grid_v, self.grid_q])
+            self.grid_m, self._gravity, dt, self._time, self._boundary_data, self.grid_kin,
+            self.grid_kin_id, self.grid_v, self.grid_q])
 
     def _resolve_contact(self):
         """Frictionless contact between bodies on the global lattice."""
@@ -269,8 +275,8 @@ class Solver:
     def _apply_boundary(self):
         """Walls, after contact."""
         wp.launch(self._boundary, self.layout.n_nodes, device=self.model.device, inputs=[
-            self.grid_m, self.grid_q, self._time, self._domain, self._band, self._wall_lo,
-            self._wall_hi, self.grid_kin, self.grid_kin_id, *self._regions, self.grid_v])
+            self.grid_m, self.grid_q, self._time, self._boundary_data, self.grid_kin,
+            self.grid_kin_id, self.grid_v])
 
     def _interpolate(self, state: State, dt):
         """G2P: velocities, affine matrices, positions, F^sn, the criterion."""
@@ -282,14 +288,10 @@ class Solver:
             state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status])
 
     # -------------------------------------------------- configuration update
-    def update_configuration(self, state: State, bodies: list[int]) -> None:
-        """Move the reference configuration of ``bodies`` to the current one
-        (their new boxes come from the bounding boxes G2P measured)."""
-        nb, d = self.n_bodies, self.model.dim
-        s = self.status.numpy()
-        box = STATUS_HEADER + STATUS_PER_BODY * nb
-        lo = s[box: box + nb * d].reshape(nb, d)
-        hi = s[box + nb * d:].reshape(nb, d)
+    def update_configuration(self, state: State, bodies: list[int], lo: np.ndarray,
+                             hi: np.ndarray) -> None:
+        """Move the reference configuration of ``bodies`` to the current one;
+        ``lo``/``hi`` [body, axis] bound their current positions (from G2P)."""
         for b in bodies:
             self.layout.fit(b, lo[b], hi[b])
         self._commit_layout()
@@ -345,14 +347,14 @@ class Solver:
         """Stability figures and criterion counts of the last step (one small
         device-to-host copy)."""
         s = self.status.numpy()
+        nb, d = self.n_bodies, self.model.dim
+        field_ = s[STATUS_HEADER:STATUS_HEADER + STATUS_PER_BODY * nb].reshape(STATUS_PER_BODY, nb)
+        box = s[STATUS_HEADER + STATUS_PER_BODY * nb:].reshape(2, nb, d)
         return StepReport(
             max_speed=float(np.sqrt(s[STATUS_MAX_V2])), nonfinite=int(s[STATUS_NONFINITE]),
-            outside=int(s[STATUS_OUTSIDE]),
-            marked=s[STATUS_HEADER:STATUS_HEADER + self.n_bodies].astype(np.int64),
-            max_dJ=s[STATUS_HEADER + self.n_bodies:STATUS_HEADER + 2 * self.n_bodies].copy(),
-            min_J=s[STATUS_HEADER + 2 * self.n_bodies:STATUS_HEADER + 3 * self.n_bodies].copy(),
-            min_stretch=np.sqrt(s[STATUS_HEADER + 3 * self.n_bodies:STATUS_HEADER + 4 * self.n_bodies]),
-            max_rate=np.sqrt(s[STATUS_HEADER + 4 * self.n_bodies:STATUS_HEADER + 5 * self.n_bodies]))
+            outside=int(s[STATUS_OUTSIDE]), marked=field_[0].astype(np.int64),
+            max_dJ=field_[1].copy(), min_J=field_[2].copy(), min_stretch=np.sqrt(field_[3]),
+            max_rate=np.sqrt(field_[4]), box_lo=box[0].copy(), box_hi=box[1].copy())
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

@@ -80,7 +80,7 @@ def compare(a: Recording, b: Recording) -> dict:
             continue
         dev = float(np.max(np.abs(pa - pb))) if pa.size else 0.0
         largest["positions"] = max(largest.get("positions", 0.0), dev)
-    for k, (da, db) in enumerate(zip(a.dJ, b.dJ)):
+    for da, db in zip(a.dJ, b.dJ):
         if da is not None and db is not None and da.shape == db.shape:
             largest["dJ"] = max(largest.get("dJ", 0.0), float(np.max(np.abs(da - db))))
     for name, (sa, va) in a.scalars.items():
