@@ -19,6 +19,7 @@ class Recording:
     colors: np.ndarray | None  # static RGBA colours per particle
     scalars: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (steps, values)
     properties: dict[str, list]  # "config:overrides" -> [values], "provenance:git_commit" -> [value]
+    update_steps: np.ndarray  # steps with a configuration-update event
 
     @property
     def dim(self) -> int:
@@ -60,8 +61,11 @@ def read(path: str | Path) -> Recording:
         if c.startswith("property:"):
             v = props_df[c].iloc[0]
             props[c[len("property:"):]] = [] if v is None else list(v)
+    events = data.reader(index="step", contents="/events").to_pandas()
+    update_steps = [int(s) for s, u in zip(events.get("step", []), events.get("/events:update_step", []))
+                    if u is not None]
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, body, colors, scalars,
-                     props)
+                     props, np.asarray(update_steps, dtype=np.int64))
 
 
 TIMING_SCALARS = {"step_time_ms"}  # wall-clock figures, never reproducible

@@ -1,5 +1,5 @@
-"""Shared test helpers: compose configs like the command line does, read
-recordings back."""
+"""Shared test helpers: compose configs like the command line does, run the
+command line."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 from hydra import compose, initialize_config_dir
 
 from pipelines import schema
@@ -35,20 +34,3 @@ def run_cli(args: list[str], cwd: Path, timeout: float = 600, **kw) -> subproces
     return subprocess.run([sys.executable, "-m", "pipelines.run", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=timeout, **kw)
 
-
-def read_recording(path: Path):
-    """(particles dataframe indexed by step, scalar dict name -> (steps, values), store)."""
-    from rerun.chunk import RrdReader
-
-    store = RrdReader(str(path)).store()
-    data = store.stream().collect()
-    particles = data.reader(index="step", contents="/particles").to_pandas()
-    scalars_df = data.reader(index="step", contents="/scalars/**").to_pandas()
-    scalars = {}
-    for col in scalars_df.columns:
-        if col.startswith("/scalars/"):
-            name = col.split("/")[2].split(":")[0]
-            s = scalars_df[["step", col]].dropna()
-            scalars[name] = (s["step"].to_numpy(), np.array([v[0] for v in s[col]]))
-    props = data.reader(index=None, contents="/__properties/**").to_pandas()
-    return particles, scalars, props

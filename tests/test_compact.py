@@ -6,7 +6,7 @@ import pytest
 
 import mpm
 from reference_mpm import compact_step
-from test_reference import assert_no_contact, tiny_scene
+from test_reference import assert_no_contact, particle_inputs, tiny_scene
 
 
 @pytest.mark.parametrize("transfer", ["mls", "apic", "pic"])
@@ -16,12 +16,9 @@ def test_compact_eulerian_step_matches_numpy_reference(dim, transfer, device):
     model, state = mpm.build(scene, mpm.KERNELS["compact"], "float64", device)
     solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(transfer=transfer))
     solver.prepare(state)
-    body = model.body.numpy()
-    models = [scene.bodies[b].material.name for b in body]
-    prms = [scene.bodies[b].material.packed() for b in body]
+    _, models, prms, mass, vol = particle_inputs(scene, model)
     s = state.numpy()
     x, v, C, F = s["x"], s["v"], s["C"], s["F0s"]
-    mass, vol = model.mass.numpy(), model.volume.numpy()
     dt = 2e-4
     for k in range(6 if dim == 2 else 3):
         x, v, C, F = compact_step(x, v, C, F, mass, vol, models, prms, model.dx, model.domain,

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import compose_cfg, read_recording
+from helpers import compose_cfg
+from pipelines import recordings
 from pipelines.runner import execute
 from pipelines.validate import resolve
 
@@ -46,8 +47,8 @@ def test_colliding_spheres_keep_zero_momentum(scheme, tmp_path):
     assert m["momentum_drift"] <= 1e-12
     # they met (at about 0.6 s) and turned back: sphere a is short of where
     # it would have coasted to, 0.4 + 0.05 t along each axis
-    particles, _, _ = read_recording(tmp_path / "run" / "recording.rrd")
-    x0, x1 = (np.stack(particles["/particles:Points3D:positions"].iloc[k]) for k in (0, -1))
+    rec = recordings.read(tmp_path / "run" / "recording.rrd")
+    x0, x1 = rec.positions[0], rec.positions[-1]
     a = np.linalg.norm(x0 - 0.4, axis=1) <= 0.12 + 1e-9
     assert x1[a, 0].mean() < 0.4 + 0.05 * 0.8 - 0.005
 
@@ -69,11 +70,9 @@ def test_ball_in_cylinder_falls_with_the_compact_kernel_only(tmp_path):
     for k in ("quadratic", "compact"):
         run(["scene=ball_in_cylinder", f"kernel={k}", "run.duration=0.25", "log.every=5"],
             tmp_path, k)
-        particles, _, _ = read_recording(tmp_path / k / "recording.rrd")
-        x0 = np.stack(particles["/particles:Points3D:positions"].iloc[0])
+        rec = recordings.read(tmp_path / k / "recording.rrd")
+        x0, x1, t = rec.positions[0], rec.positions[-1], rec.times[-1]
         ball = np.linalg.norm(x0 - (0.5, 0.62, 0.5), axis=1) <= 0.1 + 1e-9
-        x1 = np.stack(particles["/particles:Points3D:positions"].iloc[-1])
-        t = particles["sim_time"].iloc[-1].total_seconds()
         drop[k] = (x0[ball, 1].mean() - x1[ball, 1].mean()) / (0.5 * 9.81 * t * t)
     assert drop["compact"] == pytest.approx(1.0, abs=0.02)
     assert drop["quadratic"] < 0.5
@@ -89,7 +88,7 @@ def test_jelly_cube_vibrates_longer_with_the_compact_kernel(tmp_path):
     for k in ("quadratic", "compact"):
         run(["scene=jelly_cube", f"kernel={k}", "kernel.transfer=pic", "run.duration=0.8",
              "log.every=0"], tmp_path, k)
-        _, scalars, _ = read_recording(tmp_path / k / "recording.rrd")
+        scalars = recordings.read(tmp_path / k / "recording.rrd").scalars
         steps, KE = scalars["kinetic_energy"]
         _, dt = scalars["dt"]
         t = np.concatenate([[0.0], np.cumsum(dt)])[:len(steps)]

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import compose_cfg, read_recording, spec_for
+from helpers import compose_cfg, spec_for
+from pipelines import recordings
 from pipelines.runner import execute
 from pipelines.validate import resolve
 
@@ -94,8 +95,7 @@ def test_droplet_tlmpm_cannot_splash_aulmpm_can(tmp_path):
     for s in ("empm", "tlmpm", "aulmpm"):
         m[s] = run_scene(["scene=droplet_2d", f"scheme={s}", "run.duration=0.4", "log.every=50"],
                          tmp_path, s)
-        particles, _, _ = read_recording(tmp_path / s / "recording.rrd")
-        x = np.stack(particles["/particles:Points2D:positions"].iloc[-1])
+        x = recordings.read(tmp_path / s / "recording.rrd").positions[-1]
         height[s] = np.quantile(x[:, 1], 0.99)
     assert height["tlmpm"] < 0.2
     assert height["empm"] > 0.5 and height["aulmpm"] > 0.5
@@ -113,15 +113,11 @@ def test_update_events_match_the_logged_criterion(tmp_path):
             "scene.bodies.0.velocity=[0,-2]", "run.steps=400", "log.every=1", "log.progress=false"]
     metrics = execute(resolve(compose_cfg(over)), tmp_path)
     assert metrics["status"] == "completed"
-    particles, scalars, _ = read_recording(tmp_path / "recording.rrd")
-    dJ = {int(s): np.asarray(d) for s, d in zip(particles["step"], particles["/particles:dJ"])}
-    frac = dict(zip(*scalars["marked_fraction"]))  # step -> value (from step 1 on)
-    count = dict(zip(*scalars["config_updates"]))  # step -> value (from step 0 on)
-    from rerun.chunk import RrdReader
-
-    events = RrdReader(str(tmp_path / "recording.rrd")).store().stream().collect().reader(
-        index="step", contents="/events").to_pandas()
-    logged = {int(s) for s, u in zip(events["step"], events.get("/events:update_step", [])) if u is not None}
+    rec = recordings.read(tmp_path / "recording.rrd")
+    dJ = {int(s): d for s, d in zip(rec.steps, rec.dJ)}
+    frac = dict(zip(*rec.scalars["marked_fraction"]))  # step -> value (from step 1 on)
+    count = dict(zip(*rec.scalars["config_updates"]))  # step -> value (from step 0 on)
+    logged = set(rec.update_steps.tolist())
     expected = set()
     for s in sorted(frac):
         d = dJ[int(s)]

@@ -32,6 +32,14 @@ def tiny_scene(dim):
                      gravity=(0.0, -9.81, 0.0), walls=("slip",) * 6, ppc=1)
 
 
+def particle_inputs(scene, model):
+    """What the NumPy references take per particle: body index, material name,
+    packed material parameters, mass [kg] and volume [m^dim]."""
+    body = model.body.numpy()
+    return (body, [scene.bodies[b].material.name for b in body],
+            [scene.bodies[b].material.packed() for b in body], model.mass.numpy(), model.volume.numpy())
+
+
 def assert_no_contact(solver):
     """The premise of the reference comparisons: no contact correction."""
     if solver.contact:
@@ -44,13 +52,9 @@ def test_eulerian_step_matches_numpy_reference(dim, device):
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
     solver = mpm.Solver(model)
     solver.prepare(state)
-
-    body = model.body.numpy()
-    models = [scene.bodies[b].material.name for b in body]
-    prms = [scene.bodies[b].material.packed() for b in body]
+    body, models, prms, mass, vol = particle_inputs(scene, model)
     s = state.numpy()
     x, v, C, F = s["x"], s["v"], s["C"], s["F0s"]
-    mass, vol = model.mass.numpy(), model.volume.numpy()
     dt = 2e-4
     steps = 12 if dim == 2 else 4
     for k in range(steps):

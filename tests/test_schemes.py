@@ -7,16 +7,13 @@ import pytest
 
 import mpm
 from reference_mpm import lagrangian_step, update_configuration
-from test_reference import assert_no_contact, tiny_scene
+from test_reference import assert_no_contact, particle_inputs, tiny_scene
 
 
 def run_reference(scene, model, state, scheme, steps, dt):
     """The NumPy reference with the scheme's update rule; yields after each step."""
-    body = model.body.numpy()
-    models = [scene.bodies[b].material.name for b in body]
-    prms = [scene.bodies[b].material.packed() for b in body]
+    body, models, prms, mass, vol = particle_inputs(scene, model)
     s = {k: v.copy() for k, v in state.numpy().items()}
-    mass, vol = model.mass.numpy(), model.volume.numpy()
     counts = np.bincount(body)
     for _ in range(steps):
         lagrangian_step(s, mass, vol, models, prms, body, model.dx, model.cells, model.domain,
