@@ -22,7 +22,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_locate, weight_matrix_type
+from .stencil import make_locate, make_stencil_cache
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
@@ -36,7 +36,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
     proj = project(t) if project is not None else None
-    Wm = weight_matrix_type(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
     Gv = wp.types.vector(G, S)
     per_particle_K = kernel.moment is None
     inv_G = 1.0 / G
@@ -60,11 +60,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         F0s: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
         # Stencil cache out (entry p * G + g; K_p per particle):
-        cache_base: wp.array(dtype=wp.int32),
-        cache_fx: wp.array(dtype=t.vec),
-        cache_W: wp.array(dtype=Wm),
-        cache_dW: wp.array(dtype=Wm),
-        cache_K: wp.array(dtype=t.mat),
+        cache: Cache,
     ):
         p = wp.tid() + start
         b = body[p]
@@ -83,11 +79,11 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
             box = b * G + g
             flat, fx, W, dW = locate(Xp, S(1.0) / dx, grid_offsets[g], lo[box], shape[box], offset[box])
             k = p * G + g
-            cache_base[k] = flat
-            cache_fx[k] = fx
-            cache_W[k] = W
+            cache.base[k] = flat
+            cache.fx[k] = fx
+            cache.W[k] = W
             if wp.static(gradients):
-                cache_dW[k] = dW
+                cache.dW[k] = dW
             if wp.static(per_particle_K):
                 m1 = t.vec()
                 m2 = t.vec()
@@ -100,7 +96,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
                 for a in range(dim):
                     D[a, a] += m2[a] - m1[a] * m1[a]
         if wp.static(per_particle_K):
-            cache_K[p] = wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx
+            cache.K[p] = wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx
                                     * wp.identity(n=dim, dtype=S))
 
     return update

@@ -16,7 +16,7 @@ from .kernels import Kernel
 from .materials import Material
 from .params import violations
 from .sampling import sample_shape
-from .stencil import weight_matrix_type
+from .stencil import stencil_cache
 from .scene import WALL_TYPES, Scene
 from .types import Types, make_types
 
@@ -108,11 +108,7 @@ class State:
     Fsn: wp.array  # deformation gradient since the last configuration update
     X: wp.array  # reference positions [m]
     dJ: wp.array  # |det Fsn - 1| after the last step (written when recorded)
-    cache_base: wp.array  # per particle and kernel grid: flat index of the first stencil node
-    cache_fx: wp.array  # ... X / dx - o_g - base
-    cache_W: wp.array  # ... per-axis kernel weights
-    cache_dW: wp.array  # ... and their derivatives (gradient-based transfers)
-    cache_K: wp.array  # per particle: MLS/APIC moment inverse K_p (kernels without a constant one)
+    stencils: object  # the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)
 
     def numpy(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s", "Fsn", "X", "dJ")}
@@ -254,10 +250,6 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             Fsn=wp.array(eye, dtype=t.mat),
             X=wp.array(x.astype(S), dtype=t.vec),
             dJ=wp.zeros(n, dtype=t.scalar),
-            cache_base=wp.zeros(n * kernel.n_grids, dtype=wp.int32),
-            cache_fx=wp.zeros(n * kernel.n_grids, dtype=t.vec),
-            cache_W=wp.zeros(n * kernel.n_grids, dtype=weight_matrix_type(t, kernel)),
-            cache_dW=wp.zeros(n * kernel.n_grids, dtype=weight_matrix_type(t, kernel)),
-            cache_K=wp.zeros(n if kernel.moment is None else 1, dtype=t.mat),
+            stencils=stencil_cache(t, kernel, n),
         )
     return model, state

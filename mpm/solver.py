@@ -243,7 +243,7 @@ class Solver:
             wp.launch(kernel, g.count, device=m.device, inputs=[
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
                 state.x, state.v, state.C, state.F0s, state.Fsn,
-                state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K,
+                state.stencils,
                 self._dx, self._K, dt, g.start,
                 self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
                 self.energy])
@@ -283,7 +283,7 @@ class Solver:
         m = self.model
         wp.launch(self._g2p, m.n_particles, device=m.device, inputs=[
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
-            state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K,
+            state.stencils,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
             state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status])
 
@@ -304,7 +304,7 @@ class Solver:
         wp.launch(self._update[b], count, device=m.device, inputs=[
             m.body, m.body_params, self.layout.lo_d, self.layout.shape_d, self.layout.offset_d,
             self._grid_offsets, self._dx, start, state.x, state.X, state.C, state.F0s, state.Fsn,
-            state.cache_base, state.cache_fx, state.cache_W, state.cache_dW, state.cache_K])
+            state.stencils])
 
     def _commit_layout(self) -> None:
         """Upload the boxes; grow the grid arrays (by half again) if they no longer fit."""
@@ -403,7 +403,7 @@ class Solver:
         self.diagnostics.zero_()
         D = m.types.scalar(m.kernel.moment * m.dx**2 if m.kernel.moment is not None else 0.0)
         wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
-            m.mass, state.x, state.v, state.C, state.Fsn, D, state.cache_K, self._gravity,
+            m.mass, state.x, state.v, state.C, state.Fsn, D, state.stencils.K, self._gravity,
             self.diagnostics])
         out = self.diagnostics.numpy().copy()
         i = self.diagnostic_names().index("elastic_energy")

@@ -81,23 +81,53 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
 
 
 @functools.cache
+def make_stencil_cache(t: Types, kernel: Kernel):
+    """The stencil cache (mpm.model.State.stencils): per particle p and kernel
+    grid g (entry ``p * G + g``) what :func:`make_locate` gives at the last
+    configuration update, and per particle the MLS/APIC moment inverse K_p
+    (one unused entry when the kernel's moment is a constant)."""
+    Wm = weight_matrix_type(t, kernel)
+
+    @wp.struct
+    class StencilCache:
+        base: wp.array(dtype=wp.int32)  # flat index of the first stencil node
+        fx: wp.array(dtype=t.vec)  # X / dx - o_g - base
+        W: wp.array(dtype=Wm)  # per-axis kernel weights
+        dW: wp.array(dtype=Wm)  # and their derivatives (gradient-based transfers)
+        K: wp.array(dtype=t.mat)  # K_p [1/m^2]
+
+    return StencilCache
+
+
+def stencil_cache(t: Types, kernel: Kernel, n: int):
+    """A zeroed stencil cache for ``n`` particles on the current device."""
+    G, Wm = kernel.n_grids, weight_matrix_type(t, kernel)
+    cache = make_stencil_cache(t, kernel)()
+    cache.base = wp.zeros(n * G, dtype=wp.int32)
+    cache.fx = wp.zeros(n * G, dtype=t.vec)
+    cache.W = wp.zeros(n * G, dtype=Wm)
+    cache.dW = wp.zeros(n * G, dtype=Wm)
+    cache.K = wp.zeros(n if kernel.moment is None else 1, dtype=t.mat)
+    return cache
+
+
+@functools.cache
 def make_cached(t: Types, kernel: Kernel, with_gradients: bool):
-    """``cached(p, g, body, shape, cache_base, cache_fx, cache_W, cache_dW)
-    -> (strides, flat, fx, W, dW)``: particle p's stencil on kernel grid g, as
-    the last configuration update left it (dW zero unless ``with_gradients``)."""
+    """``cached(p, g, body, shape, cache) -> (strides, flat, fx, W, dW)``:
+    particle p's stencil on kernel grid g, as the last configuration update
+    left it (dW zero unless ``with_gradients``)."""
     G = kernel.n_grids
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
 
     @wp.func
-    def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec),
-               cache_base: wp.array(dtype=wp.int32), cache_fx: wp.array(dtype=t.vec),
-               cache_W: wp.array(dtype=Wm), cache_dW: wp.array(dtype=Wm)):
+    def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec), cache: Cache):
         k = p * G + g
         dW = Wm()
         if wp.static(with_gradients):
-            dW = cache_dW[k]
-        return strides(shape[body * G + g]), cache_base[k], cache_fx[k], cache_W[k], dW
+            dW = cache.dW[k]
+        return strides(shape[body * G + g]), cache.base[k], cache.fx[k], cache.W[k], dW
 
     return cached
 

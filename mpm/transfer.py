@@ -31,7 +31,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_cached, make_node, make_node_gradient, weight_matrix_type
+from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
 TRANSFERS = ("mls", "apic", "pic")
@@ -76,7 +76,7 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
     stress_energy = material.stress_energy(t)
-    Wm = weight_matrix_type(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
     needs_L = material.needs_velocity_gradient
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
@@ -97,11 +97,8 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         C: wp.array(dtype=t.mat),
         F0s: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
-        cache_base: wp.array(dtype=wp.int32),
-        cache_fx: wp.array(dtype=t.vec),
-        cache_W: wp.array(dtype=Wm),
-        cache_dW: wp.array(dtype=Wm),
-        cache_K: wp.array(dtype=t.mat),
+        # Stencil cache:
+        cache: Cache,
         # Step:
         dx: S,
         K: S,
@@ -134,14 +131,14 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         mC = m * Cp
         if wp.static(mls):
             if wp.static(per_particle_K):
-                mC = mC - stress * cache_K[p]
+                mC = mC - stress * cache.K[p]
             else:
                 mC = mC - K * stress
         rid = int(0)
         if wp.static(with_regions):
             rid = region[p]
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache_base, cache_fx, cache_W, cache_dW)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -189,7 +186,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
-    Wm = weight_matrix_type(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
     min_stretch2 = make_min_stretch2(t)
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
@@ -207,11 +204,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         # Grid in:
         grid_v: wp.array(dtype=t.vec),
         # Stencil cache:
-        cache_base: wp.array(dtype=wp.int32),
-        cache_fx: wp.array(dtype=t.vec),
-        cache_W: wp.array(dtype=Wm),
-        cache_dW: wp.array(dtype=Wm),
-        cache_K: wp.array(dtype=t.mat),
+        cache: Cache,
         # Step:
         dx: S,
         K: S,
@@ -234,7 +227,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         B = mat()
         grad_v = mat()
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache_base, cache_fx, cache_W, cache_dW)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -250,7 +243,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         Cp = mat()
         if wp.static(mls):
             if wp.static(per_particle_K):
-                Cp = S(inv_G) * B * cache_K[p]
+                Cp = S(inv_G) * B * cache.K[p]
             else:
                 Cp = (S(inv_G) * K) * B
             grad_v = Cp
@@ -260,7 +253,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 Cp = grad_v
             elif wp.static(affine):
                 if wp.static(per_particle_K):
-                    Cp = S(inv_G) * B * cache_K[p]
+                    Cp = S(inv_G) * B * cache.K[p]
                 else:
                     Cp = (S(inv_G) * K) * B
         xp = x[p] + dt * vp
