@@ -183,7 +183,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     """Sample the bodies and allocate the model and initial state on ``device``."""
     check_scene(scene, kernel)
     t = make_types(scene.dim, precision)
-    d, dx = scene.dim, scene.dx
+    d, dx, dxp = scene.dim, scene.dx, scene.particle_dx
     rng = np.random.default_rng(seed)
 
     # material models in order of first appearance; bodies grouped by model
@@ -192,7 +192,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     samples = []
     for i, b in enumerate(scene.bodies):
         ppc = b.ppc or scene.ppc
-        x = sample_shape(b.shape, d, dx, ppc, scene.jitter, rng)
+        x = sample_shape(b.shape, d, dxp, ppc, scene.jitter, rng)
         if len(x) == 0:
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
         samples.append((x, ppc))
@@ -204,8 +204,10 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     for i in order:
         b, (x, ppc) = scene.bodies[i], samples[i]
         n = len(x)
-        vol = dx**d / ppc
+        vol = dxp**d / ppc
         v, C = _rigid_velocity(b, x, d)
+        if scene.solution is not None:
+            v, C = scene.solution.velocity(x, 0.0), scene.solution.velocity_gradient(x, 0.0)
         xs.append(x), vs.append(v), Cs.append(C)
         Vs.append(np.full(n, vol)), ms.append(np.full(n, vol * b.material.rho))
         ids.append(np.full(n, i, np.int32))

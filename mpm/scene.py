@@ -37,17 +37,19 @@ class Box:
 
 @dataclass(frozen=True)
 class Sphere:
-    """Ball (a disc in 2D)."""
+    """Ball (a disc in 2D); a shell (a ring in 2D) when ``inner_radius`` > 0."""
 
     center: tuple[float, ...]
     radius: float
+    inner_radius: float = 0.0
 
     def bounds(self):
         c = np.asarray(self.center, float)
         return c - self.radius, c + self.radius
 
     def contains(self, x: np.ndarray) -> np.ndarray:
-        return np.sum((x - np.asarray(self.center)) ** 2, axis=1) <= self.radius**2
+        r2 = np.sum((x - np.asarray(self.center)) ** 2, axis=1)
+        return (r2 <= self.radius**2) & (r2 >= self.inner_radius**2)
 
 
 @dataclass(frozen=True)
@@ -162,10 +164,21 @@ class Scene:
     """volume fraction of a global node that the bodies present must fill for contact"""
     regions: list[KinematicRegion] = field(default_factory=list)
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
+    particle_resolution: int | None = None
+    """particles are sampled as if the grid had this many cells along x
+    (default: ``resolution``): a fixed particle set for grid-refinement studies"""
+    solution: object | None = None
+    """a closed-form solution (``mpm.analytic``): it sets the initial velocity
+    and, for a manufactured solution, the body force"""
 
     @property
     def dx(self) -> float:
         return self.domain[0] / self.resolution
+
+    @property
+    def particle_dx(self) -> float:
+        """Sampling cell [m]: each particle stands for particle_dx^dim / ppc."""
+        return self.domain[0] / (self.particle_resolution or self.resolution)
 
     @property
     def cells(self) -> tuple[int, ...]:

@@ -102,7 +102,10 @@ class Solver:
 
         # kernels specialised for what the model holds
         self.regions = len(model.scene.regions) > 0
-        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions), g) for g in model.groups]
+        solution = model.scene.solution
+        self.forcing = solution if getattr(solution, "has_body_force", False) else None
+        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None), g)
+                     for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies))
@@ -131,6 +134,8 @@ class Solver:
             reset[box + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
+            # body force per unit mass [m/s^2] of a manufactured solution, set every step
+            self.body_force = wp.zeros(model.n_particles if self.forcing else 1, dtype=t.vec)
             self._boundary_data = self._make_boundary_data()
             if self.contact:  # per-body fields on the global lattice
                 n_global = model.n_nodes
@@ -187,6 +192,7 @@ class Solver:
         """Take the initial positions as every body's reference configuration
         and record the neighbour pairs of the fracture measure."""
         x = state.x.numpy()
+        self._X0 = x.astype(np.float64)  # initial positions: where the body force is evaluated
         self._prepare_fracture(x)
         for b, (start, count) in enumerate(self.model.body_ranges):
             xb = x[start:start + count]
@@ -213,10 +219,13 @@ class Solver:
 
     def step(self, state: State, dt: float) -> None:
         """Advance ``state`` by ``dt`` [s] in the current reference configurations."""
-        self._time = self.model.types.scalar(self.time)
+        t0 = self.time
+        self._time = self.model.types.scalar(t0)
         self.time += dt
         dt = self.model.types.scalar(dt)
         self._clear()
+        if self.forcing is not None:
+            self._apply_forcing(t0)
         self._rasterize(state, dt)
         self._update_grid(dt)
         if self.contact:
@@ -236,13 +245,18 @@ class Solver:
         wp.copy(self.status, self._status_reset)
         self.energy.zero_()
 
+    def _apply_forcing(self, t0: float):
+        """The manufactured solution's body force at the step's start time t0 [s]."""
+        b = self.forcing.body_force(self._X0, t0)
+        self.body_force.assign(b.astype(state_dtype(self.model)))
+
     def _rasterize(self, state: State, dt):
         """P2G: mass, momentum with the stress impulse, and node positions."""
         m = self.model
         for kernel, g in self._p2g:
             wp.launch(kernel, g.count, device=m.device, inputs=[
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
-                state.x, state.v, state.C, state.F0s, state.Fsn,
+                state.x, state.v, state.C, state.F0s, state.Fsn, self.body_force,
                 state.stencils,
                 self._dx, self._K, dt, g.start,
                 self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
@@ -359,7 +373,7 @@ class Solver:
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model
         scene = m.scene
-        spacing = np.array([m.dx / (b.ppc or scene.ppc) ** (1.0 / m.dim) for b in scene.bodies])
+        spacing = np.array([scene.particle_dx / (b.ppc or scene.ppc) ** (1.0 / m.dim) for b in scene.bodies])
         body = m.body.numpy()
         p, q = neighbour_pairs(x, body, 1.5 * spacing)
         self.pair_counts = np.bincount(body[p], minlength=self.n_bodies)

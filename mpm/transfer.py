@@ -67,9 +67,12 @@ def make_min_stretch2(t: Types):
 
 
 @functools.cache
-def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool):
+def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
+             with_body_force: bool = False):
     """P2G for the particles of one material model (``material`` is its class);
-    ``with_regions``: also the mass each node draws from kinematic regions."""
+    ``with_regions``: also the mass each node draws from kinematic regions;
+    ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
+    force b [m/s^2] (a manufactured solution's) to the node momenta."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
@@ -97,6 +100,7 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         C: wp.array(dtype=t.mat),
         F0s: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
+        body_force: wp.array(dtype=t.vec),
         # Stencil cache:
         cache: Cache,
         # Step:
@@ -128,6 +132,8 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
         mv = m * v[p]
+        if wp.static(with_body_force):
+            mv = mv + (m * dt) * body_force[p]
         mC = m * Cp
         if wp.static(mls):
             if wp.static(per_particle_K):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import platform
 import socket
 import subprocess
@@ -58,3 +60,27 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
         "host": socket.gethostname(),
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def code_hash(root: Path = REPO) -> str:
+    """SHA-256 of the solver's and the pipeline's sources (``mpm/``,
+    ``pipelines/``): changes with any edit, committed or not."""
+    h = hashlib.sha256()
+    for pkg in ("mpm", "pipelines"):
+        for f in sorted((root / pkg).rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+# keys that do not change a run's result: they are left out of its hash
+UNHASHED = {"run": ("force", "progress"), "log": ("progress",)}
+
+
+def config_hash(config: dict, code: str) -> str:
+    """Content hash of a resolved config (a plain dict) and the code version:
+    two jobs with the same hash compute the same thing."""
+    cfg = {k: ({kk: vv for kk, vv in v.items() if kk not in UNHASHED.get(k, ())}
+               if isinstance(v, dict) else v) for k, v in config.items()}
+    text = json.dumps(cfg, sort_keys=True, default=str)
+    return hashlib.sha256(f"{code}\n{text}".encode()).hexdigest()[:16]

@@ -11,6 +11,7 @@ Exit codes: 0 completed, 1 failed (exception), 2 bad configuration,
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import sys
@@ -18,9 +19,10 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from . import schema
+from . import provenance, schema
 from .errors import EXIT_CONFIG, describe
 from .runner import EXIT_CODES, execute
 from .validate import ConfigError, resolve
@@ -32,23 +34,51 @@ _config_errors: list[str] = []
 
 
 def run(cfg: DictConfig) -> dict:
-    """Validate, run and return the metrics of one composed config."""
+    """Validate, run and return the metrics of one composed config. In a
+    sweep, a job whose config hash matches a finished job of the same sweep
+    directory returns that job's metrics instead, unless ``run.force``."""
     hc = HydraConfig.get()
+    out_dir = Path(hc.runtime.output_dir)
     try:
         spec = resolve(cfg)
     except ConfigError as e:  # reported on one line by main()
         _config_errors.append(str(e))
-        _remove_if_empty(Path(hc.runtime.output_dir))
+        _remove_if_empty(out_dir)
         return {"status": "invalid", "reason": str(e)}
+    init_warp()  # a launcher's worker process did not pass through main()
     overrides = list(hc.overrides.task)
     choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
-    out_dir = Path(hc.runtime.output_dir)
-    metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices)
+    identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
+                                                      provenance.code_hash())}
+    if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
+        done = finished_job(Path(hc.sweep.dir), identity["config_hash"])
+        if done is not None:
+            if done[0] != out_dir.resolve():
+                _remove_if_empty(out_dir)
+            print(f"skipped: the same config (hash {identity['config_hash']}) finished in {done[0]}; "
+                  "run.force=true runs it again", file=sys.stderr)
+            _last_status.append("completed")
+            return {**done[1], "skipped": str(done[0])}
+    metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
+                      identity=identity)
     _last_status.append(metrics["status"])
     summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
     print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
     return metrics
+
+
+def finished_job(sweep_dir: Path, config_hash: str) -> tuple[Path, dict] | None:
+    """A job directory under ``sweep_dir`` whose metrics.json has this config
+    hash and status completed, with its metrics."""
+    for path in sorted(sweep_dir.glob("**/metrics.json")):
+        try:
+            metrics = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if metrics.get("config_hash") == config_hash and metrics.get("status") == "completed":
+            return path.parent.resolve(), metrics
+    return None
 
 
 def _remove_if_empty(run_dir: Path) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import mpm
+from mpm import analytic
 
 from . import provenance
 from .progress import Progress
@@ -27,17 +28,20 @@ from .validate import RunSpec
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}
 
 
-def scalar_groups(dim: int, marked: list[str]) -> dict:
+def scalar_groups(dim: int, marked: list[str], error: bool = False) -> dict:
     """Time-series views of the recording's blueprint."""
     momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
                 ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
                  "angular_momentum_y", "angular_momentum_z"])
-    return {
+    groups = {
         "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
         "momentum": momentum,
         "step": ["dt", "max_speed", "step_time_ms"],
         "configuration updates": ["config_updates", "fracture"] + marked,
     }
+    if error:
+        groups["error"] = ["error/displacement", "error/velocity"]
+    return groups
 
 
 class _Terminate(KeyboardInterrupt):
@@ -125,6 +129,9 @@ class Run:
         self.solver = self.state = self.drift = None
         self.fracture = None  # (overall, per body) at the last evaluation
         self.fracture_step = -1
+        self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
+        self.error_last: dict | None = None
+        self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
 
     # ------------------------------------------------------------ build
@@ -135,9 +142,14 @@ class Run:
         self.solver = mpm.Solver(self.model, spec.scheme,
                                  mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer))
         self.scheme = self.solver.scheme  # defaults resolved
-        self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes)
+        self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes,
+                            scene=spec.scene_name, resolution=spec.scene.resolution, dx=self.model.dx,
+                            precision=run.precision)
         self.metrics["compile_time_s"] = self.solver.load()
         self.solver.prepare(self.state)
+        self.X0 = self.state.x.numpy().astype(np.float64)  # initial positions
+        self.solution = spec.scene.solution
+        self.error_max = {"displacement": 0.0, "velocity": 0.0}
         self.names = self.solver.diagnostic_names()
         self.drift = Drift(self.names)
         bodies = [b.name for b in spec.scene.bodies]
@@ -154,9 +166,10 @@ class Run:
                  f"({self.spec.transfer})",
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
-            particle_radius=0.5 * model.dx / max(ppc) ** (1.0 / scene.dim),
+            particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
             properties=self.properties,
-            scalar_groups=scalar_groups(scene.dim, self.marked_names if self.scheme.tracks_marks() else []))
+            scalar_groups=scalar_groups(scene.dim, self.marked_names if self.scheme.tracks_marks() else [],
+                                        self.solution is not None))
 
     # ------------------------------------------------------------ logging
     def measure(self, extra: dict) -> None:
@@ -182,6 +195,25 @@ class Run:
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
         self.sink.particles(self.step, self.t, x, dJ)
+
+    def errors(self) -> dict:
+        """RMS error of the particles against the closed-form solution at the
+        current time: E = sqrt(sum_p |phi_p - phi(X_p, t)|^2 / n_p)."""
+        x = self.state.x.numpy().astype(np.float64)
+        v = self.state.v.numpy().astype(np.float64)
+        sol = self.solution
+        e = {"displacement": analytic.rms(x - self.X0, sol.displacement(self.X0, self.t)),
+             "velocity": analytic.rms(v, sol.velocity(self.X0, self.t))}
+        for k, val in e.items():
+            self.error_max[k] = max(self.error_max[k], val)
+        self.error_last, self._error_step = e, self.step
+        return {f"error/{k}": val for k, val in e.items()}
+
+    def save_final_state(self) -> None:
+        """``final_state.npz``: positions x, velocities v and initial positions
+        X0 of the last state (self-convergence studies compare these)."""
+        np.savez(self.out_dir / "final_state.npz", x=self.state.x.numpy(), v=self.state.v.numpy(),
+                 X0=self.X0, step=self.step, time=self.t)
 
     def log_fracture(self) -> np.ndarray:
         frac = self.solver.fracture(self.state)
@@ -229,6 +261,8 @@ class Run:
         if self.scheme.tracks_marks():
             for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
                 extra[name] = float(m / n)
+        if self.solution is not None:
+            extra.update(self.errors())
         return extra
 
     # ------------------------------------------------------------ loop
@@ -245,7 +279,7 @@ class Run:
     def loop(self) -> None:
         log = self.spec.log
         steps_end, duration = self.spec.end
-        self.measure({"config_updates": 0.0})
+        self.measure({"config_updates": 0.0, **(self.errors() if self.solution is not None else {})})
         if log.every:
             self.particles()
         self.log_fracture()
@@ -314,6 +348,16 @@ class Run:
             m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
             pieces = self.solver.fragments()
             m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
+            self.save_final_state()
+            if self.solution is not None:
+                if self.error_last is None or self._error_step != self.step:
+                    self.errors()
+                u, v = self.solution.scales()
+                m["error"] = {"displacement": self.error_last["displacement"],
+                              "velocity": self.error_last["velocity"],
+                              "displacement_max": self.error_max["displacement"],
+                              "velocity_max": self.error_max["velocity"],
+                              "displacement_scale": u, "velocity_scale": v, "solution": self.solution.name}
         if m["status"] == "interrupted":
             self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
         steps = self.step
@@ -321,7 +365,10 @@ class Run:
             steps=steps, sim_time=self.t,
             dt=(self.t / steps) if steps else None, dt_min=min(self.dts) if self.dts else None,
             dt_max=max(self.dts) if self.dts else None,
-            step_time_ms=_median(self.step_ms), log_time_ms=_median(self.log_ms))
+            step_time_ms=_median(self.step_ms), log_time_ms=_median(self.log_ms),
+            loop_time_s=sum(self.step_ms) / 1e3)
+        if m["step_time_ms"] and "particles" in m:
+            m["particle_steps_per_s"] = m["particles"] / (m["step_time_ms"] / 1e3)
         if self.solver is not None:
             names = [b.name for b in self.spec.scene.bodies]
             m.update(
@@ -338,11 +385,12 @@ class Run:
 
 
 def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),
-            choices: dict | None = None, sink: Sink | None = None) -> dict:
+            choices: dict | None = None, sink: Sink | None = None, identity: dict | None = None) -> dict:
     """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
 
     ``config_yaml``, ``overrides`` and ``choices`` describe how the spec was
-    composed; they are stored in the recording with the provenance."""
+    composed; they are stored in the recording with the provenance.
+    ``identity`` (e.g. the config hash) goes into metrics.json as given."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -350,6 +398,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     if sink is None:
         sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
     run = Run(spec, out_dir, properties, sink)
+    run.metrics.update(identity or {})
     previous_term = None
     try:
         previous_term = signal.signal(signal.SIGTERM, _raise_terminate)

@@ -46,7 +46,7 @@ class ShapeConfig:
     radius: Optional[float] = None  # [m]
     half_height: Optional[float] = None  # [m]
     axis: Optional[int] = None  # 0, 1 or 2 (default 1: along y)
-    inner_radius: Optional[float] = None  # [m] cylinder: hollow inside this radius
+    inner_radius: Optional[float] = None  # [m] cylinder or sphere: hollow inside this radius
     mesh: Optional[str] = None
     size: Optional[float] = None  # [m] largest side of the mesh's bounding box
     parts: Optional[List[Any]] = None
@@ -101,6 +101,8 @@ class SceneConfig:
     contact_fill: float = 0.5  # node volume fraction the bodies must fill for contact
     bodies: List[BodyConfig] = field(default_factory=list)
     regions: List[RegionConfig] = field(default_factory=list)
+    particle_resolution: Optional[int] = None  # sample particles as on this grid (fixed particle set)
+    solution: Optional[Any] = None  # closed-form solution: {type: vibrating_bar|vortex, ...}
 
 
 @dataclass
@@ -114,6 +116,7 @@ class RunConfig:
     dt_max: float = 1.0e-3  # largest adaptive step [s]
     precision: str = "float32"  # float32 | float64
     device: str = "cpu"  # cpu | cuda
+    force: bool = False  # in a sweep: run even if a job with the same config hash finished
 
 
 @dataclass
@@ -138,6 +141,7 @@ class Config:
     run: RunConfig = field(default_factory=RunConfig)
     log: LogConfig = field(default_factory=LogConfig)
     seed: int = 0
+    scale: Any = None  # sizes of the named experiments (conf/scale), read by conf/experiment
 
 
 def register() -> None:

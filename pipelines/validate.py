@@ -148,7 +148,7 @@ def make_scheme(node, key: str = "scheme"):
 SHAPE_KEYS = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
               "cylinder": ["center", "radius", "half_height"], "mesh": ["mesh", "center", "size"],
               "compound": ["parts"]}
-SHAPE_OPTIONAL = {"cylinder": ["axis", "inner_radius"], "mesh": ["axis"]}
+SHAPE_OPTIONAL = {"cylinder": ["axis", "inner_radius"], "mesh": ["axis"], "sphere": ["inner_radius"]}
 
 
 def make_shape(node, key: str, dim: int):
@@ -184,15 +184,15 @@ def make_shape(node, key: str, dim: int):
         up = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
         return MeshShape(d["mesh"], center, _number(f"{key}.size", d["size"], gt=0.0), up)
     radius = _number(f"{key}.radius", d["radius"], gt=0.0)
-    if kind == "sphere":
-        return mpm.Sphere(center, radius)
-    if dim != 3:
-        raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere, compound")
-    axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
     inner = 0.0 if d.get("inner_radius") is None else \
         _number(f"{key}.inner_radius", d["inner_radius"], ge=0.0)
     if inner >= radius:
         raise ConfigError(f"{key}.inner_radius", f"{inner} >= radius {radius}; accepted: below the radius")
+    if kind == "sphere":
+        return mpm.Sphere(center, radius, inner)
+    if dim != 3:
+        raise ConfigError(f"{key}.type", "cylinder is 3D only; accepted in 2D: box, sphere, compound")
+    axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
     return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis,
                         inner)
 
@@ -219,6 +219,55 @@ def make_region(d: dict, key: str, dim: int, body_names: list[str]) -> mpm.Kinem
         angular_velocity=_angular(f"{key}.angular_velocity", d.get("angular_velocity"), dim),
         center=None if d.get("center") is None else _vector(f"{key}.center", d["center"], dim),
         start=start, end=float("inf") if end is None else end)
+
+
+SOLUTION_KEYS = {"vibrating_bar": ["amplitude", "mode", "axis"], "vortex": ["amplitude", "omega"]}
+
+
+def make_solution(d, key: str, dim: int, bodies: list, gravity: tuple):
+    """A closed-form solution for the scene's single body (mpm.analytic)."""
+    if d is None:
+        return None
+    if not isinstance(d, dict):
+        raise ConfigError(key, f"{d!r}; accepted: a mapping with a type key")
+    kind = _choice(f"{key}.type", d.get("type"), list(SOLUTION_KEYS))
+    for k in d:
+        if k != "type" and k not in SOLUTION_KEYS[kind]:
+            raise ConfigError(f"{key}.{k}", f"not a parameter of {kind}; accepted: "
+                                            f"{', '.join(SOLUTION_KEYS[kind])}")
+    if len(bodies) != 1:
+        raise ConfigError(f"{key}.type", f"{kind} describes one body, the scene has {len(bodies)}; "
+                                         "accepted: a scene with one body")
+    if any(g != 0.0 for g in gravity):
+        raise ConfigError("scene.gravity", f"{list(gravity)}: {kind} has no gravity; accepted: zeros")
+    body = bodies[0]
+    mat = body.material
+    amplitude = _number(f"{key}.amplitude", d.get("amplitude"), gt=0.0)
+    if kind == "vibrating_bar":
+        if not isinstance(body.shape, mpm.Box):
+            raise ConfigError("scene.bodies[0].shape.type", "the vibrating bar is a box; accepted: box")
+        if mat.name not in ("fixed_corotated", "neo_hookean") or mat.nu != 0.0:
+            raise ConfigError("scene.bodies[0].material", f"{mat.name} (nu = {getattr(mat, 'nu', None)}): "
+                              "the 1D bar solution needs an elastic solid with nu = 0; accepted: "
+                              "fixed_corotated or neo_hookean with nu: 0.0")
+        axis = _number(f"{key}.axis", d.get("axis", 0), int, ge=0, le=dim - 1)
+        lo, hi = body.shape.bounds()
+        return mpm.analytic.VibratingBar(
+            lo=float(lo[axis]), length=float(hi[axis] - lo[axis]), wave_speed=(mat.E / mat.rho) ** 0.5,
+            amplitude=amplitude, mode=_number(f"{key}.mode", d.get("mode", 1), int, ge=1), axis=axis)
+    if dim != 2:
+        raise ConfigError(f"{key}.type", "the vortex is 2D; accepted in 3D: vibrating_bar")
+    shape = body.shape
+    if not isinstance(shape, mpm.Sphere) or shape.inner_radius <= 0.0:
+        raise ConfigError("scene.bodies[0].shape", "the vortex is a ring; accepted: a sphere with "
+                                                   "inner_radius > 0")
+    if mat.name != "neo_hookean":
+        raise ConfigError("scene.bodies[0].material.model", f"{mat.name}: the vortex's body force is "
+                                                            "derived for neo_hookean; accepted: neo_hookean")
+    return mpm.analytic.Vortex(
+        center=tuple(shape.center), inner_radius=shape.inner_radius, outer_radius=shape.radius,
+        shear_modulus=mat.E / (2 * (1 + mat.nu)), density=mat.rho, amplitude=amplitude,
+        omega=_number(f"{key}.omega", d.get("omega", 3.141592653589793), gt=0.0))
 
 
 def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mpm.Scene, dict]:
@@ -264,7 +313,10 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
         contact_fill=_number(f"{key}.contact_fill", d["contact_fill"], gt=0.0),
         regions=[make_region(r, f"{key}.regions[{i}]", dim, [b.name for b in bodies])
                  for i, r in enumerate(d.get("regions") or [])],
+        particle_resolution=_number(f"{key}.particle_resolution", d.get("particle_resolution"), int,
+                                    ge=1, optional=True),
     )
+    scene.solution = make_solution(d.get("solution"), f"{key}.solution", dim, bodies, scene.gravity)
     return scene, d
 
 

@@ -1,0 +1,95 @@
+"""Hydra multirun sweeps: launchers, one directory per job, skipping finished
+jobs by config hash, the report at the end of the sweep, the named experiments."""
+
+import json
+
+import pytest
+
+from helpers import ROOT, compose_cfg, group_options, run_cli
+from omegaconf import OmegaConf
+from pipelines import provenance
+
+TINY = ["scene=rotating_plate_2d", "scene.resolution=16", "run.steps=3", "log.every=0"]
+REPORT_FILES = ["report.md", "runs.csv", "speed.csv", "speed.png", "fracture.csv", "fracture.png",
+                "update_cost.csv", "conservation.csv", "conservation.png"]
+
+
+def _jobs(sweep):
+    return sorted(p.parent for p in sweep.glob("*/metrics.json"))
+
+
+def _sweep(tmp_path, launcher, extra=()):
+    sweep = tmp_path / launcher
+    args = ["-m", f"hydra/launcher={launcher}", "scheme=empm,tlmpm", "kernel=quadratic,linear", *TINY,
+            f"hydra.sweep.dir={sweep}", *extra]
+    p = run_cli(args, cwd=ROOT, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return sweep, p
+
+
+@pytest.mark.parametrize("launcher", ["joblib", "ray"])
+def test_tiny_sweep_runs_every_job_reports_and_skips_on_rerun(tmp_path, launcher):
+    sweep, _ = _sweep(tmp_path, launcher)
+    jobs = _jobs(sweep)
+    assert len(jobs) == 4
+    metrics = [json.loads((j / "metrics.json").read_text()) for j in jobs]
+    assert {(m["scheme"], m["kernel"]) for m in metrics} == {
+        (s, k) for s in ("empm", "tlmpm") for k in ("quadratic", "linear")}
+    assert all(m["status"] == "completed" and m["steps"] == 3 for m in metrics)
+    assert all((j / "recording.rrd").stat().st_size > 0 and (j / "final_state.npz").exists() for j in jobs)
+    assert len({m["config_hash"] for m in metrics}) == 4
+    for f in REPORT_FILES:  # written by the end-of-multirun callback
+        assert (sweep / f).stat().st_size > 0, f
+    rows = (sweep / "runs.csv").read_text().splitlines()
+    assert len(rows) == 5 and "tlmpm · linear · mls" in (sweep / "report.md").read_text()
+
+    stamps = {j: (j / "metrics.json").stat().st_mtime_ns for j in jobs}
+    _, p = _sweep(tmp_path, launcher)  # the same sweep again: every job is skipped
+    assert p.stderr.count("skipped: the same config") == 4, p.stderr[-3000:]
+    assert _jobs(sweep) == jobs
+    assert all((j / "metrics.json").stat().st_mtime_ns == stamps[j] for j in jobs)
+
+
+def test_forced_rerun_and_changed_config_run_again(tmp_path):
+    sweep, _ = _sweep(tmp_path, "basic")
+    jobs = _jobs(sweep)
+    stamps = {j: (j / "metrics.json").stat().st_mtime_ns for j in jobs}
+    _, p = _sweep(tmp_path, "basic", ["run.force=true"])
+    assert "skipped" not in p.stderr
+    assert all((j / "metrics.json").stat().st_mtime_ns > stamps[j] for j in jobs)
+    _, p = _sweep(tmp_path, "basic", ["run.steps=4"])
+    assert "skipped" not in p.stderr and len(_jobs(sweep)) == 4  # same job numbers, new results
+    assert all(json.loads((j / "metrics.json").read_text())["steps"] == 4 for j in _jobs(sweep))
+
+
+def test_config_hash_follows_the_computation_not_the_presentation():
+    def h(overrides):
+        cfg = OmegaConf.to_container(compose_cfg(overrides), resolve=True)
+        return provenance.config_hash(cfg, "code")
+
+    base = h([])
+    assert h(["log.progress=false", "run.force=true"]) == base
+    assert h(["material.E=2e5"]) != base and h(["seed=1"]) != base
+    assert provenance.config_hash(OmegaConf.to_container(compose_cfg([]), resolve=True), "other") != base
+    assert len(provenance.code_hash()) == 16
+
+
+@pytest.mark.parametrize("name", group_options("experiment"))
+@pytest.mark.parametrize("scale", ["default", "paper"])
+def test_named_experiments_compose(name, scale):
+    """Every experiment composes with both scales; its sweep parameters and
+    settings resolve (the sweep itself is an experiment, not a test)."""
+    from hydra import compose, initialize_config_dir
+
+    from helpers import CONF
+
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"+experiment={name}", f"scale={scale}"],
+                      return_hydra_config=True)
+    params = OmegaConf.to_container(cfg.hydra.sweeper.params, resolve=True)
+    assert params and all(isinstance(v, str) and v for v in params.values())
+    assert cfg.hydra.sweep.dir == f"multirun/{name}/{scale}"
+    from pipelines.validate import resolve
+
+    cfg_job = compose_cfg([f"+experiment={name}", f"scale={scale}"])
+    resolve(cfg_job)  # the experiment's own settings are valid
