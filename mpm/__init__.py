@@ -4,7 +4,7 @@ Build a :class:`Scene`, turn it into a :class:`Model` and initial
 :class:`State` with :func:`build`, and advance it with :class:`Solver`.
 """
 
-from . import analytic
+from . import analytic  # noqa: F401 - mpm.analytic
 from .kernels import KERNELS, Kernel
 from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
 from .model import Model, SceneError, State, build
