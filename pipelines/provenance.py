@@ -62,12 +62,18 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
     }
 
 
+# pipeline modules that read results but never shape a run
+POST_PROCESSING = {"report.py", "replay.py", "recordings.py", "bench.py"}
+
+
 def code_hash(root: Path = REPO) -> str:
-    """SHA-256 of the solver's and the pipeline's sources (``mpm/``,
-    ``pipelines/``): changes with any edit, committed or not."""
+    """SHA-256 of the sources a run executes (``mpm/``, ``pipelines/`` but
+    the post-processing tools): changes with any such edit, committed or not."""
     h = hashlib.sha256()
     for pkg in ("mpm", "pipelines"):
         for f in sorted((root / pkg).rglob("*.py")):
+            if pkg == "pipelines" and f.name in POST_PROCESSING:
+                continue
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())
     return h.hexdigest()[:16]

@@ -799,24 +799,26 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
         use_time = all(_time_axis(rec, s[0]) is not None
                        for _, rec, p, L in series for s in (p, L) if s is not None)
         plt = _pyplot()
-        fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), squeeze=False)
-        for c, (name, idx) in enumerate((("linear momentum", 2), ("angular momentum", 3))):
-            ax = axes[0][c]
-            for item in series:
-                j, rec, s = item[0], item[1], item[idx]
-                if s is None:
-                    continue
-                x = _time_axis(rec, s[0]) if use_time else s[0]
-                colour = style[j.label][0]
-                ax.plot(x, np.maximum(s[1], DRIFT_FLOOR), color=colour, lw=1,
-                        label=f"{j.label} · {j.resolution}" if j.resolution else j.label)
-            ax.set_yscale("log")
-            ax.set_xlabel("time [s]" if use_time else "step")
-            ax.set_ylabel(f"relative {name} drift")
-            ax.set_title(name)
-            ax.grid(True, which="both", alpha=0.3)
-            if ax.lines and len(ax.lines) <= 20:
-                ax.legend(fontsize=6)
+        scenes = sorted({item[0].scene for item in series}, key=_natural_key)
+        fig, axes = plt.subplots(len(scenes), 2, figsize=(12, 4.5 * len(scenes)), squeeze=False)
+        for r, scene in enumerate(scenes):
+            for c, (name, idx) in enumerate((("linear momentum", 2), ("angular momentum", 3))):
+                ax = axes[r][c]
+                for item in series:
+                    j, rec, s = item[0], item[1], item[idx]
+                    if s is None or j.scene != scene:
+                        continue
+                    x = _time_axis(rec, s[0]) if use_time else s[0]
+                    colour = style[j.label][0]
+                    ax.plot(x, np.maximum(s[1], DRIFT_FLOOR), color=colour, lw=1,
+                            label=f"{j.label} · {j.resolution}" if j.resolution else j.label)
+                ax.set_yscale("log")
+                ax.set_xlabel("time [s]" if use_time else "step")
+                ax.set_ylabel(f"relative {name} drift")
+                ax.set_title(f"{scene}: {name}")
+                ax.grid(True, which="both", alpha=0.3)
+                if ax.lines and len(ax.lines) <= 20:
+                    ax.legend(fontsize=6)
         fig.tight_layout()
         fig.savefig(out / "conservation.png", dpi=120)
         plt.close(fig)

@@ -53,8 +53,8 @@ def run(cfg: DictConfig) -> dict:
     if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
         done = finished_job(Path(hc.sweep.dir), identity["config_hash"])
         if done is not None:
-            if done[0] != out_dir.resolve():
-                _remove_if_empty(out_dir)
+            if done[0] != out_dir.resolve():  # Hydra still writes here after the job returns
+                (out_dir / "skipped.txt").write_text(f"same config as {done[0]}\n")
             print(f"skipped: the same config (hash {identity['config_hash']}) finished in {done[0]}; "
                   "run.force=true runs it again", file=sys.stderr)
             _last_status.append("completed")

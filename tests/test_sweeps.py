@@ -93,3 +93,22 @@ def test_named_experiments_compose(name, scale):
 
     cfg_job = compose_cfg([f"+experiment={name}", f"scale={scale}"])
     resolve(cfg_job)  # the experiment's own settings are valid
+
+
+@pytest.mark.parametrize("name", group_options("experiment"))
+def test_experiment_globs_pick_every_config_of_the_group_and_no_schema(name):
+    """``glob(...)`` sweeps pick up every option in conf/ (a new kernel joins
+    the experiments) but not the structured-config schemas in the ConfigStore."""
+    from hydra.core.config_store import ConfigStore
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    cfg = OmegaConf.load(ROOT / "conf" / "experiment" / f"{name}.yaml")
+    params = cfg.hydra.sweeper.params
+    store = ConfigStore.instance().repo
+    for key in params:
+        value = OmegaConf.to_container(params, resolve=False)[key]
+        if not str(value).startswith("glob("):
+            continue
+        override = OverridesParser.create().parse_override(f"{key}={value}")
+        names = group_options(key) + [n.removesuffix(".yaml") for n in store.get(key, {})]
+        assert sorted(override.value().filter(names)) == group_options(key)
