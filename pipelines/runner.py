@@ -133,6 +133,8 @@ class Run:
         self.error_last: dict | None = None
         self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
+        self._dt0: float | None = None  # the first adaptive step [s]
+        self._stable_dt = math.inf
 
     # ------------------------------------------------------------ build
     def build(self) -> None:
@@ -268,13 +270,27 @@ class Run:
     # ------------------------------------------------------------ loop
     def next_dt(self, report: mpm.StepReport | None, duration: float | None) -> float:
         """The solver's stable step (mpm.Solver.stable_dt) capped by run.dt_max,
-        unless run.dt fixes it."""
+        unless run.dt fixes it; the last step ends on the duration."""
         run = self.spec.run
         if run.dt is not None:
             dt = run.dt
         else:
             dt = min(run.dt_max, self.solver.stable_dt(run.cfl, report, self._v0))
+            if self._dt0 is None:
+                self._dt0 = dt
+        self._stable_dt = dt
         return dt if duration is None else min(dt, duration - self.t)
+
+    def collapsed(self) -> str | None:
+        """Why the adaptive step counts as collapsed (a particle's strain rate or
+        compression running away), or None: below run.dt_collapse of the first step."""
+        dt, dt0 = self._stable_dt, self._dt0
+        if self.spec.run.dt is not None or dt0 is None:
+            return None
+        if not (dt >= self.spec.run.dt_collapse * dt0):  # NaN and 0 included
+            return (f"time step collapsed to {dt:.3g} s, below {self.spec.run.dt_collapse:g} of the first "
+                    f"step ({dt0:.3g} s): a particle's strain rate or compression is running away")
+        return None
 
     def loop(self) -> None:
         log = self.spec.log
@@ -294,6 +310,10 @@ class Run:
 
         while not done():
             dt = self.next_dt(report, duration)
+            collapse = self.collapsed()
+            if collapse:
+                self.unstable(collapse)
+                break
             t0 = time.perf_counter()
             report = self.solver.advance(self.state, dt)
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
@@ -304,7 +324,7 @@ class Run:
             if self._pending:
                 self.emit(self.solver.step_energy())
             if report.reason:
-                self.unstable(report)
+                self.unstable(report.reason, nonfinite=report.nonfinite, outside=report.outside)
                 break
             self.record_updates(report)
             t1 = time.perf_counter()
@@ -321,14 +341,13 @@ class Run:
             self.metrics["status"], self.metrics["reason"] = "completed", ""
         progress.close()
 
-    def unstable(self, report: mpm.StepReport) -> None:
+    def unstable(self, reason: str, **values) -> None:
         self.metrics["status"] = "unstable"
-        self.metrics["reason"] = f"step {self.step} (t = {self.t:.6g} s): {report.reason}"
+        self.metrics["reason"] = f"step {self.step} (t = {self.t:.6g} s): {reason}"
         self.metrics["unstable_step"] = self.step
         if self.spec.log.every:
             self.particles()
-        self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR",
-                        nonfinite=report.nonfinite, outside=report.outside)
+        self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR", **values)
 
     # ------------------------------------------------------------ finish
     def finish(self) -> None:

@@ -114,6 +114,7 @@ class RunConfig:
     dt: Optional[float] = None  # fixed time step [s]; null: CFL every step
     cfl: float = 0.4  # CFL number of the adaptive step
     dt_max: float = 1.0e-3  # largest adaptive step [s]
+    dt_collapse: float = 1.0e-4  # unstable when the adaptive step falls below this fraction of the first
     precision: str = "float32"  # float32 | float64
     device: str = "cpu"  # cpu | cuda
     force: bool = False  # in a sweep: run even if a job with the same config hash finished

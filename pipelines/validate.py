@@ -38,6 +38,7 @@ class RunSettings:
     dt: float | None
     cfl: float
     dt_max: float
+    dt_collapse: float
     precision: str
     device: str
 
@@ -333,6 +334,7 @@ def make_run(node, key: str = "run") -> RunSettings:
         dt=_number(f"{key}.dt", d["dt"], gt=0.0, optional=True),
         cfl=_number(f"{key}.cfl", d["cfl"], gt=0.0, le=1.0),
         dt_max=_number(f"{key}.dt_max", d["dt_max"], gt=0.0),
+        dt_collapse=_number(f"{key}.dt_collapse", d["dt_collapse"], ge=0.0, le=1.0),
         precision=precision, device=device)
 
 

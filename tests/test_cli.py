@@ -81,6 +81,19 @@ def test_unstable_run_stops_cleanly(tmp_path):
     verify(tmp_path / "recording.rrd")
 
 
+def test_collapsing_time_step_stops_as_unstable(tmp_path):
+    """A run whose adaptive step keeps shrinking (here: a ball speeding up
+    under gravity against a threshold of 0.95 of the first step; in practice a
+    particle's strain rate running away) stops instead of crawling forever."""
+    p = run_cli(["scene.resolution=32", "run.dt_max=1", "run.dt_collapse=0.95", "run.steps=2000",
+                 f"hydra.run.dir={tmp_path}"], cwd=ROOT)
+    assert p.returncode == 3, p.stderr
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["status"] == "unstable" and "time step collapsed" in metrics["reason"]
+    assert 1 < metrics["steps"] < 2000 and metrics["dt_min"] < metrics["dt_max"]
+    verify(tmp_path / "recording.rrd")
+
+
 @pytest.mark.parametrize("sig,name", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
 def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
     rrd = tmp_path / "recording.rrd"
