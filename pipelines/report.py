@@ -381,7 +381,8 @@ def assign_errors(jobs: list[Job]) -> None:
         if isinstance(err, dict):
             d, v = _num(err.get("displacement")), _num(err.get("velocity"))
             if d is not None or v is not None:
-                j.error_displacement, j.error_velocity, j.error_kind = d, v, "analytic"
+                kind = "reference" if err.get("solution") == "reference" else "analytic"
+                j.error_displacement, j.error_velocity, j.error_kind = d, v, kind
     groups: dict[tuple, list[Job]] = defaultdict(list)
     for j in jobs:
         if not j.error_kind and j.completed and j.resolution is not None and j.final_state() is not None:

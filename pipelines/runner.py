@@ -171,7 +171,7 @@ class Run:
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
             properties=self.properties,
             scalar_groups=scalar_groups(scene.dim, self.marked_names if self.scheme.tracks_marks() else [],
-                                        self.solution is not None))
+                                        self.solution is not None or self.spec.run.reference is not None))
 
     # ------------------------------------------------------------ logging
     def measure(self, extra: dict) -> None:
@@ -216,6 +216,24 @@ class Run:
         X0 of the last state (self-convergence studies compare these)."""
         np.savez(self.out_dir / "final_state.npz", x=self.state.x.numpy(), v=self.state.v.numpy(),
                  X0=self.X0, step=self.step, time=self.t)
+
+    def reference_errors(self, path: str) -> dict:
+        """RMS difference of the final positions and velocities to a reference
+        run's final state with the same particles (the A-ULMPM paper's eq. 36),
+        also logged as the last step's error/* scalars."""
+        ref = np.load(path)
+        out = {"solution": "reference", "reference": path}
+        if ref["X0"].shape != self.X0.shape or not np.allclose(ref["X0"], self.X0, rtol=0, atol=1e-9):
+            return {**out, "problem": "the reference has other particles (scene.particle_resolution "
+                                      "fixes the particle set across grids)"}
+        if abs(float(ref["time"]) - self.t) > 1e-9 * max(1.0, self.t):
+            return {**out, "problem": f"the reference ends at t = {float(ref['time']):.6g} s, this run at "
+                                      f"{self.t:.6g} s"}
+        x, v = self.state.x.numpy().astype(np.float64), self.state.v.numpy().astype(np.float64)
+        e = {"displacement": analytic.rms(x, ref["x"].astype(np.float64)),
+             "velocity": analytic.rms(v, ref["v"].astype(np.float64))}
+        self.sink.scalars(self.step, self.t, {f"error/{k}": v for k, v in e.items()})
+        return {**e, **out}
 
     def log_fracture(self) -> np.ndarray:
         frac = self.solver.fracture(self.state)
@@ -368,7 +386,9 @@ class Run:
             pieces = self.solver.fragments()
             m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
             self.save_final_state()
-            if self.solution is not None:
+            if self.spec.run.reference is not None and m["status"] == "completed":
+                m["error"] = self.reference_errors(self.spec.run.reference)
+            elif self.solution is not None:
                 if self.error_last is None or self._error_step != self.step:
                     self.errors()
                 u, v = self.solution.scales()

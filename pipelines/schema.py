@@ -118,6 +118,7 @@ class RunConfig:
     precision: str = "float32"  # float32 | float64
     device: str = "cpu"  # cpu | cuda
     force: bool = False  # in a sweep: run even if a job with the same config hash finished
+    reference: Optional[str] = None  # a run directory (or its final_state.npz) to measure the error against
 
 
 @dataclass

@@ -39,6 +39,7 @@ class RunSettings:
     cfl: float
     dt_max: float
     dt_collapse: float
+    reference: str | None  # final_state.npz of a reference run
     precision: str
     device: str
 
@@ -321,6 +322,17 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
     return scene, d
 
 
+def _reference(key: str, path) -> str | None:
+    """The final_state.npz of a reference run, given the run's directory or the file."""
+    if path is None:
+        return None
+    p = os.path.join(str(path), "final_state.npz") if os.path.isdir(str(path)) else str(path)
+    if not os.path.isfile(p):
+        raise ConfigError(key, f"{path!r}: no final_state.npz there; accepted: the directory of a "
+                               "finished run (or its final_state.npz)")
+    return os.path.abspath(p)
+
+
 def make_run(node, key: str = "run") -> RunSettings:
     d = _plain(node)
     steps = _number(f"{key}.steps", d["steps"], int, ge=1, optional=True)
@@ -335,6 +347,7 @@ def make_run(node, key: str = "run") -> RunSettings:
         cfl=_number(f"{key}.cfl", d["cfl"], gt=0.0, le=1.0),
         dt_max=_number(f"{key}.dt_max", d["dt_max"], gt=0.0),
         dt_collapse=_number(f"{key}.dt_collapse", d["dt_collapse"], ge=0.0, le=1.0),
+        reference=_reference(f"{key}.reference", d.get("reference")),
         precision=precision, device=device)
 
 

@@ -2,6 +2,7 @@
 jobs by config hash, the report at the end of the sweep, the named experiments."""
 
 import json
+import os
 
 import pytest
 
@@ -22,7 +23,8 @@ def _sweep(tmp_path, launcher, extra=()):
     sweep = tmp_path / launcher
     args = ["-m", f"hydra/launcher={launcher}", "scheme=empm,tlmpm", "kernel=quadratic,linear", *TINY,
             f"hydra.sweep.dir={sweep}", *extra]
-    p = run_cli(args, cwd=ROOT, timeout=900)
+    env = {**os.environ, "RAY_DEDUP_LOGS": "0"}  # Ray would fold the workers' identical lines
+    p = run_cli(args, cwd=ROOT, timeout=900, env=env)
     assert p.returncode == 0, p.stderr[-3000:]
     return sweep, p
 
