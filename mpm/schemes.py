@@ -22,7 +22,12 @@ respect to the old reference: ``affine="keep"`` leaves it as it is (what
 classic APIC/MLS-MPM does when the reference moves every step, and what makes
 EMPM conserve angular momentum to round-off); ``affine="transform"``
 re-expresses it in the new reference, C <- C (F^sn)^-1, which loses far less
-angular momentum over the rare updates of A-ULMPM.
+angular momentum over the rare updates of A-ULMPM on solids. With the
+frequent updates of a fluid, transform is unstable: a lone splash particle
+whose affine field squeezes its reference cell to half (the stretch_min
+safeguard) gets C doubled at every update, every few steps, and the step
+collapses (seen on the droplet with the compact kernel); keep is the
+default there.
 """
 
 import math
@@ -35,8 +40,8 @@ AFFINE = ("keep", "transform")
 # safeguards (dJ_max, stretch_min): off for solids, whose large elastic
 # deformations the Lagrangian reference handles and an update would only
 # expose to numerical fracture; on for fluids, which resist no shear
-DEFAULT_SOLID = (0.5, 0.1, math.inf, 0.0)
-DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5)
+DEFAULT_SOLID = (0.5, 0.1, math.inf, 0.0, "transform")
+DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5, "keep")
 
 
 @dataclass
@@ -74,8 +79,9 @@ class AULMPM:
     """Adaptively updated Lagrangian MPM (A-ULMPM paper, eq. 33).
 
     Null parameters take the defaults of the scene's kind: with a fluid
-    present epsilon = eta = 0.01, dJ_max = 0.5, stretch_min = 0.5; solids only
-    epsilon = 0.5, eta = 0.1 (the paper's choices) and no safeguards.
+    present epsilon = eta = 0.01, dJ_max = 0.5, stretch_min = 0.5, affine
+    keep; solids only epsilon = 0.5, eta = 0.1 (the paper's choices), no
+    safeguards, affine transform.
     ``epsilon = inf`` never updates (TLMPM), ``epsilon = 0`` always (EMPM).
     """
 
@@ -86,14 +92,14 @@ class AULMPM:
                                        "epsilon) [-]", gt=0.0, inf=True)
     stretch_min: float | None = param(None, "also update when a reference cell is squeezed below "
                                             "this fraction of its width [-]", ge=0.0, lt=1.0)
-    affine: str = "transform"
+    affine: str | None = None  # keep | transform; None: the scene kind's default
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
         defaults = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
-        given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min)
-        eps, eta, dJ_max, stretch_min = (d if v is None else v for v, d in zip(given, defaults))
+        given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min, self.affine)
+        eps, eta, dJ_max, stretch_min, affine = (d if v is None else v for v, d in zip(given, defaults))
         return AULMPM(name=self.name, epsilon=eps, eta=eta, dJ_max=dJ_max,
-                      stretch_min=stretch_min, affine=self.affine)
+                      stretch_min=stretch_min, affine=affine)
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         if math.isinf(self.epsilon):

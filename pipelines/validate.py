@@ -142,7 +142,7 @@ def make_scheme(node, key: str = "scheme"):
     scheme = cls(**d)
     for fname, value, accepted in violations(scheme):
         raise ConfigError(f"{key}.{fname}", f"{value} out of range; accepted: {accepted}")
-    if "affine" in d:
+    if d.get("affine") is not None:
         _choice(f"{key}.affine", d["affine"], AFFINE)
     return scheme
 

@@ -241,3 +241,20 @@ def test_water_drop_on_an_elastic_block(scheme):
     x = state.x.numpy()
     assert gap > 0.25 * dx
     assert np.ptp(x[body == 1, 0]) > 0.5  # spread over the block's whole top (0.5 m)
+
+
+def test_aulmpm_affine_default_depends_on_the_scene_kind():
+    assert mpm.AULMPM().resolved(fluid_present=False).affine == "transform"
+    assert mpm.AULMPM().resolved(fluid_present=True).affine == "keep"
+    assert mpm.AULMPM(affine="transform").resolved(fluid_present=True).affine == "transform"
+
+
+def test_aulmpm_compact_droplet_is_stable(tmp_path):
+    """Regression: with affine=transform, a lone splash particle's C doubled at
+    each of its body's updates (every few steps) until the time step collapsed
+    at t = 0.456 s (64^2, compact kernel); the fluid default (keep) is stable."""
+    spec = spec_for(["scene=droplet_2d", "scheme=aulmpm", "kernel=compact", "scene.resolution=64",
+                     "run.duration=0.5", "log.every=0", "log.scalars=false"])
+    metrics = execute(spec, tmp_path)
+    assert metrics["status"] == "completed", metrics["reason"]
+    assert metrics["affine"] == "keep" and metrics["config_updates"]["total"] > 100
