@@ -80,13 +80,20 @@ def code_hash(root: Path = REPO) -> str:
 
 
 # keys that do not change a run's result: they are left out of its hash
-UNHASHED = {"run": ("force", "progress"), "log": ("progress",)}
+# (scale only feeds interpolations, whose resolved values are hashed)
+UNHASHED = {"run": ("force",), "log": ("progress",), "scale": None}
 
 
 def config_hash(config: dict, code: str) -> str:
-    """Content hash of a resolved config (a plain dict) and the code version:
-    two jobs with the same hash compute the same thing."""
-    cfg = {k: ({kk: vv for kk, vv in v.items() if kk not in UNHASHED.get(k, ())}
-               if isinstance(v, dict) else v) for k, v in config.items()}
-    text = json.dumps(cfg, sort_keys=True, default=str)
+    """Content hash of a resolved config (a plain dict), the code version and
+    the versions of the packages a run computes with: two jobs with the same
+    hash compute the same thing."""
+    cfg = {}
+    for k, v in config.items():
+        drop = UNHASHED.get(k, ())
+        if drop is None:
+            continue
+        cfg[k] = {kk: vv for kk, vv in v.items() if kk not in drop} if isinstance(v, dict) else v
+    versions = {k: v for k, v in package_versions().items() if k in ("python", "warp-lang", "numpy")}
+    text = json.dumps({"config": cfg, "versions": versions}, sort_keys=True, default=str)
     return hashlib.sha256(f"{code}\n{text}".encode()).hexdigest()[:16]

@@ -39,6 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from mpm import analytic
 from hydra.experimental.callback import Callback
 
 MAX_RECORDINGS = 40  # recordings read for the conservation plot
@@ -271,6 +273,7 @@ class Job:
                     with np.load(path, allow_pickle=False) as npz:
                         if all(k in npz for k in ("x", "v", "X0")):
                             state = {k: np.asarray(npz[k], dtype=np.float64) for k in ("x", "v", "X0")}
+                            state["time"] = float(npz["time"]) if "time" in npz else None
                 except Exception:
                     state = {}
             self._state = state
@@ -312,12 +315,13 @@ def load_jobs(sweep_dir: Path) -> tuple[list[Job], int]:
 
 def assign_labels(jobs: list[Job]) -> None:
     """Label each job "scheme · kernel · transfer" plus every override whose
-    value varies across the sweep (resolutions, run.*, log.* and hydra* aside)."""
+    value varies across the sweep (resolutions, run.force, log.* and hydra* aside:
+    a sweep over run.dt or run.precision compares different methods)."""
     values: dict[str, set] = defaultdict(set)
     keys = {k for j in jobs for k in j.overrides}
     for key in keys:
-        if key in COVERED_KEYS or key in RESOLUTION_KEYS or key.startswith(("run.", "log.", "hydra")) \
-                or key in ("run", "log"):
+        if key in COVERED_KEYS or key in RESOLUTION_KEYS or key.startswith(("log.", "hydra")) \
+                or key in ("run", "log", "run.force"):
             continue
         for j in jobs:
             values[key].add(j.overrides.get(key))
@@ -368,8 +372,8 @@ def _same_particles(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def rms_difference(a: np.ndarray, b: np.ndarray) -> float:
-    """sqrt(sum_p |a_p - b_p|^2 / n_p) for (n, dim) arrays."""
-    return float(np.sqrt(np.sum((a - b) ** 2) / max(len(a), 1)))
+    """sqrt(sum_p |a_p - b_p|^2 / n_p) for (n, dim) arrays (mpm.analytic.rms)."""
+    return analytic.rms(a, b)
 
 
 def assign_errors(jobs: list[Job]) -> None:
@@ -385,17 +389,24 @@ def assign_errors(jobs: list[Job]) -> None:
                 j.error_displacement, j.error_velocity, j.error_kind = d, v, kind
     groups: dict[tuple, list[Job]] = defaultdict(list)
     for j in jobs:
-        if not j.error_kind and j.completed and j.resolution is not None and j.final_state() is not None:
+        if not j.error_kind and j.resolution is not None:
             groups[(j.scene, j.label)].append(j)
     for members in groups.values():
+        # the reference is the finest grid of the method; if that run did not
+        # complete (or left no final state), the method has no self error
         ref = max(members, key=lambda j: j.resolution)
-        rs = ref.final_state()
+        rs = ref.final_state() if ref.completed else None
+        if rs is None:
+            continue
         for j in members:
-            s = j.final_state()
-            if j.resolution == ref.resolution or not _same_particles(s["X0"], rs["X0"]):
+            s = j.final_state() if j.completed else None
+            if s is None or j.resolution == ref.resolution or not _same_particles(s["X0"], rs["X0"]):
                 continue
             if s["x"].shape != rs["x"].shape or s["v"].shape != rs["v"].shape:
                 continue
+            if s["time"] is not None and rs["time"] is not None and \
+                    abs(s["time"] - rs["time"]) > 1e-9 * max(1.0, abs(rs["time"])):
+                continue  # not the same instant
             j.error_displacement = rms_difference(s["x"], rs["x"])
             j.error_velocity = rms_difference(s["v"], rs["v"])
             j.error_kind, j.error_ref = "self", ref.rel
@@ -631,7 +642,7 @@ def section_update_cost(jobs: list[Job], out: Path) -> list[str]:
                 "updates_per_1e4_steps", "update_time_ms", "config_updates", "reduction", "reduction_vs"],
                rows)
     lines = [f"## {title}", "",
-             "Configuration updates per 10^4 steps and their mean wall time [ms] per update step "
+             "Configuration updates per 10^4 steps and the mean wall time [ms] per step spent on them "
              "([update_cost.csv](update_cost.csv)); the reduction is EMPM's update time divided by "
              "A-ULMPM's for the same scene, kernel, transfer and resolution.", ""]
     lines += _md_table(["scene", "label", "cells", "updates / 1e4 steps", "update time [ms]"],

@@ -35,30 +35,34 @@ _config_errors: list[str] = []
 
 def run(cfg: DictConfig) -> dict:
     """Validate, run and return the metrics of one composed config. In a
-    sweep, a job whose config hash matches a finished job of the same sweep
-    directory returns that job's metrics instead, unless ``run.force``."""
+    sweep, a job whose directory already holds a finished run of the same
+    config hash returns that run's metrics instead, unless ``run.force``."""
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     try:
         spec = resolve(cfg)
-    except ConfigError as e:  # reported on one line by main()
+    except ConfigError as e:
+        # said here too: a launcher's worker process never reaches main()
+        print(f"error: {e}", file=sys.stderr)
         _config_errors.append(str(e))
-        _remove_if_empty(out_dir)
-        return {"status": "invalid", "reason": str(e)}
+        invalid = {"status": "invalid", "reason": str(e)}
+        if hc.mode == RunMode.MULTIRUN:  # Hydra still writes into a job's directory: say why it is empty
+            (out_dir / "metrics.json").write_text(json.dumps(invalid, indent=2) + "\n")
+        else:
+            _remove_if_empty(out_dir)
+        return invalid
     init_warp()  # a launcher's worker process did not pass through main()
     overrides = list(hc.overrides.task)
     choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
                                                       provenance.code_hash())}
     if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
-        done = finished_job(Path(hc.sweep.dir), identity["config_hash"])
+        done = finished(out_dir, identity["config_hash"])
         if done is not None:
-            if done[0] != out_dir.resolve():  # Hydra still writes here after the job returns
-                (out_dir / "skipped.txt").write_text(f"same config as {done[0]}\n")
-            print(f"skipped: the same config (hash {identity['config_hash']}) finished in {done[0]}; "
-                  "run.force=true runs it again", file=sys.stderr)
-            _last_status.append("completed")
-            return {**done[1], "skipped": str(done[0])}
+            print(f"skipped: {out_dir} already holds this config's {done['status']} run "
+                  f"(hash {identity['config_hash']}); run.force=true runs it again", file=sys.stderr)
+            _last_status.append(done["status"])
+            return done
     metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
                       identity=identity)
     _last_status.append(metrics["status"])
@@ -68,16 +72,20 @@ def run(cfg: DictConfig) -> dict:
     return metrics
 
 
-def finished_job(sweep_dir: Path, config_hash: str) -> tuple[Path, dict] | None:
-    """A job directory under ``sweep_dir`` whose metrics.json has this config
-    hash and status completed, with its metrics."""
-    for path in sorted(sweep_dir.glob("**/metrics.json")):
-        try:
-            metrics = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue
-        if metrics.get("config_hash") == config_hash and metrics.get("status") == "completed":
-            return path.parent.resolve(), metrics
+FINISHED = ("completed", "unstable")  # deterministic outcomes; failed and interrupted runs run again
+
+
+def finished(job_dir: Path, config_hash: str) -> dict | None:
+    """The metrics in ``job_dir`` if they belong to a finished run of this
+    config hash. Only the job's own directory counts: job numbers shift when a
+    sweep's parameter list changes, and another directory's run would then be
+    overwritten by the job that owns it."""
+    try:
+        metrics = json.loads((job_dir / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if metrics.get("config_hash") == config_hash and metrics.get("status") in FINISHED:
+        return metrics
     return None
 
 
@@ -105,10 +113,9 @@ def main() -> None:
         message = describe(e)
         if message is None:
             raise
+        print(f"error: {message}", file=sys.stderr)
         _config_errors.append(message)
-    if _config_errors:
-        for message in _config_errors:
-            print(f"error: {message}", file=sys.stderr)
+    if _config_errors:  # run() has printed its own
         sys.exit(EXIT_CONFIG)
     if _last_status and len(_last_status) == 1:
         sys.exit(EXIT_CODES.get(_last_status[0], 1))

@@ -465,6 +465,10 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         try:
             try:
                 run.finish()
+            except Exception as e:  # never leave a "completed" that did not complete
+                run.metrics["status"] = "failed"
+                run.metrics["reason"] = f"while finishing: {type(e).__name__}: {e}"
+                raise
             finally:
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 sink.close()

@@ -12,7 +12,7 @@ import pytest
 
 from omegaconf import OmegaConf
 
-from pipelines.report import ReportCallback, fit_slope, pareto_front, write_report
+from pipelines.report import ReportCallback, assign_labels, fit_slope, load_jobs, pareto_front, write_report
 
 ROOT = Path(__file__).resolve().parents[1]
 N_PARTICLES = 40
@@ -90,7 +90,7 @@ def sweep(tmp_path_factory) -> Path:
             dx = 1.0 / res
             dev = 0.0 if res == 32 else c * dx ** 2  # deviation from the finest job ~ dx^2
             _job(root, str(num), _metrics(scheme, "quadratic", res),
-                 [f"scheme={scheme}", f"scene.resolution={res}", "run.steps=100"],
+                 [f"scheme={scheme}", f"scene.resolution={res}"],
                  {"x": x_ref + dev * px, "v": v_ref + 3 * dev * pv, "X0": X0})
             num += 1
     # a second kernel (speed ratio), an unstable job, a duplicate of job 1
@@ -102,7 +102,7 @@ def sweep(tmp_path_factory) -> Path:
          ["scheme=aulmpm", "scheme.epsilon=0.1", "scene.resolution=64"])
     num += 1
     _job(root, str(num), _metrics("empm", "quadratic", 16, skipped=str(root / "1")),
-         ["scheme=empm", "scene.resolution=16", "run.steps=100"])
+         ["scheme=empm", "scene.resolution=16"])
     num += 1
     # a scene with an analytic solution, in a deeper directory
     for res, err in ((16, 4e-3), (32, 1e-3)):
@@ -211,3 +211,14 @@ def test_cli(sweep, tmp_path):
     missing = subprocess.run([sys.executable, "-m", "pipelines.report", str(tmp_path / "nope")],
                              cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert missing.returncode == 2 and "no such directory" in missing.stderr
+
+
+def test_run_settings_that_change_the_method_split_labels(tmp_path):
+    """A sweep over run.dt is two methods, not one convergence line; run.force is not."""
+    for i, (dt, force) in enumerate((("1e-4", "false"), ("2e-4", "true"))):
+        _job(tmp_path, str(i), _metrics("empm", "quadratic", 16, config_hash=f"h{i}"),
+             ["scheme=empm", f"run.dt={dt}", f"run.force={force}"])
+    jobs, _ = load_jobs(tmp_path)
+    assign_labels(jobs)
+    assert sorted(j.label for j in jobs) == ["empm · quadratic · mls · run.dt=1e-4",
+                                             "empm · quadratic · mls · run.dt=2e-4"]

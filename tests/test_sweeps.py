@@ -47,7 +47,7 @@ def test_tiny_sweep_runs_every_job_reports_and_skips_on_rerun(tmp_path, launcher
 
     stamps = {j: (j / "metrics.json").stat().st_mtime_ns for j in jobs}
     _, p = _sweep(tmp_path, launcher)  # the same sweep again: every job is skipped
-    assert p.stderr.count("skipped: the same config") == 4, p.stderr[-3000:]
+    assert p.stderr.count("already holds this config's completed run") == 4, p.stderr[-3000:]
     assert _jobs(sweep) == jobs
     assert all((j / "metrics.json").stat().st_mtime_ns == stamps[j] for j in jobs)
 
@@ -70,7 +70,7 @@ def test_config_hash_follows_the_computation_not_the_presentation():
         return provenance.config_hash(cfg, "code")
 
     base = h([])
-    assert h(["log.progress=false", "run.force=true"]) == base
+    assert h(["log.progress=false", "run.force=true", "scale=paper"]) == base
     assert h(["material.E=2e5"]) != base and h(["seed=1"]) != base
     assert provenance.config_hash(OmegaConf.to_container(compose_cfg([]), resolve=True), "other") != base
     assert len(provenance.code_hash()) == 16
@@ -114,3 +114,27 @@ def test_experiment_globs_pick_every_config_of_the_group_and_no_schema(name):
         override = OverridesParser.create().parse_override(f"{key}={value}")
         names = group_options(key) + [n.removesuffix(".yaml") for n in store.get(key, {})]
         assert sorted(override.value().filter(names)) == group_options(key)
+
+
+def test_changed_parameter_list_never_mixes_results(tmp_path):
+    """Job numbers shift when a value is inserted: each directory must end up
+    with its own job's result (only a job's own directory can be skipped)."""
+    sweep = tmp_path / "s"
+    base = ["-m", "hydra/launcher=basic", "scene=rotating_plate_2d", "scene.resolution=16", "log.every=0",
+            f"hydra.sweep.dir={sweep}"]
+    p = run_cli(base + ["run.steps=2,3"], cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-2000:]
+    p = run_cli(base + ["run.steps=2,4,3"], cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stderr.count("already holds this config's") == 1  # job 0 only
+    steps = {j.name: json.loads((j / "metrics.json").read_text())["steps"] for j in _jobs(sweep)}
+    assert steps == {"0": 2, "1": 4, "2": 3}
+
+
+def test_invalid_job_in_a_sweep_says_why_and_the_others_run(tmp_path):
+    sweep = tmp_path / "s"
+    p = run_cli(["-m", "scene=rotating_plate_2d", "scene.resolution=16", "run.steps=2", "log.every=0",
+                 "run.cfl=0.5,2", f"hydra.sweep.dir={sweep}"], cwd=ROOT)  # joblib workers
+    assert "error: run.cfl: 2.0 out of range" in p.stderr, p.stderr[-2000:]
+    status = {j.name: json.loads((j / "metrics.json").read_text())["status"] for j in _jobs(sweep)}
+    assert status == {"0": "completed", "1": "invalid"}
