@@ -138,3 +138,18 @@ def test_invalid_job_in_a_sweep_says_why_and_the_others_run(tmp_path):
     assert "error: run.cfl: 2.0 out of range" in p.stderr, p.stderr[-2000:]
     status = {j.name: json.loads((j / "metrics.json").read_text())["status"] for j in _jobs(sweep)}
     assert status == {"0": "completed", "1": "invalid"}
+
+
+@pytest.mark.parametrize("name", group_options("experiment"))
+@pytest.mark.parametrize("launcher", ["basic", "joblib", "submitit_local", "submitit_slurm", "ray"])
+def test_named_experiments_compose_with_every_launcher(name, launcher):
+    """An experiment must not set options of one launcher (they fail to compose
+    with the others)."""
+    from hydra import compose, initialize_config_dir
+
+    from helpers import CONF
+
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"+experiment={name}", f"hydra/launcher={launcher}"],
+                      return_hydra_config=True)
+    assert cfg.hydra.sweep.dir == f"multirun/{name}/default"
