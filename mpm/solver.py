@@ -192,7 +192,7 @@ class Solver:
         """Take the initial positions as every body's reference configuration
         and record the neighbour pairs of the fracture measure."""
         x = state.x.numpy()
-        self._X0 = x.astype(np.float64)  # initial positions: where the body force is evaluated
+        self.X0 = x.astype(np.float64)  # [m] initial positions (the body force is evaluated there)
         self._prepare_fracture(x)
         for b, (start, count) in enumerate(self.model.body_ranges):
             xb = x[start:start + count]
@@ -247,7 +247,7 @@ class Solver:
 
     def _apply_forcing(self, t0: float):
         """The manufactured solution's body force at the step's start time t0 [s]."""
-        b = self.forcing.body_force(self._X0, t0)
+        b = self.forcing.body_force(self.X0, t0)
         self.body_force.assign(b.astype(state_dtype(self.model)))
 
     def _rasterize(self, state: State, dt):

@@ -371,11 +371,6 @@ def _same_particles(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.all(np.abs(a - b) <= 1e-12 * max(scale, np.finfo(float).tiny)))
 
 
-def rms_difference(a: np.ndarray, b: np.ndarray) -> float:
-    """sqrt(sum_p |a_p - b_p|^2 / n_p) for (n, dim) arrays (mpm.analytic.rms)."""
-    return analytic.rms(a, b)
-
-
 def assign_errors(jobs: list[Job]) -> None:
     """Analytic errors from metrics.json; for the other completed jobs with a
     final state, the self-convergence error against the finest job of the
@@ -407,8 +402,8 @@ def assign_errors(jobs: list[Job]) -> None:
             if s["time"] is not None and rs["time"] is not None and \
                     abs(s["time"] - rs["time"]) > 1e-9 * max(1.0, abs(rs["time"])):
                 continue  # not the same instant
-            j.error_displacement = rms_difference(s["x"], rs["x"])
-            j.error_velocity = rms_difference(s["v"], rs["v"])
+            j.error_displacement = analytic.rms(s["x"], rs["x"])
+            j.error_velocity = analytic.rms(s["v"], rs["v"])
             j.error_kind, j.error_ref = "self", ref.rel
 
 

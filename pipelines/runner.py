@@ -149,7 +149,7 @@ class Run:
                             precision=run.precision)
         self.metrics["compile_time_s"] = self.solver.load()
         self.solver.prepare(self.state)
-        self.X0 = self.state.x.numpy().astype(np.float64)  # initial positions
+        self.X0 = self.solver.X0  # initial positions [m], float64
         self.solution = spec.scene.solution
         self.error_max = {"displacement": 0.0, "velocity": 0.0}
         self.names = self.solver.diagnostic_names()
