@@ -85,6 +85,11 @@ class Model:
     def domain(self) -> tuple[float, ...]:
         return tuple(c * self.dx for c in self.cells)
 
+    @property
+    def plastic(self) -> bool:
+        """Does a body have a plastic model (history variables, return mapping)?"""
+        return any(b.material.plastic for b in self.scene.bodies)
+
     def wave_speed(self) -> float:
         """Fastest elastic/acoustic wave speed of all bodies at rest [m/s]."""
         return max(b.material.wave_speed() for b in self.scene.bodies)
@@ -96,7 +101,9 @@ class State:
 
     ``X`` are the reference positions (at the last configuration update of the
     particle's body), ``F0s`` the deformation gradient at that update and
-    ``Fsn`` the deformation since then, so F = Fsn F0s. The stencil cache
+    ``Fsn`` the deformation since then, so F = Fsn F0s; for plastic models
+    F0s keeps the elastic part, F_E = Fsn F0s, and ``history`` the plastic
+    variables (mpm.materials.plastic). The stencil cache
     (first node, local coordinate, weights) belongs to the reference
     configuration and is recomputed with it (mpm.configuration).
     """
@@ -109,9 +116,11 @@ class State:
     X: wp.array  # reference positions [m]
     dJ: wp.array  # |det Fsn - 1| after the last step (written when recorded)
     stencils: object  # the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)
+    history: wp.array  # history variables of plastic models (one unused entry without them)
 
     def numpy(self) -> dict[str, np.ndarray]:
-        out = {k: getattr(self, k).numpy().copy() for k in ("x", "v", "C", "F0s", "Fsn", "X", "dJ")}
+        out = {k: getattr(self, k).numpy().copy()
+               for k in ("x", "v", "C", "F0s", "Fsn", "X", "dJ", "history")}
         out["F"] = out["Fsn"] @ out["F0s"]
         return out
 
@@ -197,7 +206,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
         samples.append((x, ppc))
 
-    xs, vs, Cs, ms, Vs, ids = [], [], [], [], [], []
+    xs, vs, Cs, ms, Vs, ids, hs = [], [], [], [], [], [], []
     body_ranges = [None] * len(scene.bodies)
     groups: list[MaterialGroup] = []
     start = 0
@@ -211,6 +220,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
         xs.append(x), vs.append(v), Cs.append(C)
         Vs.append(np.full(n, vol)), ms.append(np.full(n, vol * b.material.rho))
         ids.append(np.full(n, i, np.int32))
+        hs.append(np.tile(b.material.initial_history() if b.material.plastic else (0.0, 0.0), (n, 1)))
         body_ranges[i] = (start, n)
         cls = type(b.material)
         if groups and groups[-1].cls is cls:
@@ -253,5 +263,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             X=wp.array(x.astype(S), dtype=t.vec),
             dJ=wp.zeros(n, dtype=t.scalar),
             stencils=stencil_cache(t, kernel, n),
+            history=wp.array(np.concatenate(hs).astype(S) if model.plastic else np.zeros((1, 2), S),
+                             dtype=t.history),
         )
     return model, state

@@ -22,7 +22,6 @@ from .fracture import fragments, make_fracture, neighbour_pairs
 from .contact import make_contact
 from .grid import make_boundary, make_boundary_data, make_grid_update, region_types
 from .layout import GridLayout
-from .materials import Fluid
 from .model import Model, State
 from .schemes import AULMPM, EMPM
 from .timestep import cfl_dt
@@ -51,6 +50,7 @@ class StepReport:
     min_J: np.ndarray  # per body: the smallest det F (compression, for the time step)
     min_stretch: np.ndarray  # per body: the smallest singular value of F^sn (for the time step)
     max_rate: np.ndarray  # per body: the largest velocity gradient |L| [1/s] (for the time step)
+    stiffening: np.ndarray  # per body: the largest growth of the squared wave speed (0: none)
     box_lo: np.ndarray  # per body: bounding box of the new positions [m] (the next reference grids)
     box_hi: np.ndarray
     updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
@@ -75,7 +75,7 @@ class Solver:
         self.model = model
         scheme = scheme or EMPM()
         if isinstance(scheme, AULMPM):
-            scheme = scheme.resolved(any(isinstance(b.material, Fluid) for b in model.scene.bodies))
+            scheme = scheme.resolved(any(b.material.flows for b in model.scene.bodies))
         self.scheme = scheme
         self.options = options or SolverOptions()
         t, k, dev = model.types, model.kernel, model.device
@@ -104,7 +104,8 @@ class Solver:
         self.regions = len(model.scene.regions) > 0
         solution = model.scene.solution
         self.forcing = solution if getattr(solution, "has_body_force", False) else None
-        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None), g)
+        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
+                               lagrangian=not isinstance(scheme, EMPM)), g)
                      for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
@@ -250,17 +251,18 @@ class Solver:
         b = self.forcing.body_force(self.X0, t0)
         self.body_force.assign(b.astype(state_dtype(self.model)))
 
-    def _rasterize(self, state: State, dt):
-        """P2G: mass, momentum with the stress impulse, and node positions."""
+    def _rasterize(self, state: State, dt, write: bool = True):
+        """P2G: plastic return mapping (stored when ``write``), mass, momentum
+        with the stress impulse, and node positions."""
         m = self.model
         for kernel, g in self._p2g:
             wp.launch(kernel, g.count, device=m.device, inputs=[
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
-                state.x, state.v, state.C, state.F0s, state.Fsn, self.body_force,
+                state.x, state.v, state.C, state.F0s, state.Fsn, self.body_force, state.history,
                 state.stencils,
-                self._dx, self._K, dt, g.start,
+                self._dx, self._K, dt, g.start, int(write),
                 self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
-                self.energy])
+                self.energy, self.status, self.n_bodies])
 
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
@@ -343,12 +345,14 @@ class Solver:
         m = self.model
         dts = []
         for b, body in enumerate(m.scene.bodies):
-            J, s = 1.0, 1.0
+            J, s, stiffening = 1.0, 1.0, 1.0
             if report is not None:
                 J = float(report.min_J[b]) if np.isfinite(report.min_J[b]) else 1.0
                 s = float(report.min_stretch[b]) if np.isfinite(report.min_stretch[b]) else 1.0
+                if report.stiffening[b] > 0 and np.isfinite(report.stiffening[b]):
+                    stiffening = float(report.stiffening[b])
             speed = report.max_speed if report is not None else max_speed
-            c = body.material.wave_speed(min(max(J, 1e-3), 1.0))
+            c = body.material.wave_speed(min(max(J, 1e-3), 1.0)) * np.sqrt(stiffening)
             dt = cfl_dt(m.dx * min(max(s, 1e-3), 1.0), c, speed, cfl,
                         body.material.kinematic_viscosity(), m.dim)
             if report is not None and report.max_rate[b] > 0:
@@ -368,7 +372,8 @@ class Solver:
             max_speed=float(np.sqrt(s[STATUS_MAX_V2])), nonfinite=int(s[STATUS_NONFINITE]),
             outside=int(s[STATUS_OUTSIDE]), marked=field_[0].astype(np.int64),
             max_dJ=field_[1].copy(), min_J=field_[2].copy(), min_stretch=np.sqrt(field_[3]),
-            max_rate=np.sqrt(field_[4]), box_lo=box[0].copy(), box_hi=box[1].copy())
+            max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
+            box_hi=box[1].copy())
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model
@@ -423,7 +428,7 @@ class Solver:
         i = self.diagnostic_names().index("elastic_energy")
         if elastic:
             self._clear()
-            self._rasterize(state, m.types.scalar(0.0))
+            self._rasterize(state, m.types.scalar(0.0), write=False)
             out[i] = self.step_energy()
         else:
             out[i] = np.nan

@@ -31,6 +31,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
+from .materials.plastic import make_plastic_update
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
@@ -41,7 +42,9 @@ pic: no affine term, force and F from the kernel gradient."""
 
 # layout of the per-step status buffer (float64): see Solver.check
 STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
-STATUS_PER_BODY = 5  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2
+STATUS_PER_BODY = 6  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2,
+#                      largest stiffening factor (P2G, plastic models that harden)
+STATUS_STIFFENING = 5
 
 
 @functools.cache
@@ -68,23 +71,37 @@ def make_min_stretch2(t: Types):
 
 @functools.cache
 def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-             with_body_force: bool = False):
+             with_body_force: bool = False, lagrangian: bool = True):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
-    force b [m/s^2] (a manufactured solution's) to the node momenta."""
+    force b [m/s^2] (a manufactured solution's) to the node momenta.
+
+    A plastic model's return mapping runs first (mpm.materials.plastic): the
+    trial F_E = F^sn F^0s is returned, the stress is that of the returned F_E,
+    and, when ``write`` is set (a step, not a stress evaluation between
+    steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored;
+    ``lagrangian`` False (EMPM) knows F^sn = I here and stores F_E as it is.
+    A model that hardens records its largest stiffening factor per body in
+    ``status`` (for the time step)."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
-    stress_energy = material.stress_energy(t)
     Cache = make_stencil_cache(t, kernel)
     needs_L = material.needs_velocity_gradient
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
     cached = make_cached(t, kernel, not mls)
+    plastic = material.plastic
+    plastic_update = stiffening = stress_energy = None
+    if plastic:
+        plastic_update = make_plastic_update(t, material)
+        stiffening = material.stiffening(t) if material.stiffening is not None else None
+    else:
+        stress_energy = material.stress_energy(t)
 
     @wp.kernel(module="unique")
     def p2g(
@@ -101,6 +118,7 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         F0s: wp.array(dtype=t.mat),
         Fsn: wp.array(dtype=t.mat),
         body_force: wp.array(dtype=t.vec),
+        history: wp.array(dtype=t.history),  # plastic models: in/out, with F0s (``write``)
         # Stencil cache:
         cache: Cache,
         # Step:
@@ -108,6 +126,7 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         K: S,
         dt: S,
         start: int,
+        write: int,
         # Grid out:
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
@@ -117,6 +136,8 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         grid_kin_id: wp.array(dtype=wp.int32),
         # Diagnostics out:
         energy: wp.array(dtype=f64),
+        status: wp.array(dtype=f64),
+        n_bodies: int,
     ):
         p = wp.tid() + start
         b = body[p]
@@ -125,10 +146,25 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
         Cp = C[p]
         Fs = Fsn[p]
         F0 = F0s[p]
-        L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
-        if wp.static(needs_L):
-            L = Cp * wp.inverse(Fs)
-        P, psi = stress_energy(Fs * F0, L, body_params[b])
+        P = t.mat()
+        psi = S(0.0)
+        if wp.static(plastic):
+            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
+            if wp.static(lagrangian):
+                F0 = wp.inverse(Fs) * FE
+            else:
+                F0 = FE
+            if write != 0:
+                F0s[p] = F0
+                history[p] = h
+            if wp.static(stiffening is not None):
+                wp.atomic_max(status, STATUS_HEADER + STATUS_STIFFENING * n_bodies + b,
+                              f64(stiffening(body_params[b], h)))
+        else:
+            L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
+            if wp.static(needs_L):
+                L = Cp * wp.inverse(Fs)
+            P, psi = stress_energy(Fs * F0, L, body_params[b])
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
         mv = m * v[p]

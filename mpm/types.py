@@ -15,6 +15,8 @@ PRECISIONS = ("float32", "float64")
 
 # Length of the per-body material parameter vector (see mpm.materials).
 N_MATERIAL_PARAMS = 8
+# Per-particle history variables of plastic models (see mpm.materials.plastic).
+N_HISTORY = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,6 +30,7 @@ class Types:
     mat: type  # F, C, stress
     ivec: type  # grid indices
     params: type  # per-body material parameters
+    history: type  # per-particle history variables of plastic models
 
     def __repr__(self) -> str:
         return f"Types({self.dim}D, {self.precision})"
@@ -48,4 +51,5 @@ def make_types(dim: int, precision: str) -> Types:
         mat=wp.types.matrix((dim, dim), scalar),
         ivec=wp.types.vector(dim, wp.int32),
         params=wp.types.vector(N_MATERIAL_PARAMS, scalar),
+        history=wp.types.vector(N_HISTORY, scalar),
     )

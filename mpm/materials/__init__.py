@@ -1,4 +1,10 @@
-"""Constitutive models, one module each; :data:`MATERIALS` maps names to classes."""
+"""Constitutive models, one module each; :data:`MATERIALS` maps names to classes.
+
+Elastic: ``fixed_corotated``, ``neo_hookean``. Fluids: ``viscous``
+(Newtonian, weakly compressible) and ``fluid`` (the same, inviscid by
+default). Plastic (mpm.materials.plastic, a return mapping every step):
+``snow``, ``sand``, ``von_mises``, ``nacc``, ``viscoplastic``.
+"""
 
 from __future__ import annotations
 
@@ -6,11 +12,18 @@ import dataclasses
 
 from .base import Material, lame
 from .fixed_corotated import FixedCorotated
-from .fluid import Fluid
+from .nacc import NACC
 from .neo_hookean import NeoHookean
+from .plastic import Plastic
+from .sand import Sand
+from .snow import Snow
+from .viscoplastic import Viscoplastic
+from .viscous import Fluid, Viscous
+from .von_mises import VonMises
 
 MATERIALS: dict[str, type[Material]] = {
-    cls.name: cls for cls in (FixedCorotated, NeoHookean, Fluid)
+    cls.name: cls for cls in (FixedCorotated, NeoHookean, Fluid, Viscous, Snow, Sand, VonMises,
+                              NACC, Viscoplastic)
 }
 
 
@@ -19,5 +32,5 @@ def material_fields(model: str) -> list[str]:
     return [f.name for f in dataclasses.fields(MATERIALS[model])]
 
 
-__all__ = ["MATERIALS", "Material", "FixedCorotated", "NeoHookean", "Fluid", "lame",
-           "material_fields"]
+__all__ = ["MATERIALS", "Material", "Plastic", "FixedCorotated", "NeoHookean", "Fluid", "Viscous",
+           "Snow", "Sand", "VonMises", "NACC", "Viscoplastic", "lame", "material_fields"]

@@ -1,8 +1,9 @@
 """What every material provides to the solver.
 
 A material is a plain dataclass of physical parameters (checked ranges, SI
-units) plus factories of Warp functions specialised for a :class:`Types`:
+units) plus factories of Warp functions specialised for a :class:`Types`.
 
+Elastic and fluid models give
 * ``stress_energy(F, L, params) -> (P, psi)``: first Piola-Kirchhoff stress
   ``P`` [Pa] of the deformation gradient ``F`` (w.r.t. the rest state), given
   the velocity gradient ``L`` in current coordinates [1/s] (used by viscous
@@ -12,6 +13,11 @@ units) plus factories of Warp functions specialised for a :class:`Types`:
 * ``project(F, params) -> F`` (optional): applied when the reference
   configuration is updated (every step for the Eulerian scheme), e.g. a fluid
   keeps only the volume change of ``F``.
+
+Plastic models (:class:`mpm.materials.plastic.Plastic`) instead give a return
+mapping and a stress in principal stretches, run every step by P2G on a
+per-particle plastic state; see that module for how the state relates to the
+reference configuration.
 
 ``params`` is the per-body vector returned by :meth:`Material.packed`, so
 bodies of one model share compiled code and a parameter sweep never
@@ -46,8 +52,12 @@ class Material:
     name: ClassVar[str] = ""
     stress_energy: ClassVar[Callable[[Types], Callable]]
     project: ClassVar[Callable[[Types], Callable] | None] = None
+    plastic: ClassVar[bool] = False  # a return mapping runs every step (mpm.materials.plastic)
     needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
     stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?
+    flows: ClassVar[bool] = False
+    """does the material flow without bound (fluids, plastic solids)? A-ULMPM
+    then takes its defaults for fluid-like scenes (mpm.schemes)"""
 
     def __post_init__(self):
         if not self.model:
@@ -70,6 +80,11 @@ class Material:
     def kinematic_viscosity(self) -> float:
         """Kinematic viscosity [m^2/s] (for the diffusive time-step limit)."""
         return 0.0
+
+    def problems(self) -> list[tuple[str, str]]:
+        """Constraints between parameters that single ranges cannot state:
+        ``(field, message)`` pairs (empty when consistent)."""
+        return []
 
 
 def elastic_wave_speed(E: float, nu: float, rho: float) -> float:

@@ -12,7 +12,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import Material, elastic_wave_speed, lame
-from .polar import make_rotation
+from .decompositions import make_rotation
 
 
 @functools.cache

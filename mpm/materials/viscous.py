@@ -1,9 +1,14 @@
-"""Weakly compressible fluid with a J-based Tait pressure and optional
-Newtonian viscosity.
+"""Newtonian viscous fluid, weakly compressible: a J-based Tait pressure and
+the viscous stress of the true velocity gradient.
 
-p = K (J^-gamma - 1),  sigma = -p I + mu_v (L + L^T),  P = J sigma F^-T,
+p = K (J^-gamma - 1),  sigma = -p I + 2 eta sym(L),  P = J sigma F^-T,
 psi(J) = K (J^(1-gamma) / (gamma - 1) + J - gamma / (gamma - 1))
-(so that p = -dpsi/dJ and psi(1) = 0; viscosity stores no energy).
+(so that p = -dpsi/dJ and psi(1) = 0; viscosity stores no energy), with
+eta the dynamic viscosity [Pa s] and L = C (F^sn)^-1 the velocity gradient in
+current coordinates [1/s]: the viscous stress is a rate, not an elastic
+stress of a one-step deformation, so its effect does not depend on dt (a
+shear wave decays at the rate eta k^2 / rho: tested). The explicit step obeys
+dt <= cfl dx^2 / (2 d eta / rho) (mpm.timestep).
 
 The deformation gradient keeps only its volume change: on every update of the
 reference configuration F <- J^(1/d) I, so shear never accumulates.
@@ -57,18 +62,19 @@ def _project(t: Types):
 
 
 @dataclass
-class Fluid(Material):
-    """Weakly compressible (Tait-like) fluid."""
+class Viscous(Material):
+    """Weakly compressible Newtonian viscous fluid."""
 
-    name = "fluid"
+    name = "viscous"
     stress_energy = staticmethod(_stress_energy)
     project = staticmethod(_project)
     needs_velocity_gradient = True
     stiffens = True
+    flows = True
 
     K: float = param(2.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]", gt=0.0)
     gamma: float = param(7.0, "Tait exponent gamma [-]", gt=1.0)
-    viscosity: float = param(0.0, "dynamic viscosity mu_v [Pa s]", ge=0.0)
+    viscosity: float = param(1.0, "dynamic viscosity eta [Pa s]", ge=0.0)
 
     def packed(self):
         return (self.K, self.gamma, self.viscosity)
@@ -80,3 +86,13 @@ class Fluid(Material):
 
     def kinematic_viscosity(self):
         return self.viscosity / self.rho
+
+
+@dataclass
+class Fluid(Viscous):
+    """The weakly compressible fluid without viscosity by default (``viscous``
+    with eta = 0), kept under its own name."""
+
+    name = "fluid"
+
+    viscosity: float = param(0.0, "dynamic viscosity eta [Pa s]", ge=0.0)
