@@ -12,7 +12,9 @@ conditions, evaluated at the node's current position q_i:
   are free), open faces do nothing;
 * kinematic regions (mpm.scene.KinematicRegion) set the velocity of every
   node that draws at least half its mass from a region's particles, while the
-  region is active: v_i = u + omega x (q_i - c(t)).
+  region is active: v_i = u + G (q_i - c(t)), with G the region's velocity
+  gradient (the skew matrix of its angular velocity omega, so that
+  G r = omega x r, plus any prescribed ``velocity_gradient``).
 """
 
 import functools
@@ -62,14 +64,12 @@ def make_walls(t: Types):
 
 @functools.cache
 def make_kinematic(t: Types):
-    """``kinematic(v, q, m, kin_m, kin_id, time, u, omega, center, window) -> v``."""
+    """``kinematic(v, q, m, kin_m, kin_id, time, u, gradient, center, window) -> v``."""
     S = t.scalar
-    vec = t.vec
-    w3 = wp.types.vector(3, S)
 
     @wp.func
     def kinematic(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S,
-                  u: wp.array(dtype=t.vec), omega: wp.array(dtype=w3),
+                  u: wp.array(dtype=t.vec), gradient: wp.array(dtype=t.mat),
                   center: wp.array(dtype=t.vec), window: wp.array(dtype=wp.types.vector(2, S))):
         if kin_id == 0 or kin_m < S(0.5) * m:
             return v
@@ -77,25 +77,20 @@ def make_kinematic(t: Types):
         if time < window[r][0] or time >= window[r][1]:
             return v
         c = center[r] + (time - window[r][0]) * u[r]
-        d = q - c
-        w = omega[r]
-        if wp.static(t.dim == 2):
-            return u[r] + vec(-w[2] * d[1], w[2] * d[0])
-        else:
-            return u[r] + wp.cross(vec(w[0], w[1], w[2]), d)
+        return u[r] + gradient[r] * (q - c)
 
     return kinematic
 
 
 def region_types(t: Types):
-    """Types of the per-region tables: velocity, angular velocity, centre, (start, end)."""
-    return t.vec, wp.types.vector(3, t.scalar), t.vec, wp.types.vector(2, t.scalar)
+    """Types of the per-region tables: velocity, velocity gradient, centre, (start, end)."""
+    return t.vec, t.mat, t.vec, wp.types.vector(2, t.scalar)
 
 
 @functools.cache
 def make_boundary_data(t: Types):
     """What the boundary conditions read: the walls and the kinematic regions."""
-    U, W3, Cc, Win = region_types(t)
+    U, G, Cc, Win = region_types(t)
 
     @wp.struct
     class BoundaryData:
@@ -104,7 +99,7 @@ def make_boundary_data(t: Types):
         wall_lo: t.ivec  # wall type of the low face per axis (mpm.scene.WALL_TYPES)
         wall_hi: t.ivec
         region_u: wp.array(dtype=U)  # per region: velocity [m/s]
-        region_omega: wp.array(dtype=W3)  # angular velocity [rad/s]
+        region_gradient: wp.array(dtype=G)  # velocity gradient [1/s]
         region_center: wp.array(dtype=Cc)  # centre at start [m]
         region_window: wp.array(dtype=Win)  # (start, end) [s]
 
@@ -123,7 +118,7 @@ def make_conditions(t: Types, with_regions: bool):
     def conditions(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S, data: Data):
         v = walls(v, q, data.domain, data.band, data.wall_lo, data.wall_hi)
         if wp.static(with_regions):
-            v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_omega,
+            v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
                           data.region_center, data.region_window)
         return v
 

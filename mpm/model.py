@@ -17,7 +17,7 @@ from .materials import Material
 from .params import violations
 from .sampling import sample_shape
 from .stencil import stencil_cache
-from .scene import WALL_TYPES, Scene
+from .scene import WALL_TYPES, Scene, skew
 from .types import Types, make_types
 
 
@@ -174,14 +174,9 @@ def _rigid_velocity(body, x, dim):
     C = np.zeros((len(x), dim, dim))
     if body.velocity is not None:
         v += np.asarray(body.velocity, float)
-    w = body.angular_velocity
-    if w is not None:
+    if body.angular_velocity is not None:
         r = x - np.asarray(body.shape.center, float)
-        if dim == 2:
-            W = np.array([[0.0, -float(w)], [float(w), 0.0]])
-        else:
-            wx, wy, wz = (float(c) for c in w)
-            W = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+        W = skew(body.angular_velocity, dim)
         v += r @ W.T
         C[:] = W  # exact velocity gradient of the rigid rotation
     return v, C

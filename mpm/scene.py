@@ -102,15 +102,26 @@ class Compound:
 Shape = Union[Box, Sphere, Cylinder, Compound]
 
 
+def skew(w, dim: int) -> np.ndarray:
+    """The matrix W with W r = w x r for an angular velocity w [rad/s] (a
+    scalar in 2D, a 3-vector in 3D)."""
+    if dim == 2:
+        return np.array([[0.0, -float(w)], [float(w), 0.0]])
+    wx, wy, wz = (float(c) for c in w)
+    return np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])
+
+
 @dataclass
 class KinematicRegion:
     """Particles of body ``body`` whose initial position lies inside ``select``
-    move rigidly while ``start <= t < end``:
-        v(q, t) = velocity + angular_velocity x (q - c(t)),
+    move with a prescribed velocity field while ``start <= t < end``:
+        v(q, t) = velocity + angular_velocity x (q - c(t)) + G (q - c(t)),
         c(t) = center + velocity (t - start),
     imposed as the velocity of every grid node that draws at least half its
     mass from them (mpm.grid). ``angular_velocity`` [rad/s] is a scalar in 2D,
-    a vector in 3D; ``center`` defaults to the centre of ``select``."""
+    a vector in 3D; ``velocity_gradient`` G [1/s] (d x d, in current
+    coordinates) adds a homogeneous stretch or shear (a material test at
+    prescribed deformation); ``center`` defaults to the centre of ``select``."""
 
     body: int
     select: Shape
@@ -120,6 +131,16 @@ class KinematicRegion:
     center: Sequence[float] | None = None
     start: float = 0.0
     end: float = float("inf")
+    velocity_gradient: Sequence[Sequence[float]] | None = None
+
+    def gradient(self, dim: int) -> np.ndarray:
+        """The velocity gradient of the prescribed field [1/s]: the skew matrix
+        of the angular velocity plus ``velocity_gradient``."""
+        G = np.zeros((dim, dim)) if self.velocity_gradient is None else \
+            np.array(self.velocity_gradient, float).reshape(dim, dim)
+        if self.angular_velocity is not None:
+            G = G + skew(self.angular_velocity, dim)
+        return G
 
 
 @dataclass

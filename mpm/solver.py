@@ -154,25 +154,23 @@ class Solver:
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
 
     def _make_boundary_data(self):
-        """Walls and kinematic regions (velocity, angular velocity with 3
-        components, centre, (start, end) per region) for the boundary kernels."""
+        """Walls and kinematic regions (velocity, velocity gradient, centre,
+        (start, end) per region) for the boundary kernels."""
         m = self.model
         t, d = m.types, m.dim
-        rows = []
-        for reg in m.scene.regions:
-            w = reg.angular_velocity
-            w3 = (0.0, 0.0, float(w or 0.0)) if d == 2 else tuple(w or (0.0, 0.0, 0.0))
-            c = reg.center if reg.center is not None else 0.5 * np.add(*reg.select.bounds())
-            rows.append((tuple(reg.velocity or (0.0,) * d), w3, tuple(c), (reg.start, reg.end)))
+        rows = [(tuple(reg.velocity or (0.0,) * d), reg.gradient(d),
+                 tuple(reg.center if reg.center is not None else 0.5 * np.add(*reg.select.bounds())),
+                 (reg.start, reg.end)) for reg in m.scene.regions]
         if not rows:  # placeholders: the kernels compile the regions out
-            rows = [((0.0,) * d, (0.0,) * 3, (0.0,) * d, (0.0, 0.0))]
+            rows = [((0.0,) * d, np.zeros((d, d)), (0.0,) * d, (0.0, 0.0))]
         data = make_boundary_data(t)()
         data.domain = t.vec(*m.domain)
         data.band = t.scalar((m.scene.wall_cells - 0.5) * m.dx)
         data.wall_lo = t.ivec(*m.wall_codes[0])
         data.wall_hi = t.ivec(*m.wall_codes[1])
-        tables = [wp.array([r[k] for r in rows], dtype=T) for k, T in enumerate(region_types(t))]
-        data.region_u, data.region_omega, data.region_center, data.region_window = tables
+        tables = [wp.array(np.array([r[k] for r in rows], dtype=state_dtype(m)), dtype=T)
+                  for k, T in enumerate(region_types(t))]
+        data.region_u, data.region_gradient, data.region_center, data.region_window = tables
         return data
 
     # ------------------------------------------------------------------ setup

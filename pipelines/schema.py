@@ -68,15 +68,17 @@ class BodyConfig:
 @dataclass
 class RegionConfig:
     """A kinematic boundary region: the particles of ``body`` (index or name)
-    whose initial position is inside ``select`` move rigidly with ``velocity``
-    [m/s] and ``angular_velocity`` [rad/s] about ``center`` (default: the
-    centre of ``select``, moving with the velocity) while start <= t < end [s]."""
+    whose initial position is inside ``select`` move with ``velocity`` [m/s],
+    ``angular_velocity`` [rad/s] and ``velocity_gradient`` [1/s] (d x d rows:
+    a homogeneous stretch or shear) about ``center`` (default: the centre of
+    ``select``, moving with the velocity) while start <= t < end [s]."""
 
     name: str = ""
     body: Any = 0
     select: ShapeConfig = field(default_factory=ShapeConfig)
     velocity: Optional[List[float]] = None
     angular_velocity: Optional[Any] = None
+    velocity_gradient: Optional[Any] = None
     center: Optional[List[float]] = None
     start: float = 0.0
     end: Optional[float] = None  # null: forever

@@ -199,6 +199,15 @@ def make_shape(node, key: str, dim: int):
                         inner)
 
 
+def _matrix(key: str, value, dim: int):
+    """A d x d matrix given as d rows, or None."""
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple)) or len(value) != dim:
+        raise ConfigError(key, f"{value!r}; accepted: {dim} rows of {dim} numbers")
+    return tuple(_vector(f"{key}[{i}]", row, dim) for i, row in enumerate(value))
+
+
 def _angular(key: str, w, dim: int):
     if w is None:
         return None
@@ -219,6 +228,7 @@ def make_region(d: dict, key: str, dim: int, body_names: list[str]) -> mpm.Kinem
         body=body, select=make_shape(d["select"], f"{key}.select", dim), name=d.get("name") or "",
         velocity=None if d.get("velocity") is None else _vector(f"{key}.velocity", d["velocity"], dim),
         angular_velocity=_angular(f"{key}.angular_velocity", d.get("angular_velocity"), dim),
+        velocity_gradient=_matrix(f"{key}.velocity_gradient", d.get("velocity_gradient"), dim),
         center=None if d.get("center") is None else _vector(f"{key}.center", d["center"], dim),
         start=start, end=float("inf") if end is None else end)
 

@@ -120,3 +120,39 @@ def test_fluid_projection_keeps_volume_change():
 def test_lame_parameters():
     mu, lam = mpm.materials.lame(1e5, 0.25)
     assert mu == pytest.approx(4e4) and lam == pytest.approx(4e4)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_svd_with_proper_rotations_also_for_repeated_singular_values(dim):
+    """F = U diag(sigma) V^T with det U = det V = 1, sigma descending and the
+    sign of an inversion on the last one, for rotations, reflections and
+    repeated singular values (where wp.svd2 alone is wrong)."""
+    from mpm.materials.decompositions import make_svd
+
+    t = make_types(dim, "float64")
+    svd = make_svd(t)
+
+    @wp.kernel(module="unique")
+    def run(F: wp.array(dtype=t.mat), U: wp.array(dtype=t.mat), s: wp.array(dtype=t.vec),
+            V: wp.array(dtype=t.mat)):
+        i = wp.tid()
+        u, sg, v = svd(F[i])
+        U[i] = u
+        s[i] = sg
+        V[i] = v
+
+    rng = np.random.default_rng(5)
+    Fs = [np.eye(dim), -np.eye(dim), np.eye(dim)[::-1], np.diag([1.0] * (dim - 1) + [-0.5])]
+    for _ in range(20):
+        Q, _ = np.linalg.qr(rng.standard_normal((dim, dim)))
+        Fs += [Q, 1.3 * Q, Q @ np.diag([1.0] * (dim - 1) + [0.7]), rng.standard_normal((dim, dim))]
+    F = np.array(Fs)
+    U, s, V = (wp.zeros(len(F), dtype=T) for T in (t.mat, t.vec, t.mat))
+    wp.launch(run, len(F), inputs=[wp.array(F, dtype=t.mat), U, s, V])
+    U, s, V = U.numpy(), s.numpy(), V.numpy()
+    np.testing.assert_allclose(np.einsum("nij,nj,nkj->nik", U, s, V), F, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(U), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(V), 1.0, atol=1e-12)
+    assert np.all(np.diff(s, axis=1) <= 1e-12)
+    np.testing.assert_allclose(np.prod(s, axis=1), np.linalg.det(F), atol=1e-12)
+    assert np.all(s[:, :-1] >= 0)

@@ -15,39 +15,6 @@ from ..types import Types
 
 
 @functools.cache
-def make_svd(t: Types):
-    S = t.scalar
-    vec, mat = t.vec, t.mat
-
-    if t.dim == 2:
-
-        @wp.func
-        def svd(F: t.mat):
-            U = mat()
-            sig = vec()
-            V = mat()
-            wp.svd2(F, U, sig, V)
-            # wp.svd2 keeps sigma >= 0 and V proper; move a reflection of U onto sigma
-            if wp.determinant(U) < S(0.0):
-                U = mat(U[0, 0], -U[0, 1], U[1, 0], -U[1, 1])
-                sig = vec(sig[0], -sig[1])
-            return U, sig, V
-
-        return svd
-
-    @wp.func
-    def svd(F: t.mat):
-        # wp.svd3 already returns proper rotations, the sign on the last sigma
-        U = mat()
-        sig = vec()
-        V = mat()
-        wp.svd3(F, U, sig, V)
-        return U, sig, V
-
-    return svd
-
-
-@functools.cache
 def make_rotation(t: Types):
     S = t.scalar
     mat = t.mat
@@ -77,3 +44,42 @@ def make_rotation(t: Types):
         return U * wp.transpose(V)
 
     return rotation
+
+
+@functools.cache
+def make_svd(t: Types):
+    S = t.scalar
+    vec, mat = t.vec, t.mat
+
+    if t.dim == 2:
+        rotation = make_rotation(t)
+
+        @wp.func
+        def svd(F: t.mat):
+            # closed form (wp.svd2 is wrong for equal singular values): the
+            # polar rotation R, then the eigenvectors of the symmetric S = R^T F
+            R = rotation(F)
+            Sym = wp.transpose(R) * F
+            a = Sym[0, 0]
+            b = S(0.5) * (Sym[0, 1] + Sym[1, 0])
+            c = Sym[1, 1]
+            phi = S(0.5) * wp.atan2(S(2.0) * b, a - c)
+            co = wp.cos(phi)
+            si = wp.sin(phi)
+            mean = S(0.5) * (a + c)
+            r = wp.sqrt(S(0.25) * (a - c) * (a - c) + b * b)
+            V = mat(co, -si, si, co)
+            return R * V, vec(mean + r, mean - r), V
+
+        return svd
+
+    @wp.func
+    def svd(F: t.mat):
+        # wp.svd3 already returns proper rotations, the sign on the last sigma
+        U = mat()
+        sig = vec()
+        V = mat()
+        wp.svd3(F, U, sig, V)
+        return U, sig, V
+
+    return svd

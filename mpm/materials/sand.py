@@ -4,10 +4,17 @@
 Yield surface (Kirchhoff stress tau = 2 mu eps + lam tr(eps) 1 in principal
 strains eps = ln sigma, pressure p = -tr(tau)/d):
     |dev tau| <= alpha d (p + c cot phi),
-    alpha = sqrt(2/3) 2 sin phi / (3 - sin phi)
-(the cone through the compression meridian of Mohr-Coulomb in 3D; cohesion c
-shifts its apex to the tension p = -c cot phi, where tr(eps) reaches
-tr_apex = d c cot phi / (d lam + 2 mu)). Return mapping of a trial strain,
+    3D: alpha = sqrt(2/3) 2 sin phi / (3 - sin phi), the cone through the
+        compression meridian of Mohr-Coulomb (Klar et al.): in triaxial
+        compression (sigma_2 = sigma_3) yield is exactly
+        sigma_1 - sigma_3 = (sigma_1 + sigma_3) sin phi (compression positive),
+        the Mohr circle touching tau = c + sigma_n tan phi;
+    2D: alpha = sin phi / sqrt(2): with two principal stresses the cone is
+        the Mohr-Coulomb criterion itself, so phi is the friction angle of the
+        simulated plane. (Public 2D codes put d = 2 into the 3D alpha, which
+        makes phi = 30 deg act as 27.5 deg.)
+Cohesion c shifts the apex to the tension p = -c cot phi, where tr(eps)
+reaches tr_apex = d c cot phi / (d lam + 2 mu). Return mapping of a trial strain,
 corrected by the volume correction v (history slot 0, below):
     eps_c = eps + v/d 1
   1. tr eps_c >= tr_apex (tension beyond the apex): eps_E = tr_apex/d 1 (no
@@ -27,7 +34,6 @@ q = sqrt(3/2) eps_p the accumulated plastic strain |delta eps_p| (history slot
 1); h1 = h3 = 0 (the default) is a constant friction angle.
 Paper parameters: E = 3.537e5 Pa, nu = 0.3, rho = 2200, phi0 = 35 deg,
 h1 = 9 deg, h2 = 0.2, h3 = 10 deg. CK-MPM sand: E = 1e4, nu = 0.4, phi = 30.
-In 2D the formulas take d = 2 (as the public 2D codes do).
 """
 
 import functools
@@ -44,6 +50,7 @@ from .elasticity import make_hencky
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
 DEG = math.pi / 180.0
+INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
 @functools.cache
@@ -61,7 +68,11 @@ def _friction(t: Types):
         phi = params[2] + (params[3] * q - params[5]) * wp.exp(-params[4] * q)
         phi = wp.clamp(phi, S(1.0e-6), S(0.5 * math.pi - 1.0e-6))
         s = wp.sin(phi)
-        alpha = S(SQRT_2_3) * S(2.0) * s / (S(3.0) - s)
+        alpha = S(0.0)
+        if wp.static(t.dim == 2):
+            alpha = s * S(INV_SQRT2)
+        else:
+            alpha = S(SQRT_2_3) * S(2.0) * s / (S(3.0) - s)
         apex = S(d) * params[6] * wp.cos(phi) / s / (S(d) * lam + S(2.0) * mu)
         return alpha, apex
 
