@@ -4,8 +4,8 @@ A solution gives, for particles at initial positions ``X`` (n, d) [m] and a
 time ``t`` [s], the exact displacement [m], velocity [m/s] and velocity
 gradient [1/s] (which seed the particles' ``v`` and ``C``), and, for a
 manufactured solution, the body force per unit mass [m/s^2] that makes it
-exact. Both are 2D problems whose material laws are written out below; the
-validation of a scene checks that its body uses a material they hold for.
+exact. The material law each holds for is written out below; the
+validation of a scene checks that its body uses it.
 """
 
 from __future__ import annotations
@@ -166,7 +166,67 @@ class Vortex:
             float(np.max(R * turn * self.omega))
 
 
-SOLUTIONS = {"vibrating_bar": VibratingBar, "vortex": Vortex}
+@dataclass(frozen=True)
+class ShearWave:
+    """A decaying shear wave in a free slab of Newtonian viscous fluid
+    (no gravity), velocity along ``axis``, varying across ``normal``:
+
+        v(X, t) = A cos(k eta) exp(-nu k^2 t) e_axis,
+        u(X, t) = A cos(k eta) (1 - exp(-nu k^2 t)) / (nu k^2) e_axis,
+        k = n pi / H, eta = X_normal - lo, nu = viscosity / rho,
+
+    with H the slab's thickness along ``normal``. The field is divergence-free
+    and v . grad v = 0, so it solves the Navier-Stokes equations exactly; the
+    shear stress eta_v dv/d(normal) vanishes on the slab's free faces, and
+    the particles never move along ``normal`` (Lagrangian = Eulerian profile).
+    The kinetic energy decays as exp(-2 nu k^2 t): the decay rate measures
+    the viscosity."""
+
+    lo: float  # [m] the slab's face at the lower ``normal`` coordinate
+    thickness: float  # [m] H
+    kinematic_viscosity: float  # [m^2/s] nu
+    amplitude: float  # [m/s] A
+    mode: int = 1
+    axis: int = 0
+    normal: int = 1
+    name = "shear_wave"
+    has_body_force = False
+
+    @property
+    def k(self) -> float:
+        return self.mode * math.pi / self.thickness
+
+    @property
+    def rate(self) -> float:
+        """Decay rate nu k^2 of the velocity [1/s]."""
+        return self.kinematic_viscosity * self.k**2
+
+    def _profile(self, X):
+        eta = X[:, self.normal] - self.lo
+        return np.cos(self.k * eta), np.sin(self.k * eta)
+
+    def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
+        u = np.zeros_like(X, dtype=np.float64)
+        u[:, self.axis] = self.amplitude * self._profile(X)[0] * (-math.expm1(-self.rate * t)) / self.rate
+        return u
+
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray:
+        v = np.zeros_like(X, dtype=np.float64)
+        v[:, self.axis] = self.amplitude * self._profile(X)[0] * math.exp(-self.rate * t)
+        return v
+
+    def velocity_gradient(self, X: np.ndarray, t: float) -> np.ndarray:
+        n, d = X.shape
+        L = np.zeros((n, d, d))
+        L[:, self.axis, self.normal] = (-self.amplitude * self.k * self._profile(X)[1]
+                                        * math.exp(-self.rate * t))
+        return L
+
+    def scales(self) -> tuple[float, float]:
+        return self.amplitude / self.rate, self.amplitude
+
+
+SOLUTIONS = {"vibrating_bar": VibratingBar, "vortex": Vortex, "shear_wave": ShearWave}
 
 
 def rms(a: np.ndarray, b: np.ndarray) -> float:

@@ -233,7 +233,8 @@ def make_region(d: dict, key: str, dim: int, body_names: list[str]) -> mpm.Kinem
         start=start, end=float("inf") if end is None else end)
 
 
-SOLUTION_KEYS = {"vibrating_bar": ["amplitude", "mode", "axis"], "vortex": ["amplitude", "omega"]}
+SOLUTION_KEYS = {"vibrating_bar": ["amplitude", "mode", "axis"], "vortex": ["amplitude", "omega"],
+                 "shear_wave": ["amplitude", "mode", "axis", "normal"]}
 
 
 def make_solution(d, key: str, dim: int, bodies: list, gravity: tuple):
@@ -267,8 +268,23 @@ def make_solution(d, key: str, dim: int, bodies: list, gravity: tuple):
         return mpm.analytic.VibratingBar(
             lo=float(lo[axis]), length=float(hi[axis] - lo[axis]), wave_speed=(mat.E / mat.rho) ** 0.5,
             amplitude=amplitude, mode=_number(f"{key}.mode", d.get("mode", 1), int, ge=1), axis=axis)
+    if kind == "shear_wave":
+        if not isinstance(body.shape, mpm.Box):
+            raise ConfigError("scene.bodies[0].shape.type", "the shear wave's slab is a box; accepted: box")
+        if not isinstance(mat, mpm.materials.Viscous) or mat.viscosity <= 0.0:
+            raise ConfigError("scene.bodies[0].material", f"{mat.name}: the shear wave decays by Newtonian "
+                              "viscosity; accepted: viscous (or fluid) with viscosity > 0")
+        axis = _number(f"{key}.axis", d.get("axis", 0), int, ge=0, le=dim - 1)
+        normal = _number(f"{key}.normal", d.get("normal", 1), int, ge=0, le=dim - 1)
+        if normal == axis:
+            raise ConfigError(f"{key}.normal", f"{normal} equals axis; accepted: another axis")
+        lo, hi = body.shape.bounds()
+        return mpm.analytic.ShearWave(
+            lo=float(lo[normal]), thickness=float(hi[normal] - lo[normal]),
+            kinematic_viscosity=mat.viscosity / mat.rho, amplitude=amplitude,
+            mode=_number(f"{key}.mode", d.get("mode", 1), int, ge=1), axis=axis, normal=normal)
     if dim != 2:
-        raise ConfigError(f"{key}.type", "the vortex is 2D; accepted in 3D: vibrating_bar")
+        raise ConfigError(f"{key}.type", "the vortex is 2D; accepted in 3D: vibrating_bar, shear_wave")
     shape = body.shape
     if not isinstance(shape, mpm.Sphere) or shape.inner_radius <= 0.0:
         raise ConfigError("scene.bodies[0].shape", "the vortex is a ring; accepted: a sphere with "

@@ -287,3 +287,193 @@ def compact_step(x, v, C, F, mass, vol, models, prms, dx, domain, gravity, walls
         if models[p] == "fluid":
             Fn[p] = np.linalg.det(Fn[p]) ** (1.0 / d) * np.eye(d)
     return xn, vn, Cn, Fn
+
+
+# ---------------------------------------------------------------------------
+# Plastic models, written from the papers' formulas with NumPy (one particle
+# at a time), for the classic MLS-MPM step with plasticity: the return
+# mapping acts on the stored trial F_E at the start of P2G (as mpm99 does).
+
+def _lame(E, nu):
+    return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
+
+
+def _svd(F):
+    """F = U diag(s) V^T with proper rotations (sign on the last value)."""
+    U, s, Vt = np.linalg.svd(F)
+    if np.linalg.det(U) < 0:
+        U[:, -1] *= -1
+        s[-1] *= -1
+    if np.linalg.det(Vt) < 0:
+        Vt[-1] *= -1
+        s[-1] *= -1
+    return U, s, Vt.T
+
+
+def plastic_return(mat, F, hist, dt):
+    """(F_E, hist) after the return mapping of ``mat`` (a dataclass of
+    mpm.materials) on the trial elastic deformation F; hist = [volumetric
+    variable, equivalent plastic strain]."""
+    d = F.shape[0]
+    mu, lam = _lame(mat.E, mat.nu)
+    U, s, V = _svd(F)
+    h = np.array(hist, float)
+    e = np.log(np.maximum(np.abs(s), 1e-6))
+    if mat.name == "snow":
+        se = np.clip(s, 1 - mat.theta_c, 1 + mat.theta_s)
+        h[0] += np.sum(e) - np.sum(np.log(se))
+    elif mat.name == "sand":
+        q = h[1] / np.sqrt(2 / 3)
+        phi = np.radians(mat.friction_angle + (mat.h1 * q - mat.h3) * np.exp(-mat.h2 * q))
+        if d == 3:
+            alpha = np.sqrt(2 / 3) * 2 * np.sin(phi) / (3 - np.sin(phi))
+        else:
+            alpha = np.sin(phi) / np.sqrt(2)
+        apex = d * mat.cohesion / np.tan(phi) / (d * lam + 2 * mu)
+        ec = e + h[0] / d
+        tr = ec.sum()
+        if tr >= apex:
+            h[0] = tr - apex
+            se = np.exp(np.full(d, apex / d))
+        else:
+            h[0] = 0.0
+            dev = ec - tr / d
+            dg = np.linalg.norm(dev) + (d * lam + 2 * mu) / (2 * mu) * (tr - apex) * alpha
+            se = np.exp(ec - dg * dev / np.linalg.norm(dev) if dg > 0 else ec)
+    elif mat.name == "von_mises":
+        dev = e - e.mean()
+        sy = mat.yield_stress + mat.hardening * h[1]
+        delta = (2 * mu * np.linalg.norm(dev) - np.sqrt(2 / 3) * sy) / (2 * mu + 2 * mat.hardening / 3)
+        se = np.exp(e - delta * dev / np.linalg.norm(dev) if delta > 0 else e)
+    elif mat.name == "nacc":
+        kappa = lam + 2 * mu / 3
+        p0 = kappa * (1e-5 + np.sinh(mat.xi * max(-h[0], 0.0)))
+        pmin = -mat.beta * p0
+        a = np.abs(s)
+        J = np.prod(a)
+        b = a * a
+        shat = mu * J ** (-2 / d) * (b - b.mean())
+        p = -kappa / 2 * (J * J - 1)
+        M2 = mat.slope() ** 2
+        if p > p0 or p < pmin:
+            pn = min(max(p, pmin), p0)
+            JE = np.sqrt(max(1 - 2 * pn / kappa, 1e-4))
+            se = np.full(d, JE ** (1 / d))
+            if mat.hardening:
+                h[0] += np.log(J / JE)
+        else:
+            yq = 1.5 * (1 + 2 * mat.beta)
+            yp = M2 * (p - pmin) * (p - p0)
+            s2 = shat @ shat
+            if yq * s2 + yp <= 0 or s2 == 0:
+                se = a
+            else:
+                c = np.sqrt(-yp / yq / s2)
+                se = np.sqrt(np.maximum(c * shat * J ** (2 / d) / mu + b.mean(), 0.0))
+                se = se * (J / np.prod(se)) ** (1 / d)
+                if mat.hardening and p0 > 1e-12 * kappa:
+                    pc = (1 - mat.beta) * p0 / 2
+                    dvec = np.array([pc - p, -np.sqrt(1.5 * s2)])
+                    dvec /= np.linalg.norm(dvec)
+                    A = M2 * dvec[0] ** 2 + (1 + 2 * mat.beta) * dvec[1] ** 2
+                    B = M2 * dvec[0] * (2 * pc - p0 - pmin)
+                    C = M2 * (pc - pmin) * (pc - p0)
+                    roots = np.roots([A, B, C]).real
+                    ps = pc + dvec[0] * roots
+                    px = ps[0] if (p - pc) * (ps[0] - pc) > 0 else ps[1]
+                    Jx2 = abs(1 - 2 * px / kappa)
+                    if Jx2 > 1e-4:
+                        h[0] += np.log(J / np.sqrt(Jx2))
+    elif mat.name == "viscoplastic":
+        a = np.abs(s)
+        J = np.prod(a)
+        bb = J ** (-2 / d) * a * a
+        dev = bb - bb.mean()
+        s_tr = mu * np.linalg.norm(dev)
+        k = np.sqrt(2) * mat.yield_stress
+        se = a
+        if s_tr > k and dt > 0:
+            assert mat.flow_index == 1.0
+            # |s_tr| - |s| = 2 mu_hat dt |D_p|, |s| = k + 2 K |D_p| (Bingham)
+            mu_hat = mu * bb.mean()
+            s_new = k + (s_tr - k) / (1 + mu_hat * dt / mat.viscosity)
+            bn = bb.mean() + dev * s_new / s_tr
+            se = np.sqrt(bn)
+            se *= (J / np.prod(se)) ** (1 / d)
+    else:
+        raise ValueError(mat.name)
+    h[1] += np.sqrt(2 / 3) * np.linalg.norm(e - np.log(se))
+    return U @ np.diag(se) @ V.T, h
+
+
+def plastic_stress(mat, FE, hist):
+    """First Piola-Kirchhoff stress of the elastic deformation F_E."""
+    d = FE.shape[0]
+    mu, lam = _lame(mat.E, mat.nu)
+    J = np.linalg.det(FE)
+    FinvT = np.linalg.inv(FE).T
+    if mat.name == "snow":
+        harden = np.exp(mat.xi * (1 - np.exp(hist[0])))
+        return harden * (2 * mu * (FE - polar_rotation(FE)) + lam * (J - 1) * J * FinvT)
+    if mat.name in ("sand", "von_mises"):
+        U, s, V = _svd(FE)
+        eps = np.log(s)
+        tau = U @ np.diag(2 * mu * eps + lam * eps.sum()) @ U.T  # Kirchhoff
+        return tau @ FinvT
+    if mat.name in ("nacc", "viscoplastic"):
+        kappa = lam + 2 * mu / 3
+        b = FE @ FE.T
+        tau = mu * J ** (-2 / d) * (b - np.trace(b) / d * np.eye(d)) + kappa / 2 * (J * J - 1) * np.eye(d)
+        return tau @ FinvT
+    raise ValueError(mat.name)
+
+
+def plastic_step(x, v, C, F, hist, mass, vol, mats, dx, cells, gravity, walls, dt, wall_cells=3):
+    """One classic MLS-MPM step (quadratic B-spline, one grid for all
+    particles) with plasticity: returns (x, v, C, F_trial, hist), F the
+    trial elastic deformation that the next step returns."""
+    n, d = x.shape
+    F = F.copy()
+    hist = hist.copy()
+    shape = tuple(c + 1 for c in cells)
+    gm = np.zeros(shape)
+    gmv = np.zeros(shape + (d,))
+    offsets = np.stack(np.meshgrid(*([np.arange(3)] * d), indexing="ij"), -1).reshape(-1, d)
+    Dinv = 4.0 / dx**2
+    for p in range(n):
+        F[p], hist[p] = plastic_return(mats[p], F[p], hist[p], dt)
+        P = plastic_stress(mats[p], F[p], hist[p])
+        base = np.floor(x[p] / dx - 0.5).astype(int)
+        fx = x[p] / dx - base
+        w = quadratic_weights(fx)
+        affine = mass[p] * C[p] - dt * vol[p] * Dinv * P @ F[p].T
+        for off in offsets:
+            weight = np.prod([w[off[a], a] for a in range(d)])
+            node = tuple(base + off)
+            gm[node] += weight * mass[p]
+            gmv[node] += weight * (mass[p] * v[p] + affine @ ((off - fx) * dx))
+    gv = np.zeros_like(gmv)
+    has = gm > 0
+    gv[has] = gmv[has] / gm[has][:, None] + dt * np.asarray(gravity)
+    idx = np.indices(shape)
+    for a in range(d):
+        for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+            near = idx[a] < wall_cells if side == 0 else idx[a] > cells[a] - wall_cells
+            if kind == "sticky":
+                gv[near] = 0.0
+            elif kind == "slip":
+                comp = gv[..., a]
+                comp[near & ((comp < 0) if side == 0 else (comp > 0))] = 0.0
+    xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
+    for p in range(n):
+        base = np.floor(x[p] / dx - 0.5).astype(int)
+        fx = x[p] / dx - base
+        w = quadratic_weights(fx)
+        for off in offsets:
+            weight = np.prod([w[off[a], a] for a in range(d)])
+            g = gv[tuple(base + off)]
+            vn[p] += weight * g
+            Cn[p] += Dinv * weight * np.outer(g, (off - fx) * dx)
+        xn[p] = x[p] + dt * vn[p]
+        Fn[p] = (np.eye(d) + dt * Cn[p]) @ F[p]
+    return xn, vn, Cn, Fn, hist

@@ -17,6 +17,11 @@ with alpha = ln J_P (history slot 0, initially ``alpha0``): compaction
      hardening, alpha += ln(J / J_x) with J_x the volume at the point where the
      line from the ellipse's centre ((1 - beta) p0 / 2, 0) to the trial state
      meets the ellipse - once per step (one public code applies it nine times).
+Under steady loading with hardening, plastic and elastic steps alternate
+(each plastic step grows the ellipse past the next trial state), so which
+steps yield is decided by round-off: a 1e-13 change of a material point's
+deformation path reaches 1e-3 in F_E within 70 steps, and two runs that
+differ by round-off (another scheme, another summation order) part ways.
 M relates to a friction angle by M = 6 sin phi / (3 - sin phi) (M = 2.36 is
 about 58 deg); ``friction_angle`` may be given instead of M. CK-MPM scenes
 (E, nu, alpha0, beta, xi, M): pumpkin 2000, 0.39, -0.04, 2, 3, 2.36; oreo
