@@ -158,6 +158,8 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
         key = f"bodies[{i}]"
         for name, value, accepted in violations(b.material):
             raise SceneError(f"{key}.material.{name}", f"{value} out of range; accepted: {accepted}")
+        for name, message in b.material.problems():
+            raise SceneError(f"{key}.material.{name}", message)
         blo, bhi = (np.asarray(v, float) for v in b.shape.bounds())
         if len(blo) != d:
             raise SceneError(f"{key}.shape", f"has {len(blo)} coordinates; accepted: {d}")

@@ -15,6 +15,7 @@ class Recording:
     times: np.ndarray  # their simulated times [s]
     positions: list[np.ndarray]  # per logged step, (n, dim)
     dJ: list[np.ndarray | None]  # per logged step
+    fields: list[dict[str, np.ndarray]]  # per logged step: the other per-particle components
     body: np.ndarray | None  # body colour index per particle (from the static colours)
     colors: np.ndarray | None  # static RGBA colours per particle
     scalars: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (steps, values)
@@ -32,7 +33,10 @@ def read(path: str | Path) -> Recording:
     data = RrdReader(str(path)).store().stream().collect()
     parts = data.reader(index="step", contents="/particles").to_pandas()
     pos_col = next((c for c in parts.columns if c.endswith(":positions")), None)
-    steps, times, positions, dJs = [], [], [], []
+    steps, times, positions, dJs, fields = [], [], [], [], []
+    other = [c for c in parts.columns if c.startswith("/particles:")
+             and c.split(":", 1)[1] not in ("dJ", "positions", "colors", "radii")
+             and not c.split(":", 1)[1].startswith("Points")]
     if pos_col is not None:
         for _, row in parts.iterrows():
             if row[pos_col] is None:
@@ -42,6 +46,8 @@ def read(path: str | Path) -> Recording:
             positions.append(np.stack(row[pos_col]).astype(np.float64))
             d = row.get("/particles:dJ")
             dJs.append(None if d is None else np.asarray(d, dtype=np.float64))
+            fields.append({c.split(":", 1)[1]: np.asarray(row[c], dtype=np.float64) for c in other
+                           if row[c] is not None})
     static = data.reader(index=None, contents="/particles").to_pandas()
     colors = None
     col = next((c for c in static.columns if c.endswith(":colors")), None)
@@ -64,7 +70,7 @@ def read(path: str | Path) -> Recording:
     events = data.reader(index="step", contents="/events").to_pandas()
     update_steps = [int(s) for s, u in zip(events.get("step", []), events.get("/events:update_step", []))
                     if u is not None]
-    return Recording(np.asarray(steps), np.asarray(times), positions, dJs, body, colors, scalars,
+    return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64))
 
 

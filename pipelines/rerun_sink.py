@@ -3,7 +3,9 @@
 Layout of the recording (timelines ``step`` and ``sim_time``):
 
   /particles          Points2D/3D positions per logged step, with the
-                      component ``dJ`` (per-particle |det F^sn - 1|);
+                      component ``dJ`` (per-particle |det F^sn - 1|) and,
+                      with plastic materials, their fields (``J_P``,
+                      ``plastic_strain``, ...: mpm.materials.Plastic.fields);
                       colours by body and radii are logged once (static)
   /domain             the domain box and the inner wall faces (static)
   /scalars/<name>     one Scalars series per physics/timing scalar, sent in
@@ -83,13 +85,16 @@ class RerunSink(Sink):
         )
 
     # ---------------------------------------------------------------- per step
-    def particles(self, step, t, x, dJ):
+    def particles(self, step, t, x, dJ, fields=None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
-        if dJ is None:
-            self.rec.log("particles", self._points.from_fields(positions=x))
+        values = dict(fields or {})
+        if dJ is not None:
+            values["dJ"] = dJ
+        if values:
+            self.rec.log("particles", self._points.from_fields(positions=x), rr.AnyValues(**values))
         else:
-            self.rec.log("particles", self._points.from_fields(positions=x), rr.AnyValues(dJ=dJ))
+            self.rec.log("particles", self._points.from_fields(positions=x))
 
     def scalars(self, step, t, values):
         for name, value in values.items():

@@ -191,12 +191,38 @@ class Run:
         self._pending.clear()
 
     def particles(self) -> None:
-        """Particles and dJ of the current state."""
+        """Particles, dJ and the plastic fields of the current state."""
         # copies: on the CPU .numpy() is a view of memory the next step
         # overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
-        self.sink.particles(self.step, self.t, x, dJ)
+        self.sink.particles(self.step, self.t, x, dJ, self.plastic_fields())
+
+    def plastic_fields(self) -> dict[str, np.ndarray]:
+        """Named per-particle fields of the plastic bodies (mpm.materials.Plastic.fields)
+        as the last return mapping left them; NaN on the particles of other bodies."""
+        if not self.model.plastic:
+            return {}
+        history = self.state.history.numpy()
+        n = self.model.n_particles
+        out: dict[str, np.ndarray] = {}
+        for body, (start, count) in zip(self.spec.scene.bodies, self.model.body_ranges):
+            if body.material.plastic:
+                for name, values in body.material.fields(history[start:start + count]).items():
+                    out.setdefault(name, np.full(n, np.nan, np.float32))[start:start + count] = values
+        return out
+
+    def plastic_summary(self) -> dict:
+        """metrics.json ``plastic``: per plastic body, min / mean / max of each field."""
+        fields = self.plastic_fields()
+        out = {}
+        for b, (body, (start, count)) in enumerate(zip(self.spec.scene.bodies, self.model.body_ranges)):
+            if body.material.plastic:
+                out[body.name] = {k: {"min": float(np.min(v[start:start + count])),
+                                      "mean": float(np.mean(v[start:start + count])),
+                                      "max": float(np.max(v[start:start + count]))}
+                                  for k, v in fields.items() if np.isfinite(v[start:start + count]).all()}
+        return out
 
     def errors(self) -> dict:
         """RMS error of the particles against the closed-form solution at the
@@ -386,6 +412,8 @@ class Run:
             pieces = self.solver.fragments()
             m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
             self.save_final_state()
+            if self.model.plastic:
+                m["plastic"] = self.plastic_summary()
             if self.spec.run.reference is not None and m["status"] == "completed":
                 m["error"] = self.reference_errors(self.spec.run.reference)
             elif self.solution is not None:

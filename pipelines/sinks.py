@@ -2,8 +2,9 @@
 never does.
 
 A sink receives: static run metadata once (:meth:`Sink.start`), particles
-(positions and the per-particle dJ field) on logged steps, a row of scalars
-every step, and events (text plus machine-readable values).
+(positions, the per-particle dJ field and, with plastic materials, their named
+per-particle fields) on logged steps, a row of scalars every step, and events
+(text plus machine-readable values).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ class Sink:
     def start(self, meta: RunMeta) -> None:
         pass
 
-    def particles(self, step: int, t: float, x: np.ndarray, dJ: np.ndarray | None) -> None:
+    def particles(self, step: int, t: float, x: np.ndarray, dJ: np.ndarray | None,
+                  fields: dict[str, np.ndarray] | None = None) -> None:
         pass
 
     def scalars(self, step: int, t: float, values: dict[str, float]) -> None:

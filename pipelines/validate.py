@@ -128,11 +128,26 @@ def make_material(node, key: str) -> Material:
     for k in d:
         if k not in names:
             raise ConfigError(f"{key}.{k}", f"not a parameter of {model}; accepted: {', '.join(names)}")
-    values = {k: (v if k == "model" else _number(f"{key}.{k}", v)) for k, v in d.items()}
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    values = {k: _material_value(f"{key}.{k}", v, fields[k]) for k, v in d.items()}
     material = cls(**values)
     for name, value, accepted in violations(material):
         raise ConfigError(f"{key}.{name}", f"{value} out of range; accepted: {accepted}")
+    for name, message in material.problems():
+        raise ConfigError(f"{key}.{name}", message)
     return material
+
+
+def _material_value(key: str, value, field: dataclasses.Field):
+    """A material parameter: the model name, a flag, or a number (null where
+    the field's default is null)."""
+    if field.name == "model":
+        return value
+    if isinstance(field.default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(key, f"{value!r}; accepted: true, false")
+        return value
+    return _number(key, value, optional="None" in str(field.type))
 
 
 def make_scheme(node, key: str = "scheme"):

@@ -31,7 +31,7 @@ BAD_INPUTS = [
     (["scheme=tlmpm", "scheme.epsilon=1"], "scheme.epsilon: unknown key; accepted: name"),
     (["kernel=nope"], "kernel=nope: unknown option; accepted: compact, cubic, linear, quadratic"),
     (["kernel.transfer=flip"], "kernel.transfer: 'flip' unknown; accepted: mls, apic, pic"),
-    (["material=steel"], "material=steel: unknown option; accepted: fixed_corotated, fluid, neo_hookean"),
+    (["material=steel"], "material=steel: unknown option; accepted: fixed_corotated, fluid, nacc, neo_hookean, sand, snow, viscoplastic, viscous, von_mises"),
     (["scene.bodies.0.shape.center=[0.5,0.9]"], "scene.bodies[0]: particles outside the domain"),
     (["scene.bodies.0.shape.radius=0"], "scene.bodies[0].shape.radius: 0.0 out of range"),
     (["scene.bodies.0.material={model: fluid, Kk: 3}"],
