@@ -20,6 +20,9 @@ Everything runs through the same code path as ``pipelines.run``
    Taichi pipeline) and MLS, under TLMPM (weights cached at the initial
    configuration) and EMPM (weights, and the compact kernel's per-particle
    moment matrix, rebuilt every step).
+5. materials: every constitutive model on the 3D sphere (EMPM, step only)
+   against fixed corotated: the cost of the return mappings (an SVD, the
+   flow rule and a principal-space stress per particle per step, in P2G).
 
 Each timed configuration runs five times and the fastest median counts
 (the machine's noise only ever adds time). ``--cold`` compiles into an empty
@@ -51,6 +54,9 @@ STEPS = {"ball_2d": 400, "ball_3d": 60}
 SCHEMES = ("empm", "tlmpm", "aulmpm")
 DROPLET = ["scene=droplet_2d", "scene.resolution=128", "run.duration=0.5"]
 KERNEL_CASE = ["scene=elastic_ball_3d", "scene.resolution=64", "material=neo_hookean"]
+MATERIAL_CASE = ["scene=elastic_ball_3d", "scene.resolution=64"]
+MATERIALS = ("fixed_corotated", "neo_hookean", "viscous", "snow", "sand", "von_mises", "nacc",
+             "viscoplastic")
 
 
 def spec_for(overrides: list[str]):
@@ -146,6 +152,25 @@ def bench_kernels(workdir: Path, steps: int) -> list[dict]:
             for (tr, s, k), m in best.items()]
 
 
+def bench_materials(workdir: Path, steps: int) -> list[dict]:
+    """Every material on the 3D sphere, in turns (as bench_schemes)."""
+
+    def overrides(material, n):
+        return MATERIAL_CASE + [f"material={material}", f"run.steps={n}", "log.every=0",
+                                "log.scalars=false", "log.progress=false"]
+
+    for mat in MATERIALS:
+        execute(spec_for(overrides(mat, 3)), workdir / f"m_{mat}_warm")
+    best: dict[str, dict] = {}
+    for k in range(REPEATS):
+        for mat in MATERIALS:
+            m = timed(overrides(mat, steps), workdir / f"m_{mat}_{k}", repeats=1)
+            if mat not in best or m["step_time_ms"] < best[mat]["step_time_ms"]:
+                best[mat] = m
+    return [{"material": mat, "particles": m["particles"], "step_ms": m["step_time_ms"]}
+            for mat, m in best.items()]
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
@@ -157,6 +182,8 @@ def main(argv=None) -> None:
                    help="skip the update-cost table")
     p.add_argument("--no-kernels", dest="kernels", action="store_false",
                    help="skip the kernel table")
+    p.add_argument("--no-materials", dest="materials", action="store_false",
+                   help="skip the material table")
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
@@ -176,6 +203,7 @@ def main(argv=None) -> None:
         schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
+        materials = bench_materials(Path(tmp), 40) if args.materials else []
     print("speed (EMPM, float32, CPU)")
     print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
           f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
@@ -208,9 +236,15 @@ def main(argv=None) -> None:
                         == (r["transfer"], r["scheme"], "quadratic"))
             print(f"{r['transfer']:<9} {r['scheme']:<7} {r['kernel']:<10} {r['particles']:>9,} "
                   f"{r['grid_nodes']:>8,} {r['step_ms']:>8.3f} {quad['step_ms'] / r['step_ms']:>8.2f}x")
+    if materials:
+        base = materials[0]["step_ms"]
+        print(f"\nmaterials on the 3D sphere (64^3, EMPM), step only, {materials[0]['particles']:,} particles")
+        print(f"{'material':<16} {'ms/step':>8} {'vs fixed_corotated':>19}")
+        for r in materials:
+            print(f"{r['material']:<16} {r['step_ms']:>8.3f} {r['step_ms'] / base:>18.2f}x")
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
-                                         "kernels": kernels}, indent=2) + "\n")
+                                         "kernels": kernels, "materials": materials}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

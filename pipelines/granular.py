@@ -12,12 +12,15 @@ is half a spacing beyond its centre):
   highest particle per column of width 2 h) between 20 % and 80 % of its
   length, in degrees.
 
-Published scaling (dry grains, quasi-2D channels), as tabulated by Lagree,
-Staron & Popinet (2011, JFM 686):
-  Lube et al. 2005:        (L_inf - L0)/L0 = 1.2 a (a < 1.8), 1.9 a^(2/3) (a > 2.8);
-                           H_inf / L0 = a (a < 1.15), a^0.4 beyond;
-  Lajeunesse et al. 2005:  (L_inf - L0)/L0 = 1.8 a (a < 3), 2.3 a^(2/3) (a > 3).
-Between the two branches of a law both are given.
+Published scaling (dry grains, quasi-2D channels; secondary sources: Lagree,
+Staron & Popinet 2011, JFM 686, and K. Kumar's thesis, Cambridge 2015):
+  run-out, Lube et al. 2005 (the same law quoted for Lajeunesse et al.'s
+  channel): (L_inf - L0)/L0 = 1.2 a (a < 1.8), 1.9 a^(2/3) (a > 2.8), both
+  branches given in the transition;
+  run-out as Lagree et al. tabulate Lajeunesse et al. 2005: 1.8 a (a < 3),
+  2.3 a^(2/3) (a > 3);
+  final height: H_inf / L0 = a^(1/3) for a > 0.7 (Lajeunesse et al. 2005, 2D),
+  a^0.4 for a > 1.15 (Lube et al. 2005, as tabulated by Lagree et al.).
 """
 
 from __future__ import annotations
@@ -67,7 +70,12 @@ def deposit(x: np.ndarray, X0: np.ndarray) -> Deposit:
 
 def lube_runout(a: float) -> list[float]:
     """(L_inf - L0) / L0 of Lube et al. 2005 (both branches in the transition)."""
-    return [1.2 * a] * (a < 2.8) + [1.9 * a ** (2 / 3)] * (a > 1.8)
+    out = []
+    if a < 2.8:
+        out.append(1.2 * a)
+    if a > 1.8:
+        out.append(1.9 * a ** (2 / 3))
+    return out
 
 
 def lajeunesse_runout(a: float) -> list[float]:
@@ -79,6 +87,95 @@ def lube_height(a: float) -> float:
     return a if a < 1.15 else a**0.4
 
 
+def lajeunesse_height(a: float) -> float:
+    """H_inf / L0 of Lajeunesse et al. 2005 (2D)."""
+    return a if a < 0.7 else a ** (1 / 3)
+
+
 def nearest(value: float, candidates: list[float]) -> float:
     """The candidate of a scaling law closest to ``value`` (relative)."""
     return min(candidates, key=lambda c: abs(value / c - 1))
+
+
+DEPOSIT_HEADERS = ["a", "runout", "Lube", "Lagree (Lajeunesse)", "height", "Lajeunesse height",
+                   "Lube height", "slope deg"]
+
+
+def deposit_row(d: Deposit) -> list:
+    """A deposit beside the published scaling (DEPOSIT_HEADERS)."""
+    return [round(d.aspect, 2), d.runout, nearest(d.runout, lube_runout(d.aspect)),
+            lajeunesse_runout(d.aspect)[0], d.height, lajeunesse_height(d.aspect),
+            lube_height(d.aspect), d.slope_deg]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """python -m pipelines.granular <run dir> ...: the deposit of finished runs."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    parser = argparse.ArgumentParser(prog="python -m pipelines.granular", description=main.__doc__)
+    parser.add_argument("runs", nargs="+", type=Path, help="run directories (with final_state.npz)")
+    args = parser.parse_args(argv)
+    print(" ".join(f"{h:>10}" for h in DEPOSIT_HEADERS) + "  run")
+    for run in args.runs:
+        path = run / "final_state.npz" if run.is_dir() else run
+        if not path.is_file():
+            print(f"error: {run}: no final_state.npz", file=sys.stderr)
+            return 2
+        with np.load(path) as f:
+            d = deposit(f["x"].astype(float), f["X0"].astype(float))
+        print(" ".join(f"{v:>10.3f}" for v in deposit_row(d)) + f"  {run}")
+    return 0
+
+
+def section_granular(jobs: list, out) -> list[str]:
+    """Report section: the deposit of every column-collapse job (scenes
+    ``column_collapse*``) against the published scaling (granular.csv)."""
+    from .report import _absent, _md_table, _write_csv
+
+    title = "Granular column collapse"
+    have = [j for j in jobs if j.scene.startswith("column_collapse")]
+    if not have:
+        return _absent(title, "no column-collapse job")
+    rows = []
+    for j in sorted(have, key=lambda j: (j.scene, j.label)):
+        s = j.final_state()
+        if s is None or j.status not in ("completed", "unstable"):
+            rows.append([j.scene, j.label, j.status, None, None, None, None, None, None, None, None])
+            continue
+        d = deposit(s["x"].astype(float), s["X0"].astype(float))
+        rows.append([j.scene, j.label, j.status, *deposit_row(d), j.num("updates_per_1e4_steps")])
+    headers = ["scene", "label", "status", *DEPOSIT_HEADERS, "updates per 1e4"]
+    _write_csv(out / "granular.csv", headers, rows)
+    lines = [f"## {title}", "",
+             "Deposit of each column at the end of the run ([granular.csv](granular.csv)): run-out "
+             "(L_inf - L0) / L0, final height H_inf / L0 and surface slope (pipelines.granular), with "
+             "the published scaling (pipelines.granular; Lube et al. 2005: the branch nearest the "
+             "result where a lies between the branches). An unstable run's deposit is where its "
+             "particles were when it stopped.", ""]
+    return lines + _md_table(headers, rows)
+
+
+def section_plastic(jobs: list, out) -> list[str]:
+    """Report section: the plastic fields every job with a plastic body left
+    (metrics.json ``plastic``: min, mean and max per field), plastic.csv."""
+    from .report import _absent, _md_table, _write_csv
+
+    title = "Plastic state"
+    rows = []
+    for j in sorted(jobs, key=lambda j: (j.scene, j.label)):
+        for body, fields in (j.metrics.get("plastic") or {}).items():
+            for name, v in fields.items():
+                rows.append([j.scene, j.label, j.status, body, name, v["min"], v["mean"], v["max"]])
+    if not rows:
+        return _absent(title, "no job with a plastic body")
+    headers = ["scene", "label", "status", "body", "field", "min", "mean", "max"]
+    _write_csv(out / "plastic.csv", headers, rows)
+    return [f"## {title}", "", "Per-particle plastic fields at the end of each run: J_P (plastic "
+            "volume ratio), density_ratio (rho / rho0), hardening factor, equivalent plastic strain, ... "
+            "([plastic.csv](plastic.csv)).", ""] + _md_table(headers, rows)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -874,6 +874,8 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     out = Path(out) if out is not None else sweep_dir
     out.mkdir(parents=True, exist_ok=True)
+    from .granular import section_granular, section_plastic  # experiment families of their own
+
     jobs, duplicates = load_jobs(sweep_dir)
     lines = ["# Sweep report", "", f"Sweep: `{sweep_dir}`", ""]
     if not jobs:
@@ -889,6 +891,8 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         lines += section_speed(jobs, out, style)
         lines += section_conservation(jobs, out, style)
         lines += section_fracture(jobs, out, style)
+        lines += section_granular(jobs, out)
+        lines += section_plastic(jobs, out)
     path = out / "report.md"
     path.write_text("\n".join(lines).rstrip() + "\n")
     return path

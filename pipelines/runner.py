@@ -204,11 +204,13 @@ class Run:
         if not self.model.plastic:
             return {}
         history = self.state.history.numpy()
+        J_E = np.linalg.det(self.state.Fsn.numpy() @ self.state.F0s.numpy())
         n = self.model.n_particles
         out: dict[str, np.ndarray] = {}
         for body, (start, count) in zip(self.spec.scene.bodies, self.model.body_ranges):
             if body.material.plastic:
-                for name, values in body.material.fields(history[start:start + count]).items():
+                rows = slice(start, start + count)
+                for name, values in body.material.fields(history[rows], J_E[rows]).items():
                     out.setdefault(name, np.full(n, np.nan, np.float32))[start:start + count] = values
         return out
 

@@ -148,7 +148,10 @@ def test_snow_clamps_and_moves_volume_into_J_P(dim):
     np.testing.assert_allclose(np.linalg.det(r.F[:, 0]), np.linalg.det(r.F_E[:, 0]) * J_P, rtol=1e-10)
     assert J_P[-1] < 0.9  # it was compacted
     # the stress is fixed corotated with the hardened moduli
-    h = mat.fields(r.history[-1])["hardening"][0]
+    fields = mat.fields(r.history[-1], np.linalg.det(r.F_E[-1]))
+    h = fields["hardening"][0]
+    # density: rho0 / J with J = det F = J_E J_P
+    assert fields["density_ratio"][0] == pytest.approx(1 / np.linalg.det(r.F[-1, 0]), rel=1e-10)
     mu, lam = mpm.materials.lame(mat.E, mat.nu)
     FE = r.F_E[-1, 0]
     U, s, Vt = np.linalg.svd(FE)
@@ -277,3 +280,21 @@ def test_viscoplastic_relaxation_does_not_depend_on_dt():
         out.append(mp.run(F, dt).tau[-1, 0, 0, 1])
     assert out[0] == pytest.approx(out[1], rel=2e-3)
     assert out[0] > 50.0 / math.sqrt(1.0) * 0.99
+
+
+def test_stress_strain_command_writes_the_curve(tmp_path, capsys):
+    """python -m pipelines.material_point: CSV and PNG of a von Mises uniaxial
+    test whose plateau is the yield stress; bad material keys fail in one line."""
+    from pipelines.material_point import main
+
+    out = tmp_path / "vm.png"
+    assert main(["material=von_mises", "material.yield_stress=2e4", "--path", "uniaxial",
+                 "--strain", "0.05", "--steps", "50", "--out", str(out)]) == 0
+    data = np.genfromtxt(out.with_suffix(".csv"), delimiter=",", names=True)
+    assert out.exists() and len(data) == 51
+    # Cauchy = Kirchhoff / J_E: on the plateau within the elastic volume change
+    assert data["von_mises"][-1] == pytest.approx(2e4, rel=2e-2)
+    assert main(["material=von_mises", "material.yield_stres=1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: material.yield_stres: unknown key; accepted: model, rho, E, nu, yield_stress, "
+                   "hardening"]

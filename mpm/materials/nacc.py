@@ -152,6 +152,7 @@ class NACC(Plastic):
     flow = staticmethod(_flow)
     elasticity = staticmethod(_elasticity)
     history_names = ("alpha", "plastic_strain")
+    log_Jp = True
 
     E: float = param(2.0e4, "Young's modulus [Pa]", gt=0.0)
     nu: float = param(0.4, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
@@ -189,7 +190,7 @@ class NACC(Plastic):
     def initial_history(self):
         return (self.alpha0, 0.0)
 
-    def fields(self, history):
-        alpha = history[:, 0]
-        return {"alpha": alpha, "p0": self.kappa() * (1e-5 + np.sinh(self.xi * np.maximum(-alpha, 0.0))),
-                "plastic_strain": history[:, 1]}
+    def fields(self, history, J_E):
+        out = super().fields(history, J_E)
+        out["p0"] = self.kappa() * (1e-5 + np.sinh(self.xi * np.maximum(-history[:, 0], 0.0)))
+        return out

@@ -86,13 +86,24 @@ class Plastic(Material):
     stiffening: ClassVar[Callable[[Types], Callable] | None] = None
     history_names: ClassVar[tuple[str, str]] = ("", "plastic_strain")
     """names of the two history variables ("" for an unused slot)"""
+    log_Jp: ClassVar[bool | None] = False
+    """history slot 0 is ln J_P (True), the flow keeps the volume (False), or
+    the plastic volume change is not tracked (None)"""
 
     def initial_history(self) -> tuple[float, float]:
         return (0.0, 0.0)
 
-    def fields(self, history: np.ndarray) -> dict[str, np.ndarray]:
-        """Per-particle fields to log, from the history variables (n, 2)."""
-        return {name: history[:, i] for i, name in enumerate(self.history_names) if name}
+    def fields(self, history: np.ndarray, J_E: np.ndarray) -> dict[str, np.ndarray]:
+        """Per-particle fields to log, from the history variables (n, 2) and
+        J_E = det(F^sn F^0s): the named history variables and, where the
+        plastic volume is known, the density ratio rho / rho0 = 1 / (J_E J_P)
+        (after a step J_E is the trial state's and the history the last
+        return's, so their product is the current J)."""
+        out = {name: history[:, i] for i, name in enumerate(self.history_names) if name}
+        if self.log_Jp is not None:
+            J_P = np.exp(history[:, 0]) if self.log_Jp else 1.0
+            out["density_ratio"] = 1.0 / (J_E * J_P)
+        return out
 
     def wave_speed(self, J: float = 1.0) -> float:
         return elastic_wave_speed(self.E, self.nu, self.rho)

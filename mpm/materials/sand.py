@@ -132,6 +132,7 @@ class Sand(Plastic):
     flow = staticmethod(_flow)
     elasticity = staticmethod(_elasticity)
     history_names = ("volume_correction", "plastic_strain")
+    log_Jp = None  # the volume correction is the unrecovered dilation, not ln J_P
 
     rho: float = param(2200.0, "rest density [kg/m^3]", gt=0.0)
     E: float = param(3.537e5, "Young's modulus [Pa]", gt=0.0)
@@ -158,8 +159,8 @@ class Sand(Plastic):
         q = np.asarray(plastic_strain) / SQRT_2_3
         return self.friction_angle + (self.h1 * q - self.h3) * np.exp(-self.h2 * q)
 
-    def fields(self, history):
-        out = super().fields(history)
+    def fields(self, history, J_E):
+        out = super().fields(history, J_E)
         if self.h1 or self.h3:
             out["friction_angle"] = self.friction_angle_at(history[:, 1])
         return out

@@ -80,6 +80,7 @@ class Snow(Plastic):
     elasticity = staticmethod(_elasticity)
     stiffening = staticmethod(_stiffening)
     history_names = ("log_Jp", "plastic_strain")
+    log_Jp = True
 
     rho: float = param(400.0, "rest density [kg/m^3]", gt=0.0)
     E: float = param(1.4e5, "Young's modulus E0 of the uncompacted snow [Pa]", gt=0.0)
@@ -92,7 +93,7 @@ class Snow(Plastic):
         mu, lam = lame(self.E, self.nu)
         return (mu, lam, self.theta_c, self.theta_s, self.xi)
 
-    def fields(self, history):
-        J_P = np.exp(history[:, 0])
-        return {"J_P": J_P, "hardening": np.exp(self.xi * (1.0 - J_P)),
-                "plastic_strain": history[:, 1]}
+    def fields(self, history, J_E):
+        out = super().fields(history, J_E)
+        J_P = np.exp(out.pop("log_Jp"))
+        return {"J_P": J_P, "hardening": np.exp(self.xi * (1.0 - J_P)), **out}

@@ -86,8 +86,8 @@ class VonMises(Plastic):
         mu, lam = lame(self.E, self.nu)
         return (mu, lam, self.yield_stress, self.hardening)
 
-    def fields(self, history):
-        out = super().fields(history)
+    def fields(self, history, J_E):
+        out = super().fields(history, J_E)
         if self.hardening:
             out["yield_stress"] = self.yield_stress + self.hardening * history[:, 1]
         return out
