@@ -39,12 +39,14 @@ def quadratic_weights(fx):
 
 
 def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wall_cells=3,
-         body=None):
+         body=None, elastic_state=None):
     """One MLS-MPM step; returns new (x, v, C, F). ``models``/``prms`` per particle.
 
     walls: per face (x_lo, x_hi, y_lo, ...) "sticky" | "slip" | "open".
     body: per-particle body index; each body is rasterised to a grid of its own
     (no contact between bodies).
+    elastic_state: ``(p, F_p) -> (F_E, P)`` replaces the stored F by its
+    elastic part and gives its stress at the start of P2G (plasticity).
     """
     if body is not None and len(np.unique(body)) > 1:
         out = [a.copy() for a in (x, v, C, F)]
@@ -57,6 +59,7 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
                 o[sel] = r
         return tuple(out)
     n, d = x.shape
+    F = F.copy()
     shape = tuple(c + 1 for c in cells)
     gm = np.zeros(shape)
     gmv = np.zeros(shape + (d,))
@@ -66,7 +69,10 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
         base = np.floor(x[p] / dx - 0.5).astype(int)
         fx = x[p] / dx - base
         w = quadratic_weights(fx)  # (3, d)
-        P = stress(models[p], F[p], C[p], prms[p])
+        if elastic_state is not None:
+            F[p], P = elastic_state(p, F[p])
+        else:
+            P = stress(models[p], F[p], C[p], prms[p])
         affine = mass[p] * C[p] - dt * vol[p] * Dinv * P @ F[p].T
         for off in offsets:
             weight = np.prod([w[off[a], a] for a in range(d)])
@@ -430,50 +436,15 @@ def plastic_stress(mat, FE, hist):
 
 def plastic_step(x, v, C, F, hist, mass, vol, mats, dx, cells, gravity, walls, dt, wall_cells=3):
     """One classic MLS-MPM step (quadratic B-spline, one grid for all
-    particles) with plasticity: returns (x, v, C, F_trial, hist), F the
-    trial elastic deformation that the next step returns."""
-    n, d = x.shape
-    F = F.copy()
+    particles) with plasticity, as mpm99 does it: the return mapping of the
+    stored trial F_E at the start of P2G. Returns (x, v, C, F_trial, hist),
+    F the trial elastic deformation that the next step returns."""
     hist = hist.copy()
-    shape = tuple(c + 1 for c in cells)
-    gm = np.zeros(shape)
-    gmv = np.zeros(shape + (d,))
-    offsets = np.stack(np.meshgrid(*([np.arange(3)] * d), indexing="ij"), -1).reshape(-1, d)
-    Dinv = 4.0 / dx**2
-    for p in range(n):
-        F[p], hist[p] = plastic_return(mats[p], F[p], hist[p], dt)
-        P = plastic_stress(mats[p], F[p], hist[p])
-        base = np.floor(x[p] / dx - 0.5).astype(int)
-        fx = x[p] / dx - base
-        w = quadratic_weights(fx)
-        affine = mass[p] * C[p] - dt * vol[p] * Dinv * P @ F[p].T
-        for off in offsets:
-            weight = np.prod([w[off[a], a] for a in range(d)])
-            node = tuple(base + off)
-            gm[node] += weight * mass[p]
-            gmv[node] += weight * (mass[p] * v[p] + affine @ ((off - fx) * dx))
-    gv = np.zeros_like(gmv)
-    has = gm > 0
-    gv[has] = gmv[has] / gm[has][:, None] + dt * np.asarray(gravity)
-    idx = np.indices(shape)
-    for a in range(d):
-        for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
-            near = idx[a] < wall_cells if side == 0 else idx[a] > cells[a] - wall_cells
-            if kind == "sticky":
-                gv[near] = 0.0
-            elif kind == "slip":
-                comp = gv[..., a]
-                comp[near & ((comp < 0) if side == 0 else (comp > 0))] = 0.0
-    xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
-    for p in range(n):
-        base = np.floor(x[p] / dx - 0.5).astype(int)
-        fx = x[p] / dx - base
-        w = quadratic_weights(fx)
-        for off in offsets:
-            weight = np.prod([w[off[a], a] for a in range(d)])
-            g = gv[tuple(base + off)]
-            vn[p] += weight * g
-            Cn[p] += Dinv * weight * np.outer(g, (off - fx) * dx)
-        xn[p] = x[p] + dt * vn[p]
-        Fn[p] = (np.eye(d) + dt * Cn[p]) @ F[p]
-    return xn, vn, Cn, Fn, hist
+
+    def elastic_state(p, Fp):
+        FE, hist[p] = plastic_return(mats[p], Fp, hist[p], dt)
+        return FE, plastic_stress(mats[p], FE, hist[p])
+
+    x, v, C, F = step(x, v, C, F, mass, vol, [m.name for m in mats], [None] * len(x), dx, cells,
+                      gravity, walls, dt, wall_cells, elastic_state=elastic_state)
+    return x, v, C, F, hist

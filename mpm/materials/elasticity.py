@@ -112,3 +112,28 @@ def make_split(t: Types):
         return P, psi
 
     return split
+
+
+@functools.cache
+def hencky_elasticity(t: Types):
+    """``elasticity(sigma, params, history)`` of a plastic model whose moduli
+    are (mu, lam) = params[0:2] (mpm.materials.plastic)."""
+    hencky = make_hencky(t)
+
+    @wp.func
+    def elasticity(sigma: t.vec, params: t.params, history: t.history):
+        return hencky(sigma, params[0], params[1])
+
+    return elasticity
+
+
+@functools.cache
+def split_elasticity(t: Types):
+    """``elasticity(sigma, params, history)`` with (mu, kappa) = params[0:2]."""
+    split = make_split(t)
+
+    @wp.func
+    def elasticity(sigma: t.vec, params: t.params, history: t.history):
+        return split(sigma, params[0], params[1])
+
+    return elasticity

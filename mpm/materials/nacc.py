@@ -40,7 +40,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_split
+from .elasticity import split_elasticity
 from .plastic import STRETCH_FLOOR, Plastic
 
 JE2_FLOOR = 1.0e-4  # smallest J_E^2 a tip projection may produce
@@ -133,24 +133,13 @@ def _flow(t: Types):
     return flow
 
 
-@functools.cache
-def _elasticity(t: Types):
-    split = make_split(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return split(sigma, params[0], params[1])
-
-    return elasticity
-
-
 @dataclass
 class NACC(Plastic):
     """Non-associative Cam-Clay with hardening on log J_P."""
 
     name = "nacc"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(_elasticity)
+    elasticity = staticmethod(split_elasticity)
     history_names = ("alpha", "plastic_strain")
     log_Jp = True
 

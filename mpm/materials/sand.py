@@ -46,7 +46,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_hencky
+from .elasticity import hencky_elasticity
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
 DEG = math.pi / 180.0
@@ -113,24 +113,13 @@ def _flow(t: Types):
     return flow
 
 
-@functools.cache
-def _elasticity(t: Types):
-    hencky = make_hencky(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return hencky(sigma, params[0], params[1])
-
-    return elasticity
-
-
 @dataclass
 class Sand(Plastic):
     """Drucker-Prager sand on the Hencky strain, with volume correction."""
 
     name = "sand"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(_elasticity)
+    elasticity = staticmethod(hencky_elasticity)
     history_names = ("volume_correction", "plastic_strain")
     log_Jp = None  # the volume correction is the unrecovered dilation, not ln J_P
 

@@ -29,7 +29,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_split
+from .elasticity import split_elasticity
 from .plastic import STRETCH_FLOOR, Plastic
 
 NEWTON_ITERATIONS = 40
@@ -97,24 +97,13 @@ def _flow(t: Types):
     return flow
 
 
-@functools.cache
-def _elasticity(t: Types):
-    split = make_split(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return split(sigma, params[0], params[1])
-
-    return elasticity
-
-
 @dataclass
 class Viscoplastic(Plastic):
     """Herschel-Bulkley / Bingham viscoplastic fluid (Yue et al. 2015)."""
 
     name = "viscoplastic"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(_elasticity)
+    elasticity = staticmethod(split_elasticity)
     history_names = ("", "plastic_strain")
 
     E: float = param(1.0e5, "Young's modulus of the elastic response [Pa]", gt=0.0)

@@ -22,13 +22,12 @@ nu = 0.4, sigma_y = 3e6 (as the radius in that code).
 import functools
 from dataclasses import dataclass
 
-import numpy as np
 import warp as wp
 
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_hencky
+from .elasticity import hencky_elasticity
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
 
@@ -57,24 +56,13 @@ def _flow(t: Types):
     return flow
 
 
-@functools.cache
-def _elasticity(t: Types):
-    hencky = make_hencky(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return hencky(sigma, params[0], params[1])
-
-    return elasticity
-
-
 @dataclass
 class VonMises(Plastic):
     """J2 plasticity with linear hardening on the Hencky strain."""
 
     name = "von_mises"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(_elasticity)
+    elasticity = staticmethod(hencky_elasticity)
     history_names = ("", "plastic_strain")
 
     E: float = param(1.0e6, "Young's modulus [Pa]", gt=0.0)
