@@ -10,7 +10,8 @@ a cell width dx: the particles came apart without the material having
 deformed that much - numerical fracture. Two figures follow: the fraction of
 broken pairs (0: intact), and the number of fragments, the connected pieces
 of each body's graph of intact pairs (1: whole). For fluids (F keeps only its
-volume change) they count rearrangement of the flow, not fracture.
+volume change) and plastic materials (F^sn F^0s is the elastic part F_E) they
+count rearrangement and plastic flow, not fracture.
 """
 
 import functools

@@ -9,7 +9,8 @@ gradient at the last update, ``F^{sn}`` the deformation since then,
 ``F^{0n} = F^{sn} F^{0s}``.
 
 P2G (eq. 10-12, 20, 23), on every grid g of the kernel, which receives the
-particle's full mass:
+particle's full mass (for plastic models after the return mapping, with
+F_E = F^sn F^0s in place of F^{0n}: mpm.materials.plastic):
     m_i      = sum_p W_ip m_p
     m_i v_i  = sum_p W_ip [m_p v_p + m_p C_p r] - dt V_p^0 P(F^{0n}) F^{0s,T} grad_ip
     m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
@@ -69,9 +70,17 @@ def make_min_stretch2(t: Types):
     return min_stretch2
 
 
-@functools.cache
 def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
              with_body_force: bool = False, lagrangian: bool = True):
+    """P2G for the particles of one material model: see :func:`_make_p2g`
+    (``lagrangian`` matters to plastic models only: one kernel otherwise)."""
+    return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
+                     lagrangian or not material.plastic)
+
+
+@functools.cache
+def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
+              with_body_force: bool, lagrangian: bool):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body

@@ -218,12 +218,12 @@ class Run:
         """metrics.json ``plastic``: per plastic body, min / mean / max of each field."""
         fields = self.plastic_fields()
         out = {}
-        for b, (body, (start, count)) in enumerate(zip(self.spec.scene.bodies, self.model.body_ranges)):
+        for body, (start, count) in zip(self.spec.scene.bodies, self.model.body_ranges):
             if body.material.plastic:
-                out[body.name] = {k: {"min": float(np.min(v[start:start + count])),
-                                      "mean": float(np.mean(v[start:start + count])),
-                                      "max": float(np.max(v[start:start + count]))}
-                                  for k, v in fields.items() if np.isfinite(v[start:start + count]).all()}
+                rows = {k: v[start:start + count] for k, v in fields.items()}
+                out[body.name] = {k: {"min": float(np.min(v)), "mean": float(np.mean(v)),
+                                      "max": float(np.max(v))}
+                                  for k, v in rows.items() if np.isfinite(v).all()}
         return out
 
     def errors(self) -> dict:

@@ -139,8 +139,8 @@ def make_material(node, key: str) -> Material:
 
 
 def _material_value(key: str, value, field: dataclasses.Field):
-    """A material parameter: the model name, a flag, or a number (null where
-    the field's default is null)."""
+    """A material parameter: the model name, a flag, or a number (or null
+    where the field's type allows it)."""
     if field.name == "model":
         return value
     if isinstance(field.default, bool):

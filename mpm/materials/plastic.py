@@ -96,12 +96,13 @@ class Plastic(Material):
     def fields(self, history: np.ndarray, J_E: np.ndarray) -> dict[str, np.ndarray]:
         """Per-particle fields to log, from the history variables (n, 2) and
         J_E = det(F^sn F^0s): the named history variables and, where the
-        plastic volume is known, the density ratio rho / rho0 = 1 / (J_E J_P)
-        (after a step J_E is the trial state's and the history the last
-        return's, so their product is the current J)."""
+        plastic volume is known, the density against the initial one,
+        rho / rho0 = 1 / (J_E J_P / J_P0) (after a step J_E is the trial
+        state's and the history the last return's, so their product is the
+        current volume ratio)."""
         out = {name: history[:, i] for i, name in enumerate(self.history_names) if name}
         if self.log_Jp is not None:
-            J_P = np.exp(history[:, 0]) if self.log_Jp else 1.0
+            J_P = np.exp(history[:, 0] - self.initial_history()[0]) if self.log_Jp else 1.0
             out["density_ratio"] = 1.0 / (J_E * J_P)
         return out
 
