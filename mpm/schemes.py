@@ -78,7 +78,8 @@ class TLMPM(_FixedRule):
 class AULMPM:
     """Adaptively updated Lagrangian MPM (A-ULMPM paper, eq. 33).
 
-    Null parameters take the defaults of the scene's kind: with a fluid
+    Null parameters take the defaults of the scene's kind (a material that
+    ``flows`` - a fluid or a plastic material - counts as a fluid): with a fluid
     present epsilon = eta = 0.01, dJ_max = 0.5, stretch_min = 0.5, affine
     keep; solids only epsilon = 0.5, eta = 0.1 (the paper's choices), no
     safeguards, affine transform.
@@ -95,6 +96,7 @@ class AULMPM:
     affine: str | None = None  # keep | transform; None: the scene kind's default
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
+        """Defaults filled in; ``fluid_present``: a body's material flows."""
         defaults = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
         given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min, self.affine)
         eps, eta, dJ_max, stretch_min, affine = (d if v is None else v for v, d in zip(given, defaults))

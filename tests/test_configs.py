@@ -1,4 +1,5 @@
-"""Every scene x material in conf/ composes, validates, builds and runs."""
+"""Every scene x material in conf/ composes and validates; every scene runs
+with its material, every material runs in a 2D and a 3D scene."""
 
 import json
 
@@ -18,13 +19,23 @@ def test_groups_found():
 
 @pytest.mark.parametrize("material", MATERIALS)
 @pytest.mark.parametrize("scene", SCENES)
-def test_scene_material_runs(scene, material, tmp_path):
-    spec = spec_for([f"scene={scene}", f"material={material}", "run.steps=4", "log.every=2"])
+def test_scene_material_composes(scene, material):
+    spec = spec_for([f"scene={scene}", f"material={material}"])
     # the group's material goes to every body that does not bring its own
     cfg_bodies = compose_cfg([f"scene={scene}"]).scene.bodies
     for b, cb in zip(spec.scene.bodies, cfg_bodies):
         if cb.material is None:
             assert b.material.name == material
+        else:
+            assert b.material.name == cb.material.model
+
+
+@pytest.mark.parametrize("overrides", [[f"scene={s}"] for s in SCENES]
+                         + [[f"scene={s}", f"material={m}"] for m in MATERIALS
+                            for s in ("elastic_ball_2d", "cube_drop_3d")],
+                         ids=lambda o: ",".join(x.split("=")[1] for x in o))
+def test_scene_material_runs(overrides, tmp_path):
+    spec = spec_for(overrides + ["run.steps=4", "log.every=2"])
     metrics = execute(spec, tmp_path)
     assert metrics["status"] == "completed", metrics["reason"]
     assert metrics["steps"] == 4 and metrics["particles"] > 100
