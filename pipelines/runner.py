@@ -48,8 +48,29 @@ class _Terminate(KeyboardInterrupt):
     """SIGTERM, handled like Ctrl-C (e.g. a cluster pre-empting the job)."""
 
 
-def _raise_terminate(signum, frame):
-    raise _Terminate()
+class Interrupts:
+    """Ctrl-C and SIGTERM. Outside the step loop they raise at once; inside
+    it they are remembered and raised at the next step boundary
+    (:meth:`check`): Python ignores an exception raised while a finaliser
+    runs (a Warp array's ``__del__``, say, which the loop triggers every step),
+    so a signal raised wherever it lands can be lost. A second signal while
+    one is pending raises at once."""
+
+    def __init__(self):
+        self.deferred = False
+        self.pending: type[KeyboardInterrupt] | None = None
+
+    def handler(self, signum, frame):
+        exc = _Terminate if signum == signal.SIGTERM else KeyboardInterrupt
+        if self.deferred and self.pending is None:
+            self.pending = exc
+            return
+        raise exc()
+
+    def check(self) -> None:
+        if self.pending is not None:
+            exc, self.pending = self.pending, None
+            raise exc()
 
 
 class Drift:
@@ -134,6 +155,7 @@ class Run:
         self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
         self._dt0: float | None = None  # the first adaptive step [s]
+        self.interrupts = Interrupts()
         self._stable_dt = math.inf
 
     # ------------------------------------------------------------ build
@@ -348,13 +370,24 @@ class Run:
         self.announce_scheme()
         progress = Progress(steps_end, duration, log.progress)
         self._v0 = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
-        report = None
         self.metrics["status"], self.metrics["reason"] = "running", ""
 
         def done() -> bool:
             return self.step >= steps_end if steps_end is not None else self.t >= duration * (1 - 1e-12)
 
+        self.interrupts.deferred = True
+        try:
+            self._steps(done, duration, progress)
+        finally:
+            self.interrupts.deferred = False
+            progress.close()
+
+    def _steps(self, done, duration, progress) -> None:
+        """Step until done, unstable or interrupted (at a step boundary)."""
+        log = self.spec.log
+        report = None
         while not done():
+            self.interrupts.check()
             dt = self.next_dt(report, duration)
             collapse = self.collapsed()
             if collapse:
@@ -385,7 +418,6 @@ class Run:
             progress.update(self.step, self.t, self.step_ms[-1])
         else:
             self.metrics["status"], self.metrics["reason"] = "completed", ""
-        progress.close()
 
     def unstable(self, reason: str, **values) -> None:
         self.metrics["status"] = "unstable"
@@ -468,9 +500,10 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
     run = Run(spec, out_dir, properties, sink)
     run.metrics.update(identity or {})
-    previous_term = None
+    previous_term = previous_int = None
     try:
-        previous_term = signal.signal(signal.SIGTERM, _raise_terminate)
+        previous_term = signal.signal(signal.SIGTERM, run.interrupts.handler)
+        previous_int = signal.signal(signal.SIGINT, run.interrupts.handler)
     except ValueError:  # not the main thread
         pass
     try:
@@ -487,7 +520,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         raise
     finally:
         # no second Ctrl-C may cut the cleanup short
-        old_int = signal.getsignal(signal.SIGINT)
+        old_int = previous_int if previous_int is not None else signal.getsignal(signal.SIGINT)
         try:
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         except ValueError:

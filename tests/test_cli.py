@@ -114,3 +114,26 @@ def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
     assert metrics["status"] == "interrupted" and metrics["reason"].startswith(f"{name} at step")
     assert metrics["steps"] > 0 and metrics["energy_final"] is not None
     verify(rrd)
+
+
+def test_a_signal_landing_in_a_finaliser_is_not_lost():
+    """Python ignores an exception raised in __del__; Warp arrays die every
+    step. In the step loop a signal is therefore remembered and raised at the
+    next step boundary; a second one raises at once."""
+    from pipelines.runner import Interrupts
+
+    interrupts = Interrupts()
+    interrupts.deferred = True
+
+    class Dying:
+        def __del__(self):
+            interrupts.handler(signal.SIGTERM, None)
+
+    Dying()  # the handler runs inside a finaliser: nothing may be raised there
+    with pytest.raises(KeyboardInterrupt) as info:
+        interrupts.check()
+    assert type(info.value).__name__ == "_Terminate"  # reported as SIGTERM
+    interrupts.check()  # raised once
+    interrupts.handler(signal.SIGINT, None)
+    with pytest.raises(KeyboardInterrupt):  # a second one while one is pending
+        interrupts.handler(signal.SIGINT, None)

@@ -123,11 +123,28 @@ def test_drucker_prager_holds_no_tension(dim):
     assert np.abs(P2).max() < 1e-6 * mat.E and np.abs(hist2[:, 0]).max() < 1e-9
 
 
-def test_sand_hardening_follows_klar():
-    """phi(q) = phi0 + (h1 q - h3) exp(-h2 q) with q the accumulated plastic
-    strain: the friction angle logged is the one the cone uses."""
-    mat = mpm.materials.Sand(friction_angle=35.0, h1=9.0, h2=0.2, h3=10.0)
-    q = np.array([0.0, 1.0, 5.0])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_sand_hardening_follows_klar(dim):
+    """With Klar's hardening the cone the return mapping uses has the friction
+    angle phi(q) = phi0 + (h1 q - h3) exp(-h2 q), q = sqrt(3/2) eps_p the
+    accumulated plastic strain at the start of the step: on the yielding
+    steps of a triaxial compression (s1 - s3) = (s1 + s3) sin phi(q), and phi
+    moves from phi0 - h3 towards phi0 as q grows."""
+    mat = mpm.materials.Sand(E=1e5, nu=0.3, friction_angle=35.0, h1=9.0, h2=0.2, h3=10.0)
+    n1, n2 = 20, 400
+    a = np.concatenate([np.linspace(1.0, 0.99, n1 + 1), 0.99 * np.linspace(1.0, 0.6, n2 + 1)[1:]])
+    b = np.concatenate([np.linspace(1.0, 0.99, n1 + 1), (0.99**dim / a[n1 + 1:]) ** (1 / (dim - 1))])
+    F = np.array([np.diag([ai] + [bi] * (dim - 1)) for ai, bi in zip(a, b)])
+    r = MaterialPoint(mat, dim).run(deformation_path(F), 1e-3)
+    s = -principal(r.tau[1:, 0])[:, ::-1]
+    s1, s3 = s[:, 0], s[:, -1]
+    phi = np.radians(mat.friction_angle_at(r.history[:-1, 0, 1]))  # q before each step
+    yielded = np.diff(r.history[:, 0, 1]) > 0
+    assert yielded.sum() > n2 // 2
+    np.testing.assert_allclose((s1 - s3)[yielded], ((s1 + s3) * np.sin(phi))[yielded],
+                               rtol=1e-9, atol=1e-9 * np.abs(s1).max())
+    q = r.history[[n1 + 1, -1], 0, 1] / math.sqrt(2 / 3)
+    assert mat.friction_angle_at(r.history[-1, 0, 1]) > mat.friction_angle_at(r.history[n1 + 2, 0, 1])
     np.testing.assert_allclose(mat.friction_angle_at(q * math.sqrt(2 / 3)),
                                35.0 + (9.0 * q - 10.0) * np.exp(-0.2 * q))
 
