@@ -41,7 +41,7 @@ from ..params import param
 from ..types import Types
 from .base import lame
 from .elasticity import split_elasticity
-from .plastic import STRETCH_FLOOR, Plastic
+from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
 
 JE2_FLOOR = 1.0e-4  # smallest J_E^2 a tip projection may produce
 
@@ -56,9 +56,8 @@ def friction_to_M(phi_deg: float) -> float:
 def _flow(t: Types):
     S = t.scalar
     vec = t.vec
-    d = float(t.dim)
-    ONE_OVER_D = 1.0 / t.dim
-    MINUS_TWO_OVER_D = -2.0 / t.dim
+    isochoric_b = make_isochoric_b(t)
+    stretches_of_b = make_stretches_of_b(t)
 
     @wp.func
     def flow(sigma: t.vec, params: t.params, history: t.history, dt: S):
@@ -71,42 +70,23 @@ def _flow(t: Types):
         h = history
         p0 = kappa * (S(1.0e-5) + wp.sinh(xi * wp.max(-h[0], S(0.0))))
         p_min = -beta * p0
-        J = S(1.0)
-        b = vec()
-        trb = S(0.0)
-        for i in range(wp.static(t.dim)):
-            a = wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))
-            J *= a
-            b[i] = a * a
-            trb += a * a
-        scale = wp.pow(J, S(MINUS_TWO_OVER_D))
-        s = vec()
-        for i in range(wp.static(t.dim)):
-            s[i] = mu * scale * (b[i] - trb / S(d))
+        stretches, J, mean, dev = isochoric_b(sigma)
+        s = mu * dev
         p = -S(0.5) * kappa * (J * J - S(1.0))
-        out = vec()
-        if p > p0 or p < p_min:  # beyond a tip: isotropic, on the tip
+        if p > p0 or p < p_min:  # beyond a tip: isotropic (no deviator), on the tip
             p = wp.clamp(p, p_min, p0)
             JE = wp.sqrt(wp.max(S(1.0) - S(2.0) * p / kappa, S(JE2_FLOOR)))
-            for i in range(wp.static(t.dim)):
-                out[i] = wp.pow(JE, S(ONE_OVER_D))
             if hardening:
                 h[0] = h[0] + wp.log(J / JE)
-            return out, h
+            return stretches_of_b(mean, vec(), JE), h
         s2 = wp.dot(s, s)
         a_q = S(1.5) * (S(1.0) + S(2.0) * beta)
         y_p = M2 * (p - p_min) * (p - p0)  # <= 0 between the tips
         if a_q * s2 + y_p <= S(0.0) or s2 <= S(0.0):  # inside: elastic
-            for i in range(wp.static(t.dim)):
-                out[i] = wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))
-            return out, h
-        # scale s onto the ellipse at fixed p; b = J^(2/d) s / mu + tr(b)/d
+            return stretches, h
+        # scale s onto the ellipse at fixed p (J kept exactly)
         c = wp.sqrt(-y_p / a_q / s2)
-        prod = S(1.0)
-        for i in range(wp.static(t.dim)):
-            out[i] = wp.sqrt(wp.max(c * s[i] / (mu * scale) + trb / S(d), S(0.0)))
-            prod *= out[i]
-        out = out * wp.pow(J / wp.max(prod, S(1.0e-30)), S(ONE_OVER_D))  # keep J (p) exactly
+        out = stretches_of_b(mean, c * dev, J)
         if hardening and p0 > S(1.0e-12) * kappa:
             # where the line from the centre to the trial state meets the ellipse
             pc = S(0.5) * (S(1.0) - beta) * p0

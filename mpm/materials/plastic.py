@@ -169,3 +169,53 @@ def make_exp_strain(t: Types):
         return sigma
 
     return exp_strain
+
+
+@functools.cache
+def make_isochoric_b(t: Types):
+    """``isochoric_b(sigma) -> (stretches, J, mean, dev)``: the stretches
+    |sigma_i| (floored), J = their product, and the mean and deviator of the
+    isochoric left Cauchy-Green strain b_bar_i = J^(-2/d) sigma_i^2 (the
+    models on b_E: NACC, viscoplastic; s = mu dev)."""
+    S = t.scalar
+    vec = t.vec
+    d = float(t.dim)
+    minus_two_over_d = -2.0 / t.dim
+    ones = vec(*([1.0] * t.dim))
+
+    @wp.func
+    def isochoric_b(sigma: t.vec):
+        a = vec()
+        J = S(1.0)
+        for i in range(wp.static(t.dim)):
+            a[i] = wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))
+            J *= a[i]
+        scale = wp.pow(J, S(minus_two_over_d))
+        b = vec()
+        for i in range(wp.static(t.dim)):
+            b[i] = scale * a[i] * a[i]
+        mean = wp.dot(b, ones) / S(d)
+        return a, J, mean, b - mean * ones
+
+    return isochoric_b
+
+
+@functools.cache
+def make_stretches_of_b(t: Types):
+    """``stretches_of_b(mean, dev, J) -> sigma``: the principal stretches whose
+    isochoric strain is mean + dev and whose volume is J (an isochoric
+    return keeps the volume exactly)."""
+    S = t.scalar
+    vec = t.vec
+    one_over_d = 1.0 / t.dim
+
+    @wp.func
+    def stretches_of_b(mean: S, dev: t.vec, J: S):
+        out = vec()
+        prod = S(1.0)
+        for i in range(wp.static(t.dim)):
+            out[i] = wp.sqrt(wp.max(mean + dev[i], S(0.0)))
+            prod *= out[i]
+        return out * wp.pow(J / wp.max(prod, S(1.0e-30)), S(one_over_d))
+
+    return stretches_of_b

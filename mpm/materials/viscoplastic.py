@@ -30,7 +30,7 @@ from ..params import param
 from ..types import Types
 from .base import lame
 from .elasticity import split_elasticity
-from .plastic import STRETCH_FLOOR, Plastic
+from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
 
 NEWTON_ITERATIONS = 40
 SQRT2 = math.sqrt(2.0)
@@ -39,11 +39,8 @@ SQRT2 = math.sqrt(2.0)
 @functools.cache
 def _flow(t: Types):
     S = t.scalar
-    vec = t.vec
-    d = float(t.dim)
-    ONE_OVER_D = 1.0 / t.dim
-    MINUS_TWO_OVER_D = -2.0 / t.dim
-    ones = vec(*([1.0] * t.dim))
+    isochoric_b = make_isochoric_b(t)
+    stretches_of_b = make_stretches_of_b(t)
 
     @wp.func
     def flow(sigma: t.vec, params: t.params, history: t.history, dt: S):
@@ -51,22 +48,11 @@ def _flow(t: Types):
         tau_Y = params[2]
         K = params[3]
         n = params[4]
-        J = S(1.0)
-        out = vec()
-        for i in range(wp.static(t.dim)):
-            out[i] = wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))
-            J *= out[i]
-        scale = wp.pow(J, S(MINUS_TWO_OVER_D))
-        b = vec()
-        mean = S(0.0)
-        for i in range(wp.static(t.dim)):
-            b[i] = scale * out[i] * out[i]
-            mean += b[i] / S(d)
-        dev = b - mean * ones
+        stretches, J, mean, dev = isochoric_b(sigma)
         s_tr = mu * wp.length(dev)
         excess = s_tr - S(SQRT2) * tau_Y
         if excess <= S(0.0) or dt <= S(0.0):
-            return out, history
+            return stretches, history
         # x = |s| - sqrt(2) tau_Y solves x + c x^(1/n) = excess,
         # c = 2 mu_hat dt / sqrt(2) (sqrt(2) K)^(-1/n)
         c = S(SQRT2) * mu * mean * dt * wp.pow(S(SQRT2) * K, -S(1.0) / n)
@@ -87,12 +73,7 @@ def _flow(t: Types):
                 if nx <= lo or nx >= hi:
                     nx = S(0.5) * (lo + hi)
                 x = nx
-        b = mean * ones + ((S(SQRT2) * tau_Y + x) / s_tr) * dev
-        prod = S(1.0)
-        for i in range(wp.static(t.dim)):
-            out[i] = wp.sqrt(wp.max(b[i], S(0.0)))
-            prod *= out[i]
-        return out * wp.pow(J / wp.max(prod, S(1.0e-30)), S(ONE_OVER_D)), history
+        return stretches_of_b(mean, ((S(SQRT2) * tau_Y + x) / s_tr) * dev, J), history
 
     return flow
 
