@@ -308,7 +308,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 else:
                     Cp = (S(inv_G) * K) * B
         xp = x[p] + dt * vp
-        Fs = Fsn[p] + dt * grad_v
+        Fsn_old = Fsn[p]
+        Fs = Fsn_old + dt * grad_v
         x[p] = xp
         v[p] = vp
         C[p] = Cp
@@ -323,13 +324,14 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         if wp.static(track_compression):
             wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
                           f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
-        # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1;
-        # for EMPM F^sn was I: L = grad_v; otherwise bounded by |grad_v|^2 / sigma_min^2
+        # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1
+        # (for EMPM F^sn was I: L = grad_v); a singular F^sn makes it non-finite
         rate2 = wp.ddot(grad_v, grad_v)
         if wp.static(lagrangian):
             s2 = min_stretch2(Fs)
             wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))
-            rate2 = rate2 / wp.max(s2, S(1.0e-12))
+            L = grad_v * wp.inverse(Fsn_old)
+            rate2 = wp.ddot(L, L)
         wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))
 
         # stability monitor and bounding box of the new positions
