@@ -3,22 +3,34 @@
 Measured quantities (names from :func:`diagnostic_names`):
   mass            sum m_p [kg]
   momentum        sum m_p v_p [kg m/s]
-  angular_momentum  APIC angular momentum about the origin [kg m^2/s]
-                  sum m_p x_p x v_p + m_p axial(A_p),  A_p = C_p D_p F^sn_p^T,
+  angular_momentum  APIC angular momentum about the centre of mass c [kg m^2/s]
+                  sum m_p (x_p - c) x v_p + m_p axial(A_p),  A_p = C_p D_p F^sn_p^T,
                   D_p = K_p^-1 the kernel's second moment (dx^2/4 I for the
                   quadratic B-spline; Jiang et al. 2015): the angular momentum
                   of the nodal field sum_i q_i x m_i v_i each particle
-                  rasterises; in 2D the scalar m (x0 v1 - x1 v0) + m (A10 - A01)
+                  rasterises; in 2D the scalar m (x0 v1 - x1 v0) + m (A10 - A01).
+                  The kernel sums it about the origin (L_0) with sum m_p x_p;
+                  :func:`about_center_of_mass` turns it into L_0 - c x P. About
+                  the centre of mass it is conserved under uniform gravity too,
+                  and a body spinning far from the origin is not measured
+                  against its orbital angular momentum.
   kinetic_energy  sum 1/2 m_p |v_p|^2 [J]
   elastic_energy  sum V_p^0 psi(F_p) [J]; evaluated by the P2G pass, which
                   decomposes F for the stress anyway (see mpm.transfer)
   potential_energy  -sum m_p g . x_p [J] (zero at the origin)
   momentum_scale  sum m_p |v_p|: the scale of relative momentum drifts
-  angular_momentum_scale  sum m_p (|x_p| |v_p| + |A_p|): same for angular
+  angular_momentum_scale  sum m_p (|x_p - c'| |v_p| + |A_p|): same for angular,
+                  about a given point c' (the centre of mass of the previous
+                  measurement)
+  center_of_mass  sum m_p x_p / sum m_p [m]
+
+Relative drifts (:func:`relative_drift`) are |Q(t) - Q(0)| / |Q(0)| when Q(0)
+is not near zero, else against the quantity's scale.
 """
 
 import functools
 
+import numpy as np
 import warp as wp
 
 from .types import Types
@@ -29,7 +41,38 @@ def diagnostic_names(dim: int) -> list[str]:
     L = ["angular_momentum"] if dim == 2 else [f"angular_momentum_{a}" for a in axes]
     return (["mass"] + [f"momentum_{a}" for a in axes] + L
             + ["kinetic_energy", "elastic_energy", "potential_energy",
-               "momentum_scale", "angular_momentum_scale"])
+               "momentum_scale", "angular_momentum_scale"]
+            + [f"center_of_mass_{a}" for a in axes])
+
+
+NEAR_ZERO = 1.0e-3  # |Q(0)| below this fraction of Q's scale counts as zero
+
+
+def relative_drift(first: np.ndarray, current: np.ndarray, scale: float) -> float:
+    """|Q - Q0| / |Q0|, or / ``scale`` when |Q0| < NEAR_ZERO scale (a
+    quantity that starts at zero, such as the momentum of two bodies
+    colliding head-on)."""
+    diff = float(np.linalg.norm(np.asarray(current) - np.asarray(first)))
+    norm0 = float(np.linalg.norm(first))
+    denom = norm0 if norm0 >= NEAR_ZERO * scale else scale
+    return diff / denom if denom > 0 else diff
+
+
+def about_center_of_mass(d: np.ndarray, dim: int) -> np.ndarray:
+    """Diagnostics as summed by the kernel (L about the origin, sum m x) to
+    the named ones (L about the centre of mass, the centre of mass)."""
+    names = diagnostic_names(dim)
+    out = d.copy()
+    M = d[0]
+    iP, iL, ic = 1, 1 + dim, names.index(f"center_of_mass_{'xyz'[0]}")
+    c = d[ic:ic + dim] / M if M > 0 else np.zeros(dim)
+    P = d[iP:iP + dim]
+    if dim == 2:
+        out[iL] = d[iL] - (c[0] * P[1] - c[1] * P[0])
+    else:
+        out[iL:iL + 3] = d[iL:iL + 3] - np.cross(c, P)
+    out[ic:ic + dim] = c
+    return out
 
 
 @functools.cache
@@ -43,6 +86,7 @@ def make_measure(t: Types, per_particle_K: bool):
     nL = 1 if dim == 2 else 3
     iL = 1 + dim  # first angular momentum slot
     iE = iL + nL  # kinetic energy slot
+    iC = iE + 5  # sum m x
 
     @wp.kernel(module="unique")
     def measure(
@@ -54,6 +98,7 @@ def make_measure(t: Types, per_particle_K: bool):
         D: S,
         cache_K: wp.array(dtype=t.mat),
         gravity: t.vec,
+        center: t.vec,
         out: wp.array(dtype=f64),
     ):
         p = wp.tid()
@@ -79,6 +124,8 @@ def make_measure(t: Types, per_particle_K: bool):
         wp.atomic_add(out, iE + 2, f64(-m * wp.dot(gravity, xp)))
         speed = wp.length(vp)
         wp.atomic_add(out, iE + 3, f64(m * speed))
-        wp.atomic_add(out, iE + 4, f64(m * (wp.length(xp) * speed + wp.sqrt(wp.ddot(A, A)))))
+        wp.atomic_add(out, iE + 4, f64(m * (wp.length(xp - center) * speed + wp.sqrt(wp.ddot(A, A)))))
+        for d in range(wp.static(dim)):
+            wp.atomic_add(out, iC + d, f64(m * xp[d]))
 
     return measure

@@ -17,14 +17,14 @@ import numpy as np
 import warp as wp
 
 from .configuration import make_update
-from .diagnostics import diagnostic_names, make_measure
+from .diagnostics import about_center_of_mass, diagnostic_names, make_measure
 from .fracture import fragments, make_fracture, neighbour_pairs
 from .contact import make_contact
 from .grid import make_boundary, make_boundary_data, make_grid_update, region_types
 from .layout import GridLayout
 from .model import Model, State
 from .schemes import AULMPM, EMPM
-from .timestep import cfl_dt
+from .timestep import StepLimits, step_limits
 from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
                        STATUS_PER_BODY, TRANSFERS, make_g2p, make_p2g)
 
@@ -63,9 +63,6 @@ class StepReport:
         if self.outside:
             return f"{self.outside} particles left the domain"
         return None
-
-
-STRAIN_STEP = 0.25  # dt |L| <= STRAIN_STEP * cfl: the strain increment of one step
 
 
 class Solver:
@@ -152,6 +149,7 @@ class Solver:
         self._capacity = 0
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
+        self._center = np.zeros(t.dim)  # centre of mass at the last measure [m]
 
     def _make_boundary_data(self):
         """Walls and kinematic regions (velocity, velocity gradient, centre,
@@ -336,27 +334,31 @@ class Solver:
                 self.grid_kin_id = wp.zeros(n_kin, dtype=wp.int32)
 
     def stable_dt(self, cfl: float, report: StepReport | None = None, max_speed: float = 0.0) -> float:
-        """The explicit step limit [s] after ``report``'s step (at rest without one):
-        per body, dt = cfl s_min dx / (c(J_min) + max|v|), with s_min the smallest
-        stretch of F^sn (the narrowest reference cell, now) and c the wave speed
-        at the most compressed particle; viscous diffusion bounds it too."""
+        """The explicit step limit [s] after ``report``'s step (at rest without
+        one): the smallest of :meth:`step_limits` over the bodies."""
+        return min(lim.dt for lim in self.step_limits(cfl, report, max_speed))
+
+    def step_limits(self, cfl: float, report: StepReport | None = None,
+                    max_speed: float = 0.0) -> list[StepLimits]:
+        """Per body, the terms of the step limit (mpm.timestep): the wave
+        speed c(J_min) at the most compressed particle (grown by a stiffening
+        material's factor), the narrowest reference cell s_min dx, viscous
+        diffusion and the strain rate."""
         m = self.model
-        dts = []
+        limits = []
         for b, body in enumerate(m.scene.bodies):
-            J, s, stiffening = 1.0, 1.0, 1.0
+            J, s, stiffening, rate = 1.0, 1.0, 1.0, 0.0
             if report is not None:
                 J = float(report.min_J[b]) if np.isfinite(report.min_J[b]) else 1.0
                 s = float(report.min_stretch[b]) if np.isfinite(report.min_stretch[b]) else 1.0
                 if report.stiffening[b] > 0 and np.isfinite(report.stiffening[b]):
                     stiffening = float(report.stiffening[b])
+                rate = float(report.max_rate[b])
             speed = report.max_speed if report is not None else max_speed
             c = body.material.wave_speed(min(max(J, 1e-3), 1.0)) * np.sqrt(stiffening)
-            dt = cfl_dt(m.dx * min(max(s, 1e-3), 1.0), c, speed, cfl,
-                        body.material.kinematic_viscosity(), m.dim)
-            if report is not None and report.max_rate[b] > 0:
-                dt = min(dt, STRAIN_STEP * cfl / report.max_rate[b])
-            dts.append(dt)
-        return min(dts)
+            limits.append(step_limits(m.dx, min(max(s, 1e-3), 1.0), c, speed, cfl,
+                                      body.material.kinematic_viscosity(), m.dim, rate))
+        return limits
 
     # ------------------------------------------------------------ read back
     def check(self) -> StepReport:
@@ -421,8 +423,11 @@ class Solver:
         D = m.types.scalar(m.kernel.moment * m.dx**2 if m.kernel.moment is not None else 0.0)
         wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
             m.mass, state.x, state.v, state.C, state.Fsn, D, state.stencils.K, self._gravity,
-            self.diagnostics])
-        out = self.diagnostics.numpy().copy()
+            m.types.vec(*self._center), self.diagnostics])
+        out = about_center_of_mass(self.diagnostics.numpy(), m.dim)
+        names = self.diagnostic_names()
+        i = names.index("center_of_mass_x")
+        self._center = out[i:i + m.dim].copy()
         i = self.diagnostic_names().index("elastic_energy")
         if elastic:
             self._clear()
