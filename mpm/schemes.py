@@ -8,13 +8,23 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
 * EMPM (s = n): update every step - Eulerian MLS-MPM (Hu et al. 2018).
 * TLMPM (s = 0): never update - total Lagrangian MPM (de Vaucorbeil 2020).
 * AULMPM: update a body when the fraction of its particles with
-  dJ_p >= epsilon reaches eta (the paper's criterion), or - safeguards - when
-  any of its particles reaches dJ_p >= dJ_max, or has its reference cell
-  squeezed below ``stretch_min`` of its width in some direction (smallest
-  singular value of F^sn). The fraction alone lets a handful of particles, a
-  splash's thin jet, tangle their reference cells between updates (a fluid
-  resists no shear, so nothing stops it) and blow up. epsilon = inf turns all
-  updates off (TLMPM), epsilon = 0 makes every step update (EMPM).
+  dJ_p >= epsilon reaches eta (``criterion="paper"``: eq. 33 exactly as
+  published). ``criterion="distortion"`` (the default with a material that
+  flows) also updates when any particle reaches dJ_p >= dJ_max or has its
+  reference cell squeezed below ``stretch_min`` of its width in some
+  direction (the smallest singular value s of F^sn). Why (RESULTS.md, "What
+  limits A-ULMPM's step on a fluid"): a fluid resists no shear, and a lone
+  splash particle (or a thin jet) at a wall keeps a large affine velocity
+  gradient C that nothing damps; its F^sn shears isochorically, so dJ stays
+  near 0 while s falls to 0 within a few dozen steps and its reference cell
+  tangles (det F^sn < 0), which blows up a run at a fixed EMPM-sized step.
+  The adaptive step avoids the blow-up by shrinking with s (a reference cell
+  is s dx wide now; mpm.timestep), so under the paper's criterion the step
+  collapses instead. s is also exactly the factor the step loses to the
+  reference, so ``stretch_min`` is a bound on that loss: dt >= stretch_min x
+  the step a fresh reference would allow, whenever the wave term binds.
+  epsilon = inf turns all updates off (TLMPM), epsilon = 0 makes every step
+  update (EMPM).
 
 At an update X <- x, F^0s <- F^sn F^0s, F^sn <- I, and the cached stencil
 weights are recomputed. The affine matrix C is a velocity gradient with
@@ -36,12 +46,13 @@ from dataclasses import dataclass
 from .params import param
 
 AFFINE = ("keep", "transform")
+CRITERIA = ("paper", "distortion")
 # (epsilon, eta) the paper uses for solids and for fluid-like scenes, with the
 # safeguards (dJ_max, stretch_min): off for solids, whose large elastic
 # deformations the Lagrangian reference handles and an update would only
 # expose to numerical fracture; on for fluids, which resist no shear
-DEFAULT_SOLID = (0.5, 0.1, math.inf, 0.0, "transform")
-DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5, "keep")
+DEFAULT_SOLID = (0.5, 0.1, math.inf, 0.0, "transform", "paper")
+DEFAULT_FLUID = (0.01, 0.01, 0.5, 0.5, "keep", "distortion")
 
 
 @dataclass
@@ -80,34 +91,49 @@ class AULMPM:
 
     Null parameters take the defaults of the scene's kind (a material that
     ``flows`` - a fluid or a plastic material - counts as a fluid): with a fluid
-    present epsilon = eta = 0.01, dJ_max = 0.5, stretch_min = 0.5, affine
-    keep; solids only epsilon = 0.5, eta = 0.1 (the paper's choices), no
-    safeguards, affine transform.
+    present epsilon = eta = 0.01, criterion distortion with dJ_max = 0.5,
+    stretch_min = 0.5, affine keep; solids only epsilon = 0.5, eta = 0.1
+    (the paper's choices), criterion paper, affine transform. The paper's
+    criterion ignores dJ_max and stretch_min (giving them is an error).
     ``epsilon = inf`` never updates (TLMPM), ``epsilon = 0`` always (EMPM).
     """
 
     name: str = "aulmpm"
     epsilon: float | None = param(None, "mark particles with dJ >= epsilon [-]", ge=0.0, inf=True)
     eta: float | None = param(None, "update when marked / n >= eta [-]", ge=0.0, le=1.0)
-    dJ_max: float | None = param(None, "also update when any particle has dJ >= max(dJ_max, "
-                                       "epsilon) [-]", gt=0.0, inf=True)
-    stretch_min: float | None = param(None, "also update when a reference cell is squeezed below "
-                                            "this fraction of its width [-]", ge=0.0, lt=1.0)
+    dJ_max: float | None = param(None, "distortion: also update when any particle has dJ >= "
+                                       "max(dJ_max, epsilon) [-]", gt=0.0, inf=True)
+    stretch_min: float | None = param(None, "distortion: also update when a reference cell is "
+                                            "squeezed below this fraction of its width [-]", ge=0.0, lt=1.0)
     affine: str | None = None  # keep | transform; None: the scene kind's default
+    criterion: str | None = None  # paper | distortion; None: the scene kind's default
 
     def resolved(self, fluid_present: bool) -> "AULMPM":
         """Defaults filled in; ``fluid_present``: a body's material flows."""
         defaults = DEFAULT_FLUID if fluid_present else DEFAULT_SOLID
+        criterion = self.criterion or defaults[5]
+        if criterion == "paper":
+            defaults = defaults[:2] + (math.inf, 0.0) + defaults[4:]
         given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min, self.affine)
         eps, eta, dJ_max, stretch_min, affine = (d if v is None else v for v, d in zip(given, defaults))
         return AULMPM(name=self.name, epsilon=eps, eta=eta, dJ_max=dJ_max,
-                      stretch_min=stretch_min, affine=affine)
+                      stretch_min=stretch_min, affine=affine, criterion=criterion)
+
+    def problems(self) -> list[tuple[str, str]]:
+        """(key, message) for inconsistent settings."""
+        if self.criterion == "paper" and (self.dJ_max is not None or self.stretch_min is not None):
+            key = "dJ_max" if self.dJ_max is not None else "stretch_min"
+            return [(key, "is not part of criterion 'paper' (eq. 33: epsilon and eta only); "
+                          "use criterion=distortion or leave it null")]
+        return []
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         if math.isinf(self.epsilon):
             return False
-        return (marked >= self.eta * count or max_dJ >= max(self.dJ_max, self.epsilon)
-                or min_stretch < self.stretch_min)
+        if marked >= self.eta * count:
+            return True
+        return self.criterion == "distortion" and (max_dJ >= max(self.dJ_max, self.epsilon)
+                                                   or min_stretch < self.stretch_min)
 
     def tracks_marks(self) -> bool:
         return not math.isinf(self.epsilon)

@@ -17,7 +17,7 @@ from mpm.materials import MATERIALS, Material
 from mpm.meshes import MeshShape, asset_path
 from mpm.params import violations
 from mpm.scene import WALL_TYPES
-from mpm.schemes import AFFINE
+from mpm.schemes import AFFINE, CRITERIA
 from mpm.transfer import TRANSFERS
 
 from .schema import CONTACTS, DEVICES, PRECISIONS, SHAPES
@@ -159,6 +159,10 @@ def make_scheme(node, key: str = "scheme"):
         raise ConfigError(f"{key}.{fname}", f"{value} out of range; accepted: {accepted}")
     if d.get("affine") is not None:
         _choice(f"{key}.affine", d["affine"], AFFINE)
+    if d.get("criterion") is not None:
+        _choice(f"{key}.criterion", d["criterion"], CRITERIA)
+    for fname, message in getattr(scheme, "problems", lambda: [])():
+        raise ConfigError(f"{key}.{fname}", message)
     return scheme
 
 

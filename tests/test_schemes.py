@@ -73,18 +73,25 @@ def run(scene, scheme, steps, dt, precision="float64"):
     return state.numpy(), reports
 
 
+CRITERIA = {"paper": {"criterion": "paper"},
+            # bounds tight enough to fire on the tiny scenes if they were consulted
+            "distortion": {"criterion": "distortion", "dJ_max": 1e-6, "stretch_min": 0.99999}}
+
+
+@pytest.mark.parametrize("criterion", list(CRITERIA))
 @pytest.mark.parametrize("dim", [2, 3])
-def test_aulmpm_limits_are_empm_and_tlmpm(dim):
+def test_aulmpm_limits_are_empm_and_tlmpm(dim, criterion):
     """epsilon = 0 (affine kept): every particle is marked, every step updates
-    - the Eulerian scheme; epsilon = inf: never - the total Lagrangian scheme.
-    Same floating-point operations, so equal bit for bit."""
+    - the Eulerian scheme; epsilon = inf: never - the total Lagrangian scheme,
+    with either criterion. Same floating-point operations, so equal bit for bit."""
     scene = tiny_scene(dim)
     steps = 30 if dim == 2 else 8
     ref_e, _ = run(scene, mpm.EMPM(), steps, 2e-4)
-    got_e, rep = run(scene, mpm.AULMPM(epsilon=0.0, eta=1.0, affine="keep"), steps, 2e-4)
+    got_e, rep = run(scene, mpm.AULMPM(epsilon=0.0, eta=1.0, affine="keep", **CRITERIA[criterion]),
+                     steps, 2e-4)
     assert all(len(r.updated) == len(scene.bodies) for r in rep)
     ref_t, _ = run(scene, mpm.TLMPM(), steps, 2e-4)
-    got_t, rep = run(scene, mpm.AULMPM(epsilon=float("inf"), eta=0.0), steps, 2e-4)
+    got_t, rep = run(scene, mpm.AULMPM(epsilon=float("inf"), eta=0.0, **CRITERIA[criterion]), steps, 2e-4)
     assert not any(r.updated for r in rep)
     for key in ("x", "v", "C", "F"):
         np.testing.assert_array_equal(got_e[key], ref_e[key], err_msg=key)
@@ -93,9 +100,26 @@ def test_aulmpm_limits_are_empm_and_tlmpm(dim):
     assert np.abs(ref_e["x"] - ref_t["x"]).max() > 1e-9
 
 
+def test_aulmpm_criteria():
+    """paper: eq. 33 only (marked >= eta n); distortion: also any dJ >= dJ_max
+    or a reference cell squeezed below stretch_min; the paper's criterion
+    ignores the bounds even on a fluid, and refuses them when given."""
+    paper = mpm.AULMPM(criterion="paper").resolved(fluid_present=True)
+    dist = mpm.AULMPM().resolved(fluid_present=True)
+    assert (paper.dJ_max, paper.stretch_min, dist.criterion) == (float("inf"), 0.0, "distortion")
+    n = 1000
+    assert paper.updates(10, n, 0.0, 1.0) and dist.updates(10, n, 0.0, 1.0)  # 10 >= 0.01 n
+    assert not paper.updates(9, n, 0.9, 0.1)  # one particle squeezed or compressed: not eq. 33
+    assert dist.updates(9, n, 0.5, 1.0) and dist.updates(9, n, 0.0, 0.49)
+    assert not dist.updates(9, n, 0.49, 0.5)
+    assert mpm.AULMPM(criterion="paper", stretch_min=0.5).problems()
+    assert not mpm.AULMPM(criterion="distortion", stretch_min=0.5).problems()
+
+
 def test_aulmpm_defaults_follow_the_materials():
     solid = mpm.AULMPM().resolved(fluid_present=False)
     fluid = mpm.AULMPM().resolved(fluid_present=True)
     assert (solid.epsilon, solid.eta, solid.dJ_max, solid.stretch_min) == (0.5, 0.1, float("inf"), 0.0)
     assert (fluid.epsilon, fluid.eta, fluid.dJ_max, fluid.stretch_min) == (0.01, 0.01, 0.5, 0.5)
+    assert (solid.criterion, fluid.criterion) == ("paper", "distortion")
     assert mpm.AULMPM(epsilon=0.2).resolved(True).epsilon == 0.2
