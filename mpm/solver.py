@@ -23,7 +23,7 @@ from .contact import make_contact
 from .grid import make_boundary, make_boundary_data, make_grid_update, region_types
 from .layout import GridLayout
 from .model import Model, State
-from .schemes import AULMPM, EMPM
+from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, step_limits
 from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
                        STATUS_PER_BODY, TRANSFERS, make_g2p, make_p2g)
@@ -72,7 +72,7 @@ class Solver:
         self.model = model
         scheme = scheme or EMPM()
         if isinstance(scheme, AULMPM):
-            scheme = scheme.resolved(any(b.material.flows for b in model.scene.bodies))
+            scheme = scheme.resolved(scene_kind(b.material for b in model.scene.bodies))
         self.scheme = scheme
         self.options = options or SolverOptions()
         t, k, dev = model.types, model.kernel, model.device

@@ -104,8 +104,8 @@ def test_aulmpm_criteria():
     """paper: eq. 33 only (marked >= eta n); distortion: also any dJ >= dJ_max
     or a reference cell squeezed below stretch_min; the paper's criterion
     ignores the bounds even on a fluid, and refuses them when given."""
-    paper = mpm.AULMPM(criterion="paper").resolved(fluid_present=True)
-    dist = mpm.AULMPM().resolved(fluid_present=True)
+    paper = mpm.AULMPM(criterion="paper").resolved("fluid")
+    dist = mpm.AULMPM().resolved("plastic")
     assert (paper.dJ_max, paper.stretch_min, dist.criterion) == (float("inf"), 0.0, "distortion")
     n = 1000
     assert paper.updates(10, n, 0.0, 1.0) and dist.updates(10, n, 0.0, 1.0)  # 10 >= 0.01 n
@@ -117,9 +117,15 @@ def test_aulmpm_criteria():
 
 
 def test_aulmpm_defaults_follow_the_materials():
-    solid = mpm.AULMPM().resolved(fluid_present=False)
-    fluid = mpm.AULMPM().resolved(fluid_present=True)
+    solid = mpm.AULMPM().resolved("solid")
+    fluid = mpm.AULMPM().resolved("fluid")
     assert (solid.epsilon, solid.eta, solid.dJ_max, solid.stretch_min) == (0.5, 0.1, float("inf"), 0.0)
-    assert (fluid.epsilon, fluid.eta, fluid.dJ_max, fluid.stretch_min) == (0.01, 0.01, 0.5, 0.5)
-    assert (solid.criterion, fluid.criterion) == ("paper", "distortion")
-    assert mpm.AULMPM(epsilon=0.2).resolved(True).epsilon == 0.2
+    plastic = mpm.AULMPM().resolved("plastic")
+    assert (fluid.epsilon, fluid.eta, fluid.dJ_max, fluid.stretch_min) == (0.01, 0.01, float("inf"), 0.9)
+    assert (plastic.epsilon, plastic.eta, plastic.dJ_max, plastic.stretch_min) == (0.01, 0.01, 0.5, 0.5)
+    assert (solid.criterion, fluid.criterion, plastic.criterion) == ("paper", "distortion", "distortion")
+    kind, M = mpm.schemes.scene_kind, mpm.MATERIALS
+    assert kind([M["fixed_corotated"]()]) == "solid"
+    assert kind([M["fixed_corotated"](), M["sand"]()]) == kind([M["viscoplastic"]()]) == "plastic"
+    assert kind([M["sand"](), M["fluid"]()]) == kind([M["viscous"]()]) == "fluid"
+    assert mpm.AULMPM(epsilon=0.2).resolved("fluid").epsilon == 0.2

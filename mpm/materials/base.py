@@ -57,7 +57,10 @@ class Material:
     stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?
     flows: ClassVar[bool] = False
     """does the material flow without bound (fluids, plastic solids)? A-ULMPM
-    then takes its defaults for fluid-like scenes (mpm.schemes)"""
+    then takes its defaults for flowing bodies (mpm.schemes)"""
+    fluid: ClassVar[bool] = False
+    """no shear stiffness at all (the weakly compressible fluids): A-ULMPM's
+    fluid defaults, measured by the aulmpm_tradeoff experiment"""
 
     def __post_init__(self):
         if not self.model:

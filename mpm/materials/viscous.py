@@ -71,6 +71,7 @@ class Viscous(Material):
     needs_velocity_gradient = True
     stiffens = True
     flows = True
+    fluid = True
 
     K: float = param(2.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]", gt=0.0)
     gamma: float = param(7.0, "Tait exponent gamma [-]", gt=1.0)
