@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from mpm import analytic
+from mpm.diagnostics import NEAR_ZERO
 from hydra.experimental.callback import Callback
 
 MAX_RECORDINGS = 40  # recordings read for the conservation plot
@@ -264,7 +265,8 @@ class Job:
         return next((p for p in candidates if p.is_file()), None)
 
     def final_state(self) -> dict | None:
-        """Arrays x [m], v [m/s] and X0 [m] of final_state.npz, None if absent or unreadable."""
+        """Arrays x [m], v [m/s], X0 [m] (and mass [kg], None in older files) of
+        final_state.npz, None if absent or unreadable."""
         if self._state is None:
             path = self.data_file("final_state.npz")
             state: dict = {}
@@ -274,6 +276,7 @@ class Job:
                         if all(k in npz for k in ("x", "v", "X0")):
                             state = {k: np.asarray(npz[k], dtype=np.float64) for k in ("x", "v", "X0")}
                             state["time"] = float(npz["time"]) if "time" in npz else None
+                            state["mass"] = np.asarray(npz["mass"], dtype=np.float64) if "mass" in npz else None
                 except Exception:
                     state = {}
             self._state = state
@@ -743,8 +746,9 @@ def _time_axis(rec, steps: np.ndarray) -> np.ndarray | None:
 
 def drift_series(scalars: dict, prefix: str) -> tuple[np.ndarray, np.ndarray] | None:
     """(steps, |Q(t) - Q(0)| / scale) for Q the vector of scalars named
-    ``prefix`` or ``prefix_x/_y/_z``; the scale is the largest
-    ``prefix_scale`` seen (the largest |Q| if absent)."""
+    ``prefix`` or ``prefix_x/_y/_z``, relative to |Q(0)|, or to the largest
+    ``prefix_scale`` seen (the largest |Q| if absent) when |Q(0)| is near zero
+    (mpm.diagnostics.relative_drift)."""
     names = [n for n in scalars if (n == prefix or re.fullmatch(prefix + r"_[xyz]", n))]
     if not names:
         return None
@@ -761,7 +765,9 @@ def drift_series(scalars: dict, prefix: str) -> tuple[np.ndarray, np.ndarray] | 
     scale = float(np.nanmax(scale_series[1])) if scale_series is not None and len(scale_series[1]) else 0.0
     if not scale > 0:
         scale = float(np.nanmax(np.linalg.norm(Q, axis=1)))
-    return common, diff / scale if scale > 0 else diff
+    norm0 = float(np.linalg.norm(Q[0]))
+    denom = norm0 if norm0 >= NEAR_ZERO * scale else scale  # as mpm.diagnostics.relative_drift
+    return common, diff / denom if denom > 0 else diff
 
 
 def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
@@ -779,8 +785,9 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
                 + [j.num("energy_initial"), j.num("energy_final")] for j in have]
         _write_csv(out / "conservation.csv", ["dir", "scene", "label", "resolution", "status"] + list(keys)
                    + ["energy_initial", "energy_final"], rows)
-        lines += ["Relative drifts between the first and the last measurement: mass, linear and angular "
-                  "momentum against the largest magnitude seen ([conservation.csv](conservation.csv)).", ""]
+        lines += ["Relative drifts between the first and the last measurement: mass, linear momentum "
+                  "and angular momentum about the centre of mass, against the first value (against the "
+                  "quantity's scale where it starts near zero) ([conservation.csv](conservation.csv)).", ""]
         lines += _md_table(["dir", "scene", "label", "cells", "status", "mass", "momentum",
                             "angular momentum"], [r[:8] for r in rows])
     if not with_rec:
@@ -830,8 +837,9 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
         fig.savefig(out / "conservation.png", dpi=120)
         plt.close(fig)
         lines += [f"Relative drift over {'time [s]' if use_time else 'steps'} read from {len(series)} "
-                  "recording(s): |P(t) - P(0)| / max|P| for linear and |L(t) - L(0)| / max|L| for angular "
-                  f"momentum, log scale floored at {DRIFT_FLOOR:g}; colours by method, one line per job.", ""]
+                  "recording(s): |Q(t) - Q(0)| / |Q(0)| for the linear momentum P and the angular momentum L "
+                  "about the centre of mass (against the quantity's scale where Q(0) is near zero: "
+                  f"two spheres colliding head-on), log scale floored at {DRIFT_FLOOR:g}; colours by method, one line per job.", ""]
         _image(lines, "conservation.png", "momentum drift over time")
     if len(with_rec) > MAX_RECORDINGS:
         lines += [f"Only the first {MAX_RECORDINGS} of {len(with_rec)} recordings were read.", ""]
@@ -875,6 +883,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     out = Path(out) if out is not None else sweep_dir
     out.mkdir(parents=True, exist_ok=True)
     from .granular import section_granular, section_plastic  # experiment families of their own
+    from .tradeoff import section_tradeoff
 
     jobs, duplicates = load_jobs(sweep_dir)
     lines = ["# Sweep report", "", f"Sweep: `{sweep_dir}`", ""]
@@ -893,6 +902,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         lines += section_fracture(jobs, out, style)
         lines += section_granular(jobs, out)
         lines += section_plastic(jobs, out)
+        lines += section_tradeoff(jobs, out)
     path = out / "report.md"
     path.write_text("\n".join(lines).rstrip() + "\n")
     return path

@@ -7,6 +7,7 @@ the recording is finalised and ``metrics.json`` written.
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 import signal
@@ -18,6 +19,7 @@ import numpy as np
 
 import mpm
 from mpm import analytic
+from mpm.diagnostics import relative_drift
 
 from . import provenance
 from .progress import Progress
@@ -36,8 +38,8 @@ def scalar_groups(dim: int, marked: list[str], error: bool = False) -> dict:
     groups = {
         "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
         "momentum": momentum,
-        "step": ["dt", "max_speed", "step_time_ms"],
-        "configuration updates": ["config_updates", "fracture"] + marked,
+        "step": ["dt", "dt_fresh", "max_speed", "step_time_ms"],
+        "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
     }
     if error:
         groups["error"] = ["error/displacement", "error/velocity"]
@@ -75,7 +77,9 @@ class Interrupts:
 
 class Drift:
     """Relative drift of conserved quantities between the first and last
-    measurement, against the largest scale seen (see mpm.diagnostics)."""
+    measurement: against the first value, or the largest scale seen when the
+    first is near zero (mpm.diagnostics.relative_drift; angular momentum is
+    about the centre of mass)."""
 
     def __init__(self, names: list[str]):
         self.names = names
@@ -94,8 +98,7 @@ class Drift:
         self.L_scale = max(self.L_scale, d[self.names.index("angular_momentum_scale")])
 
     def _rel(self, idx: list[int], scale: float) -> float:
-        diff = float(np.linalg.norm(self.last[idx] - self.first[idx]))
-        return diff / scale if scale > 0 else diff
+        return relative_drift(self.first[idx], self.last[idx], scale)
 
     def energy(self, d: np.ndarray) -> float:
         return float(sum(d[self.names.index(k)] for k in ("kinetic_energy", "elastic_energy",
@@ -150,6 +153,7 @@ class Run:
         self.solver = self.state = self.drift = None
         self.fracture = None  # (overall, per body) at the last evaluation
         self.fracture_step = -1
+        self._pieces = None  # (fracture per body, fragments per body) at the last count
         self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
         self.error_last: dict | None = None
         self._error_step = -1
@@ -157,6 +161,9 @@ class Run:
         self._dt0: float | None = None  # the first adaptive step [s]
         self.interrupts = Interrupts()
         self._stable_dt = math.inf
+        self._fresh_dt = math.inf  # the step a freshly updated reference would allow [s]
+        self.dt_binding: collections.Counter = collections.Counter()  # steps per binding term
+        self.fresh_dts: list[float] = []
 
     # ------------------------------------------------------------ build
     def build(self) -> None:
@@ -179,6 +186,8 @@ class Run:
         bodies = [b.name for b in spec.scene.bodies]
         self.marked_names = (["marked_fraction"] if len(bodies) == 1 else
                              [f"marked_fraction/{b}" for b in bodies])
+        self.stretch_names = (["min_stretch"] if len(bodies) == 1 else
+                              [f"min_stretch/{b}" for b in bodies])
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
 
@@ -192,7 +201,8 @@ class Run:
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
             properties=self.properties,
-            scalar_groups=scalar_groups(scene.dim, self.marked_names if self.scheme.tracks_marks() else [],
+            scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
+                                        + (self.stretch_names if self.scheme.name != "empm" else []),
                                         self.solution is not None or self.spec.run.reference is not None))
 
     # ------------------------------------------------------------ logging
@@ -262,10 +272,11 @@ class Run:
         return {f"error/{k}": val for k, val in e.items()}
 
     def save_final_state(self) -> None:
-        """``final_state.npz``: positions x, velocities v and initial positions
-        X0 of the last state (self-convergence studies compare these)."""
+        """``final_state.npz``: positions x, velocities v, initial positions X0
+        and masses of the last state (self-convergence and trade-off studies
+        compare these)."""
         np.savez(self.out_dir / "final_state.npz", x=self.state.x.numpy(), v=self.state.v.numpy(),
-                 X0=self.X0, step=self.step, time=self.t)
+                 X0=self.X0, mass=self.model.mass.numpy(), step=self.step, time=self.t)
 
     def reference_errors(self, path: str) -> dict:
         """RMS difference of the final positions and velocities to a reference
@@ -286,11 +297,18 @@ class Run:
         return {**e, **out}
 
     def log_fracture(self) -> np.ndarray:
+        """The fracture measure and the pieces per body (recounted only when a
+        body's fraction of broken pairs changed: the count is a host-side graph
+        search, 0.1 s for 100K particles)."""
         frac = self.solver.fracture(self.state)
         overall = float(np.sum(frac * self.solver.pair_counts) / max(self.solver.pair_counts.sum(), 1))
-        row = {"fracture": overall}
+        if self._pieces is None or not np.array_equal(frac, self._pieces[0]):
+            self._pieces = (frac.copy(), self.solver.fragments())
+        pieces = self._pieces[1]
+        row = {"fracture": overall, "fragments": float(pieces.sum())}
         if len(frac) > 1:
             row.update({f"fracture/{b.name}": float(f) for b, f in zip(self.spec.scene.bodies, frac)})
+            row.update({f"fragments/{b.name}": float(c) for b, c in zip(self.spec.scene.bodies, pieces)})
         self.sink.scalars(self.step, self.t, row)
         self.fracture, self.fracture_step = (overall, frac), self.step
         return frac
@@ -303,8 +321,12 @@ class Run:
         elif s.name == "tlmpm":
             text = "tlmpm: the reference configuration is the initial one (s = 0), never updated"
         else:
-            text = (f"aulmpm: a body is updated when the fraction of its particles with "
-                    f"dJ >= {s.epsilon:g} reaches {s.eta:g}; affine matrix: {s.affine}")
+            text = (f"aulmpm ({s.criterion} criterion): a body is updated when the fraction of its "
+                    f"particles with dJ >= {s.epsilon:g} reaches {s.eta:g}")
+            if s.criterion == "distortion":
+                text += (f", or a particle has dJ >= {max(s.dJ_max, s.epsilon):g} or a reference cell "
+                         f"is squeezed below {s.stretch_min:g} of its width")
+            text += f"; affine matrix: {s.affine}"
         params = {k: v for k, v in vars(s).items() if isinstance(v, (int, float, str))}
         self.sink.event(0, 0.0, text, scheme=s.name, **params)
 
@@ -326,11 +348,14 @@ class Run:
                 update_step=self.step, update_time=self.t)
 
     def row_extra(self, dt: float, report: mpm.StepReport) -> dict:
-        extra = {"dt": dt, "max_speed": report.max_speed, "step_time_ms": self.step_ms[-1],
+        extra = {"dt": dt, "dt_fresh": self._fresh_dt, "max_speed": report.max_speed, "step_time_ms": self.step_ms[-1],
                  "config_updates": float(self.updates.sum())}
         if self.scheme.tracks_marks():
             for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
                 extra[name] = float(m / n)
+        if self.scheme.name != "empm":  # the narrowest reference cell (1 in EMPM)
+            for name, s in zip(self.stretch_names, report.min_stretch):
+                extra[name] = float(s)
         if self.solution is not None:
             extra.update(self.errors())
         return extra
@@ -340,10 +365,15 @@ class Run:
         """The solver's stable step (mpm.Solver.stable_dt) capped by run.dt_max,
         unless run.dt fixes it; the last step ends on the duration."""
         run = self.spec.run
+        limits = self.solver.step_limits(run.cfl, report, self._v0)
+        limit = min(limits, key=lambda lim: lim.dt)
+        self._fresh_dt = min(run.dt_max, min(lim.fresh for lim in limits))
         if run.dt is not None:
             dt = run.dt
+            self.dt_binding["fixed"] += 1
         else:
-            dt = min(run.dt_max, self.solver.stable_dt(run.cfl, report, self._v0))
+            dt = min(run.dt_max, limit.dt)
+            self.dt_binding["dt_max" if run.dt_max <= limit.dt else limit.binding] += 1
             if self._dt0 is None:
                 self._dt0 = dt
         self._stable_dt = dt
@@ -398,6 +428,7 @@ class Run:
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
             self.update_ms.append(1e3 * report.update_time)
             self.dts.append(dt)
+            self.fresh_dts.append(self._fresh_dt)
             self.step += 1
             self.t += dt
             if self._pending:
@@ -443,7 +474,7 @@ class Run:
             overall, per_body = self.fracture
             names = [b.name for b in self.spec.scene.bodies]
             m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
-            pieces = self.solver.fragments()
+            pieces = self.solver.fragments()  # exact at the end
             m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
             self.save_final_state()
             if self.model.plastic:
@@ -466,6 +497,10 @@ class Run:
             steps=steps, sim_time=self.t,
             dt=(self.t / steps) if steps else None, dt_min=min(self.dts) if self.dts else None,
             dt_max=max(self.dts) if self.dts else None,
+            dt_binding=dict(self.dt_binding),
+            # the step against what a freshly updated reference would allow (1: the reference costs nothing)
+            dt_reference_factor=(float(np.mean(np.minimum(np.array(self.dts) / np.array(self.fresh_dts), 1.0)))
+                                 if self.dts else None),
             step_time_ms=_median(self.step_ms), log_time_ms=_median(self.log_ms),
             loop_time_s=sum(self.step_ms) / 1e3)
         if m["step_time_ms"] and "particles" in m:

@@ -112,8 +112,9 @@ def test_experiment_globs_pick_every_config_of_the_group_and_no_schema(name):
         if not str(value).startswith("glob("):
             continue
         override = OverridesParser.create().parse_override(f"{key}={value}")
-        names = group_options(key) + [n.removesuffix(".yaml") for n in store.get(key, {})]
-        assert sorted(override.value().filter(names)) == group_options(key)
+        group = key.lstrip("+")
+        names = group_options(group) + [n.removesuffix(".yaml") for n in store.get(group, {})]
+        assert sorted(override.value().filter(names)) == group_options(group)
 
 
 def test_changed_parameter_list_never_mixes_results(tmp_path):
