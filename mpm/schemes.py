@@ -9,15 +9,16 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
 * TLMPM (s = 0): never update - total Lagrangian MPM (de Vaucorbeil 2020).
 * AULMPM: update a body when the fraction of its particles with
   dJ_p >= epsilon reaches eta (``criterion="paper"``: eq. 33 exactly as
-  published). ``criterion="distortion"`` (the default with a material that
-  flows) also updates when any particle reaches dJ_p >= dJ_max or has its
+  published). ``criterion="distortion"`` (the default with a fluid or a
+  plastic body, :data:`DEFAULTS`) also updates when any particle reaches dJ_p >= dJ_max or has its
   reference cell squeezed below ``stretch_min`` of its width in some
-  direction (the smallest singular value s of F^sn). Why (RESULTS.md, "What
-  limits A-ULMPM's step on a fluid"): a fluid resists no shear, and a lone
+  direction (the smallest singular value s of F^sn). Why (RESULTS.md,
+  "A-ULMPM on fluids"): a fluid resists no shear, and a lone
   splash particle (or a thin jet) at a wall keeps a large affine velocity
-  gradient C that nothing damps; its F^sn shears isochorically, so dJ stays
-  near 0 while s falls to 0 within a few dozen steps and its reference cell
-  tangles (det F^sn < 0), which blows up a run at a fixed EMPM-sized step.
+  gradient C that nothing damps; its F^sn shears at nearly constant volume,
+  and one particle never makes the fraction eta, while s falls to 0 within a
+  few dozen steps and its reference cell tangles (det F^sn < 0), which blows
+  up a run at a fixed EMPM-sized step.
   The adaptive step avoids the blow-up by shrinking with s (a reference cell
   is s dx wide now; mpm.timestep), so under the paper's criterion the step
   collapses instead. s is also exactly the factor the step loses to the
@@ -34,8 +35,8 @@ EMPM conserve angular momentum to round-off); ``affine="transform"``
 re-expresses it in the new reference, C <- C (F^sn)^-1, which loses far less
 angular momentum over the rare updates of A-ULMPM on solids. With the
 frequent updates of a fluid, transform is unstable: a lone splash particle
-whose affine field squeezes its reference cell to half (the stretch_min
-safeguard) gets C doubled at every update, every few steps, and the step
+whose affine field squeezes its reference cell to half (stretch_min = 0.5)
+gets C doubled at every update, every few steps, and the step
 collapses (seen on the droplet with the compact kernel); keep is the
 default there.
 """

@@ -119,6 +119,8 @@ def section_tradeoff(jobs: list, out) -> list[str]:
                 ax.plot(ti, ei, marker, ms=11 if marker == "*" else 7,
                         color="tab:red" if name == "empm" else ("tab:green" if on else "tab:blue"))
                 ax.annotate(name, (ti, ei), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
             ax.set_xlabel("run time [s] (stepping)")
             ax.set_ylabel("shape error against the fine EMPM reference")
             ax.set_title(f"{scene}: EMPM (square), the paper's (0.01, 0.01) (star)")

@@ -29,6 +29,12 @@ def test_rotating_plate_fractures_only_with_the_eulerian_scheme(tmp_path):
     for s in ("tlmpm", "aulmpm"):
         assert m[s]["fracture"]["total"] == 0.0 and m[s]["fragments"]["total"] == 1, s
     assert m["aulmpm"]["config_updates"]["total"] < m["aulmpm"]["steps"] / 20
+    # the recording carries the pieces beside the broken fraction, ending on metrics.json's count
+    from pipelines.recordings import read
+
+    scalars = read(tmp_path / "empm" / "recording.rrd").scalars
+    assert scalars["fragments"][1][-1] == m["empm"]["fragments"]["total"]
+    assert scalars["fragments"][1][0] == 1 and len(scalars["fragments"][1]) == len(scalars["fracture"][1])
 
 
 @pytest.mark.parametrize("scheme,affine", [("tlmpm", "keep"), ("aulmpm", "keep"), ("aulmpm", "transform")])
