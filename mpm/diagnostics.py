@@ -48,14 +48,16 @@ def diagnostic_names(dim: int) -> list[str]:
 NEAR_ZERO = 1.0e-3  # |Q(0)| below this fraction of Q's scale counts as zero
 
 
-def relative_drift(first: np.ndarray, current: np.ndarray, scale: float) -> float:
+def relative_drift(first: np.ndarray, current: np.ndarray, scale: float):
     """|Q - Q0| / |Q0|, or / ``scale`` when |Q0| < NEAR_ZERO scale (a
     quantity that starts at zero, such as the momentum of two bodies
-    colliding head-on)."""
-    diff = float(np.linalg.norm(np.asarray(current) - np.asarray(first)))
+    colliding head-on). ``current`` is one value of Q (a float comes back)
+    or a series of them along its first axis (an array comes back)."""
+    diff = np.linalg.norm(np.asarray(current) - np.asarray(first), axis=-1)
     norm0 = float(np.linalg.norm(first))
     denom = norm0 if norm0 >= NEAR_ZERO * scale else scale
-    return diff / denom if denom > 0 else diff
+    out = diff / denom if denom > 0 else diff
+    return float(out) if np.ndim(out) == 0 else out
 
 
 def about_center_of_mass(d: np.ndarray, dim: int) -> np.ndarray:
@@ -64,7 +66,7 @@ def about_center_of_mass(d: np.ndarray, dim: int) -> np.ndarray:
     names = diagnostic_names(dim)
     out = d.copy()
     M = d[0]
-    iP, iL, ic = 1, 1 + dim, names.index(f"center_of_mass_{'xyz'[0]}")
+    iP, iL, ic = 1, 1 + dim, names.index("center_of_mass_x")
     c = d[ic:ic + dim] / M if M > 0 else np.zeros(dim)
     P = d[iP:iP + dim]
     if dim == 2:

@@ -48,7 +48,7 @@ from .params import param
 
 AFFINE = ("keep", "transform")
 CRITERIA = ("paper", "distortion")
-# (epsilon, eta, dJ_max, stretch_min, affine, criterion) per kind of scene:
+# A-ULMPM's parameters per kind of scene:
 # solids take the paper's (0.5, 0.1) and its criterion, no bounds (their large
 # elastic deformations are what the Lagrangian reference handles; an update
 # would only expose them to numerical fracture); plastic bodies the paper's
@@ -56,17 +56,21 @@ CRITERIA = ("paper", "distortion")
 # the paper's (0.01, 0.01) with the stretch bound 0.9, which keeps the step
 # within 10 % of EMPM's and won the aulmpm_tradeoff measurement (RESULTS.md)
 DEFAULTS = {
-    "solid": (0.5, 0.1, math.inf, 0.0, "transform", "paper"),
-    "plastic": (0.01, 0.01, 0.5, 0.5, "keep", "distortion"),
-    "fluid": (0.01, 0.01, math.inf, 0.9, "keep", "distortion"),
+    "solid": dict(epsilon=0.5, eta=0.1, dJ_max=math.inf, stretch_min=0.0, affine="transform",
+                  criterion="paper"),
+    "plastic": dict(epsilon=0.01, eta=0.01, dJ_max=0.5, stretch_min=0.5, affine="keep",
+                    criterion="distortion"),
+    "fluid": dict(epsilon=0.01, eta=0.01, dJ_max=math.inf, stretch_min=0.9, affine="keep",
+                  criterion="distortion"),
 }
+PAPER_BOUNDS = dict(dJ_max=math.inf, stretch_min=0.0)  # eq. 33 alone: the bounds off
 
 
 def scene_kind(materials) -> str:
     """"fluid" if a material has no shear stiffness, else "plastic" if one
     flows, else "solid": which defaults A-ULMPM takes."""
     materials = list(materials)
-    if any(getattr(m, "fluid", False) for m in materials):
+    if any(m.fluid for m in materials):
         return "fluid"
     return "plastic" if any(m.flows for m in materials) else "solid"
 
@@ -79,6 +83,9 @@ class _FixedRule:
 
     def tracks_marks(self) -> bool:
         return False
+
+    def problems(self) -> list[tuple[str, str]]:
+        return []
 
 
 @dataclass
@@ -127,14 +134,11 @@ class AULMPM:
 
     def resolved(self, kind: str) -> "AULMPM":
         """Defaults filled in for a scene of ``kind`` (:func:`scene_kind`)."""
-        defaults = DEFAULTS[kind]
-        criterion = self.criterion or defaults[5]
-        if criterion == "paper":
-            defaults = defaults[:2] + (math.inf, 0.0) + defaults[4:]
-        given = (self.epsilon, self.eta, self.dJ_max, self.stretch_min, self.affine)
-        eps, eta, dJ_max, stretch_min, affine = (d if v is None else v for v, d in zip(given, defaults))
-        return AULMPM(name=self.name, epsilon=eps, eta=eta, dJ_max=dJ_max,
-                      stretch_min=stretch_min, affine=affine, criterion=criterion)
+        defaults = dict(DEFAULTS[kind])
+        if (self.criterion or defaults["criterion"]) == "paper":
+            defaults.update(PAPER_BOUNDS)
+        given = {k: getattr(self, k) for k in defaults}
+        return AULMPM(name=self.name, **{k: defaults[k] if v is None else v for k, v in given.items()})
 
     def problems(self) -> list[tuple[str, str]]:
         """(key, message) for inconsistent settings."""

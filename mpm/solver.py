@@ -149,7 +149,7 @@ class Solver:
         self._capacity = 0
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
-        self._center = np.zeros(t.dim)  # centre of mass at the last measure [m]
+        self._center = np.zeros(t.dim)  # centre of mass [m]: at prepare, then at the last measure
 
     def _make_boundary_data(self):
         """Walls and kinematic regions (velocity, velocity gradient, centre,
@@ -190,6 +190,8 @@ class Solver:
         and record the neighbour pairs of the fracture measure."""
         x = state.x.numpy()
         self.X0 = x.astype(np.float64)  # [m] initial positions (the body force is evaluated there)
+        mass = self.model.mass.numpy().astype(np.float64)
+        self._center = mass @ self.X0 / mass.sum()  # the angular momentum scale's centre
         self._prepare_fracture(x)
         for b, (start, count) in enumerate(self.model.body_ranges):
             xb = x[start:start + count]
@@ -428,7 +430,7 @@ class Solver:
         names = self.diagnostic_names()
         i = names.index("center_of_mass_x")
         self._center = out[i:i + m.dim].copy()
-        i = self.diagnostic_names().index("elastic_energy")
+        i = names.index("elastic_energy")
         if elastic:
             self._clear()
             self._rasterize(state, m.types.scalar(0.0), write=False)

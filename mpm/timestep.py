@@ -25,11 +25,9 @@ TERMS = ("wave", "viscous", "strain_rate")
 
 def cfl_dt(dx: float, wave_speed: float, max_speed: float, cfl: float,
            kinematic_viscosity: float = 0.0, dim: int = 2) -> float:
-    """dt = cfl dx / (c + max|v|), and the viscous bound when nu > 0 [s]."""
-    dt = cfl * dx / (wave_speed + max_speed)
-    if kinematic_viscosity > 0.0:
-        dt = min(dt, cfl * dx * dx / (2.0 * dim * kinematic_viscosity))
-    return dt
+    """dt = cfl dx / (c + max|v|), and the viscous bound when nu > 0 [s]: the
+    limit of an undeformed reference with no strain rate."""
+    return step_limits(dx, 1.0, wave_speed, max_speed, cfl, kinematic_viscosity, dim, 0.0).dt
 
 
 @dataclass(frozen=True)

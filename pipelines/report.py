@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from mpm import analytic
-from mpm.diagnostics import NEAR_ZERO
+from mpm.diagnostics import relative_drift
 from hydra.experimental.callback import Callback
 
 MAX_RECORDINGS = 40  # recordings read for the conservation plot
@@ -760,14 +760,11 @@ def drift_series(scalars: dict, prefix: str) -> tuple[np.ndarray, np.ndarray] | 
         return None
     common = np.sort(common)
     Q = np.stack([np.interp(common, *scalars[n]) for n in sorted(names)], axis=1)
-    diff = np.linalg.norm(Q - Q[0], axis=1)
     scale_series = scalars.get(f"{prefix}_scale")
     scale = float(np.nanmax(scale_series[1])) if scale_series is not None and len(scale_series[1]) else 0.0
     if not scale > 0:
         scale = float(np.nanmax(np.linalg.norm(Q, axis=1)))
-    norm0 = float(np.linalg.norm(Q[0]))
-    denom = norm0 if norm0 >= NEAR_ZERO * scale else scale  # as mpm.diagnostics.relative_drift
-    return common, diff / denom if denom > 0 else diff
+    return common, relative_drift(Q[0], Q, scale)
 
 
 def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:

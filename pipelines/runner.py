@@ -163,7 +163,7 @@ class Run:
         self._stable_dt = math.inf
         self._fresh_dt = math.inf  # the step a freshly updated reference would allow [s]
         self.dt_binding: collections.Counter = collections.Counter()  # steps per binding term
-        self.fresh_dts: list[float] = []
+        self.reference_factors: list[float] = []  # per step: dt / fresh dt of the binding body
 
     # ------------------------------------------------------------ build
     def build(self) -> None:
@@ -184,10 +184,11 @@ class Run:
         self.names = self.solver.diagnostic_names()
         self.drift = Drift(self.names)
         bodies = [b.name for b in spec.scene.bodies]
-        self.marked_names = (["marked_fraction"] if len(bodies) == 1 else
-                             [f"marked_fraction/{b}" for b in bodies])
-        self.stretch_names = (["min_stretch"] if len(bodies) == 1 else
-                              [f"min_stretch/{b}" for b in bodies])
+        def per_body(name: str) -> list[str]:  # one scalar, or one per body
+            return [name] if len(bodies) == 1 else [f"{name}/{b}" for b in bodies]
+
+        self.marked_names = per_body("marked_fraction")
+        self.stretch_names = per_body("min_stretch")
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
 
@@ -368,6 +369,7 @@ class Run:
         limits = self.solver.step_limits(run.cfl, report, self._v0)
         limit = min(limits, key=lambda lim: lim.dt)
         self._fresh_dt = min(run.dt_max, min(lim.fresh for lim in limits))
+        self._reference_factor = limit.reference_factor
         if run.dt is not None:
             dt = run.dt
             self.dt_binding["fixed"] += 1
@@ -428,7 +430,7 @@ class Run:
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
             self.update_ms.append(1e3 * report.update_time)
             self.dts.append(dt)
-            self.fresh_dts.append(self._fresh_dt)
+            self.reference_factors.append(self._reference_factor)
             self.step += 1
             self.t += dt
             if self._pending:
@@ -498,9 +500,8 @@ class Run:
             dt=(self.t / steps) if steps else None, dt_min=min(self.dts) if self.dts else None,
             dt_max=max(self.dts) if self.dts else None,
             dt_binding=dict(self.dt_binding),
-            # the step against what a freshly updated reference would allow (1: the reference costs nothing)
-            dt_reference_factor=(float(np.mean(np.minimum(np.array(self.dts) / np.array(self.fresh_dts), 1.0)))
-                                 if self.dts else None),
+            # the stable step against what a fresh reference would allow (1: the reference costs nothing)
+            dt_reference_factor=float(np.mean(self.reference_factors)) if self.reference_factors else None,
             step_time_ms=_median(self.step_ms), log_time_ms=_median(self.log_ms),
             loop_time_s=sum(self.step_ms) / 1e3)
         if m["step_time_ms"] and "particles" in m:

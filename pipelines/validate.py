@@ -161,7 +161,7 @@ def make_scheme(node, key: str = "scheme"):
         _choice(f"{key}.affine", d["affine"], AFFINE)
     if d.get("criterion") is not None:
         _choice(f"{key}.criterion", d["criterion"], CRITERIA)
-    for fname, message in getattr(scheme, "problems", lambda: [])():
+    for fname, message in scheme.problems():
         raise ConfigError(f"{key}.{fname}", message)
     return scheme
 

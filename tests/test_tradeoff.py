@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pipelines.report import write_report
-from pipelines.tradeoff import BINS, center_of_mass, mass_distribution, shape_error
+from pipelines.tradeoff import center_of_mass, mass_distribution, shape_error
 from test_report import _job, _metrics
 
 
@@ -78,4 +78,3 @@ def test_report_reads_a_tradeoff_sweep(tmp_path):
     # distortion (fastest), empm (faster than paper... 5 s, better than distortion), paper (best);
     # distortion_s0.9 is dominated by empm
     assert "distortion," in front and "empm" in front and "paper" in front and "s0.9" not in front
-    assert BINS > 1
