@@ -15,12 +15,15 @@ conditions, evaluated at the node's current position q_i:
   region is active: v_i = u + G (q_i - c(t)), with G the region's velocity
   gradient (the skew matrix of its angular velocity omega, so that
   G r = omega x r, plus any prescribed ``velocity_gradient``).
+
+Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
 """
 
 import functools
 
 import warp as wp
 
+from .colliders import make_collide, make_collider_data
 from .scene import WALL_TYPES
 from .types import Types
 
@@ -89,8 +92,10 @@ def region_types(t: Types):
 
 @functools.cache
 def make_boundary_data(t: Types):
-    """What the boundary conditions read: the walls and the kinematic regions."""
+    """What the boundary conditions read: the walls, the colliders and the
+    kinematic regions."""
     U, G, Cc, Win = region_types(t)
+    Collider = make_collider_data(t)
 
     @wp.struct
     class BoundaryData:
@@ -102,21 +107,27 @@ def make_boundary_data(t: Types):
         region_gradient: wp.array(dtype=G)  # velocity gradient [1/s]
         region_center: wp.array(dtype=Cc)  # centre at start [m]
         region_window: wp.array(dtype=Win)  # (start, end) [s]
+        colliders: wp.array(dtype=Collider)  # mpm.colliders records
 
     return BoundaryData
 
 
 @functools.cache
-def make_conditions(t: Types, with_regions: bool):
-    """``conditions(v, q, m, kin_m, kin_id, time, data) -> v``: walls, then regions."""
+def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
+    """``conditions(v, q, m, kin_m, kin_id, time, data) -> v``: walls, the
+    colliders (the shapes named in ``colliders``; none: compiled out), then
+    regions."""
     S = t.scalar
     walls = make_walls(t)
     kinematic = make_kinematic(t)
+    collide = make_collide(t, colliders)
     Data = make_boundary_data(t)
 
     @wp.func
     def conditions(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S, data: Data):
         v = walls(v, q, data.domain, data.band, data.wall_lo, data.wall_hi)
+        if wp.static(len(colliders) > 0):
+            v = collide(v, q, time, data.colliders)
         if wp.static(with_regions):
             v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
                           data.region_center, data.region_window)
@@ -126,11 +137,12 @@ def make_conditions(t: Types, with_regions: bool):
 
 
 @functools.cache
-def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
+def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
+                     colliders: tuple[str, ...] = ()):
     """Momentum to velocity and gravity; the boundary conditions too unless
     ``with_boundary`` is False (contact comes first, then :func:`make_boundary`)."""
     S = t.scalar
-    conditions = make_conditions(t, with_regions)
+    conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
 
     @wp.kernel(module="unique")
@@ -160,10 +172,10 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool):
 
 
 @functools.cache
-def make_boundary(t: Types, with_regions: bool):
+def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
     """The boundary conditions as a pass of their own (after contact)."""
     S = t.scalar
-    conditions = make_conditions(t, with_regions)
+    conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
 
     @wp.kernel(module="unique")

@@ -11,6 +11,7 @@ from typing import Sequence, Union
 
 import numpy as np
 
+from .colliders import Collider
 from .materials import Material
 
 WALL_TYPES = ("sticky", "slip", "open")
@@ -78,6 +79,32 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
+class Bowl:
+    """Spherical cap shell: the points between ``radius`` and ``radius +
+    thickness`` from ``center`` that lie below the rim plane ``rim`` [m]
+    above the centre along coordinate ``axis`` (the opening); an arc in 2D."""
+
+    center: tuple[float, ...]
+    radius: float
+    thickness: float
+    rim: float
+    axis: int = 1
+
+    def bounds(self):
+        c = np.asarray(self.center, float)
+        R = self.radius + self.thickness
+        lo, hi = c - R, c + R
+        hi[self.axis] = c[self.axis] + min(self.rim, R)
+        return lo, hi
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        d = x - np.asarray(self.center)
+        r2 = np.sum(d**2, axis=1)
+        return ((r2 >= self.radius**2) & (r2 <= (self.radius + self.thickness) ** 2)
+                & (d[:, self.axis] <= self.rim))
+
+
+@dataclass(frozen=True)
 class Compound:
     """Union of shapes, filled as one body (e.g. a bunny hanging from a cord)."""
 
@@ -99,7 +126,50 @@ class Compound:
         return tuple(0.5 * (lo + hi))
 
 
-Shape = Union[Box, Sphere, Cylinder, Compound]
+def rotation_matrix(angles, dim: int) -> np.ndarray:
+    """Rotation by ``angles`` [degrees]: a scalar in 2D (counter-clockwise),
+    three in 3D applied about x, then y, then z (R = Rz Ry Rx)."""
+    if dim == 2:
+        a = np.radians(float(angles))
+        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    ax, ay, az = np.radians(np.asarray(angles, float))
+    Rx = np.array([[1, 0, 0], [0, np.cos(ax), -np.sin(ax)], [0, np.sin(ax), np.cos(ax)]])
+    Ry = np.array([[np.cos(ay), 0, np.sin(ay)], [0, 1, 0], [-np.sin(ay), 0, np.cos(ay)]])
+    Rz = np.array([[np.cos(az), -np.sin(az), 0], [np.sin(az), np.cos(az), 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+@dataclass(frozen=True, eq=False)
+class Rotated:
+    """``shape`` turned by the rotation matrix ``R`` about its centre."""
+
+    shape: object
+    R: np.ndarray
+
+    @property
+    def center(self):
+        return tuple(self.shape.center)
+
+    def bounds(self):
+        """Exact for meshes and spheres, else the turned bounding box's bounds."""
+        lo, hi = (np.asarray(b, float) for b in self.shape.bounds())
+        if isinstance(self.shape, Sphere):
+            return lo, hi
+        c = np.asarray(self.center, float)
+        d = len(lo)
+        if hasattr(self.shape, "geometry"):  # mpm.meshes.MeshShape
+            pts = self.shape.geometry[0]
+        else:
+            pts = np.array([[hi[k] if (i >> k) & 1 else lo[k] for k in range(d)] for i in range(2**d)])
+        turned = c + (pts - c) @ self.R.T
+        return turned.min(axis=0), turned.max(axis=0)
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        c = np.asarray(self.center, float)
+        return self.shape.contains(c + (x - c) @ self.R)
+
+
+Shape = Union[Box, Sphere, Cylinder, Bowl, Compound, Rotated]
 
 
 def skew(w, dim: int) -> np.ndarray:
@@ -185,6 +255,8 @@ class Scene:
     """volume fraction of a global node that the bodies present must fill for contact"""
     regions: list[KinematicRegion] = field(default_factory=list)
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
+    colliders: list[Collider] = field(default_factory=list)
+    """rigid colliders other than the walls (mpm.colliders)"""
     particle_resolution: int | None = None
     """particles are sampled as if the grid had this many cells along x
     (default: ``resolution``): a fixed particle set for grid-refinement studies"""

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .colliders import INSIDE_DEPTH, build_meshes, kinds_of, make_inside_count, pack
 from .configuration import make_update
 from .diagnostics import about_center_of_mass, diagnostic_names, make_measure
 from .fracture import fragments, make_fracture, neighbour_pairs
@@ -111,9 +112,12 @@ class Solver:
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
         self.contact = nb > 1 and model.scene.contact == "frictionless"
-        self._grid_update = make_grid_update(t, not self.contact, self.regions)
+        colliders = model.scene.colliders
+        self.collider_kinds = kinds_of(colliders)
+        self._grid_update = make_grid_update(t, not self.contact, self.regions, self.collider_kinds)
         self._contact = make_contact(t) if self.contact else ()
-        self._boundary = make_boundary(t, self.regions) if self.contact else None
+        self._boundary = make_boundary(t, self.regions, self.collider_kinds) if self.contact else None
+        self._inside = make_inside_count(t, self.collider_kinds) if colliders else None
         self._measure = make_measure(t, per_particle_K=k.moment is None)
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
@@ -134,7 +138,9 @@ class Solver:
             self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy seen by P2G
             # body force per unit mass [m/s^2] of a manufactured solution, set every step
             self.body_force = wp.zeros(model.n_particles if self.forcing else 1, dtype=t.vec)
+            self._meshes = build_meshes(colliders, dev)  # kept alive for their ids
             self._boundary_data = self._make_boundary_data()
+            self._inside_counts = wp.zeros(max(len(colliders), 1), dtype=wp.int32)
             if self.contact:  # per-body fields on the global lattice
                 n_global = model.n_nodes
                 self._cells = t.ivec(*model.cells)
@@ -169,6 +175,7 @@ class Solver:
         tables = [wp.array(np.array([r[k] for r in rows], dtype=state_dtype(m)), dtype=T)
                   for k, T in enumerate(region_types(t))]
         data.region_u, data.region_gradient, data.region_center, data.region_window = tables
+        data.colliders = pack(m.scene.colliders, t, self._meshes, m.device)
         return data
 
     # ------------------------------------------------------------------ setup
@@ -176,6 +183,7 @@ class Solver:
         ks = [k for k, _ in self._p2g] + [self._g2p, self._grid_update, self._measure,
                                           self._fracture]
         ks += list(self._contact) + ([self._boundary] if self._boundary else [])
+        ks += [self._inside] if self._inside else []
         return ks + list(self._update.values())
 
     def load(self) -> float:
@@ -357,6 +365,7 @@ class Solver:
                     stiffening = float(report.stiffening[b])
                 rate = float(report.max_rate[b])
             speed = report.max_speed if report is not None else max_speed
+            speed = max([speed] + [c.speed() for c in m.scene.colliders])
             c = body.material.wave_speed(min(max(J, 1e-3), 1.0)) * np.sqrt(stiffening)
             limits.append(step_limits(m.dx, min(max(s, 1e-3), 1.0), c, speed, cfl,
                                       body.material.kinematic_viscosity(), m.dim, rate))
@@ -408,6 +417,17 @@ class Solver:
         label = fragments(self.model.n_particles, self._pair_p.numpy(), self._pair_q.numpy(), intact)
         body = self.model.body.numpy()
         return np.array([len(np.unique(label[body == b])) for b in range(self.n_bodies)])
+
+    def inside_colliders(self, state: State) -> np.ndarray:
+        """Per collider, the particles deeper inside it than INSIDE_DEPTH cells."""
+        m = self.model
+        if self._inside is None:
+            return np.zeros(0, np.int64)
+        self._inside_counts.zero_()
+        wp.launch(self._inside, m.n_particles, device=m.device, inputs=[
+            state.x, m.types.scalar(self.time), m.types.scalar(INSIDE_DEPTH * m.dx),
+            self._boundary_data.colliders, self._inside_counts])
+        return self._inside_counts.numpy()[:len(m.scene.colliders)].astype(np.int64)
 
     def step_energy(self) -> float:
         """Elastic energy [J] of the state the last step started from (P2G
