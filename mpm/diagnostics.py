@@ -131,3 +131,16 @@ def make_measure(t: Types, per_particle_K: bool):
             wp.atomic_add(out, iC + d, f64(m * xp[d]))
 
     return measure
+
+
+def spilled_fraction(x: np.ndarray, bowl) -> float:
+    """Fraction of the points ``x`` [m] (a fluid's particles) that lie below
+    the rim plane of ``bowl`` (an mpm.scene.Bowl, its initial geometry) and
+    outside its outer sphere: fluid that has left the bowl and run down its
+    outside (A-ULMPM paper, Fig. 11: the leaking EMPM bowl)."""
+    if len(x) == 0:
+        return 0.0
+    d = x - np.asarray(bowl.center)
+    below = d[:, bowl.axis] < bowl.rim
+    outside = np.linalg.norm(d, axis=1) > bowl.radius + bowl.thickness
+    return float(np.mean(below & outside))

@@ -1,12 +1,14 @@
 """Triangle-mesh shapes: a closed mesh, placed in the scene, filled with
 particles (inside test by the generalised winding number on Warp's mesh BVH).
 
-``load_mesh`` reads USD (``pxr``, package usd-core) and OBJ files; the name
-``warp:bunny`` (and the other ``warp:<name>``) refers to the assets shipped
-inside the warp-lang package, e.g. the Stanford bunny.
+``load_mesh`` reads OBJ, PLY, STL, OFF and glTF files through trimesh and USD
+files through ``pxr`` (package usd-core); the name ``warp:bunny`` (and the
+other ``warp:<name>``, see :func:`mesh_assets`) refers to the assets shipped
+inside the warp-lang package, e.g. the Stanford bunny and a bear.
 """
 
 import functools
+import hashlib
 import os
 from dataclasses import dataclass
 
@@ -14,30 +16,41 @@ import numpy as np
 import warp as wp
 
 
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".usd", ".usda", ".usdc")
+ASSETS_DIR = os.path.join(os.path.dirname(wp.__file__), "examples", "assets")
+CLOSED_ASSETS = ("bunny", "bear", "cube", "sphere")  # the shipped meshes that enclose a volume
+
+
+def mesh_assets() -> list[str]:
+    """Names of the closed meshes shipped with warp-lang (``warp:<name>``)."""
+    return [a for a in CLOSED_ASSETS if os.path.exists(os.path.join(ASSETS_DIR, a + ".usd"))]
+
+
 def asset_path(name: str) -> str:
     """Resolve ``warp:<name>`` to the USD asset inside warp-lang; other names are paths."""
     if name.startswith("warp:"):
-        return os.path.join(os.path.dirname(wp.__file__), "examples", "assets", name[5:] + ".usd")
+        return os.path.join(ASSETS_DIR, name[5:] + ".usd")
     return name
 
 
 @functools.cache
+def file_digest(name: str) -> str:
+    """SHA-256 of a mesh file's bytes (a run's config hash includes it)."""
+    with open(asset_path(name), "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()[:16]
+
+
+@functools.cache
 def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(points (n, 3), triangles (m, 3)) of a USD or OBJ file, in its own units."""
+    """(points (n, 3), triangles (m, 3)) of a mesh file, in its own units."""
     path = asset_path(name)
     if not os.path.exists(path):
         raise FileNotFoundError(path)
-    if path.endswith(".obj"):
-        pts, tris = [], []
-        with open(path) as f:
-            for line in f:
-                parts = line.split()
-                if parts and parts[0] == "v":
-                    pts.append([float(v) for v in parts[1:4]])
-                elif parts and parts[0] == "f":
-                    idx = [int(p.split("/")[0]) - 1 for p in parts[1:]]
-                    tris += [[idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1)]
-        return np.asarray(pts, float), np.asarray(tris, np.int32)
+    if not path.lower().endswith((".usd", ".usda", ".usdc")):
+        import trimesh
+
+        mesh = trimesh.load(path, force="mesh", process=False)
+        return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32)
     from pxr import Usd, UsdGeom  # usd-core
 
     stage = Usd.Stage.Open(path)

@@ -84,10 +84,11 @@ def code_hash(root: Path = REPO) -> str:
 UNHASHED = {"run": ("force",), "log": ("progress",), "scale": None}
 
 
-def config_hash(config: dict, code: str) -> str:
-    """Content hash of a resolved config (a plain dict), the code version and
-    the versions of the packages a run computes with: two jobs with the same
-    hash compute the same thing."""
+def config_hash(config: dict, code: str, files: dict | None = None) -> str:
+    """Content hash of a resolved config (a plain dict), the code version,
+    the versions of the packages a run computes with and the digests of the
+    files it reads (``files``: name -> digest, e.g. meshes): two jobs with the
+    same hash compute the same thing."""
     cfg = {}
     for k, v in config.items():
         drop = UNHASHED.get(k, ())
@@ -95,5 +96,6 @@ def config_hash(config: dict, code: str) -> str:
             continue
         cfg[k] = {kk: vv for kk, vv in v.items() if kk not in drop} if isinstance(v, dict) else v
     versions = {k: v for k, v in package_versions().items() if k in ("python", "warp-lang", "numpy")}
-    text = json.dumps({"config": cfg, "versions": versions}, sort_keys=True, default=str)
+    text = json.dumps({"config": cfg, "versions": versions, **({"files": files} if files else {})},
+                      sort_keys=True, default=str)
     return hashlib.sha256(f"{code}\n{text}".encode()).hexdigest()[:16]

@@ -55,7 +55,9 @@ def run(cfg: DictConfig) -> dict:
     overrides = list(hc.overrides.task)
     choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
-                                                      provenance.code_hash())}
+                                                      provenance.code_hash(), files=spec.meshes)}
+    if spec.meshes:
+        identity["meshes"] = spec.meshes
     if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
         done = finished(out_dir, identity["config_hash"])
         if done is not None:

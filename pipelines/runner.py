@@ -19,7 +19,7 @@ import numpy as np
 
 import mpm
 from mpm import analytic
-from mpm.diagnostics import relative_drift
+from mpm.diagnostics import relative_drift, spilled_fraction
 
 from . import provenance
 from .progress import Progress
@@ -154,6 +154,7 @@ class Run:
         self.fracture = None  # (overall, per body) at the last evaluation
         self.fracture_step = -1
         self._pieces = None  # (fracture per body, fragments per body) at the last count
+        self.inside_max = None  # per collider: the most particles seen inside it
         self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
         self.error_last: dict | None = None
         self._error_step = -1
@@ -201,7 +202,7 @@ class Run:
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
-            properties=self.properties,
+            properties=self.properties, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
                                         + (self.stretch_names if self.scheme.name != "empm" else []),
                                         self.solution is not None or self.spec.run.reference is not None))
@@ -277,7 +278,20 @@ class Run:
         and masses of the last state (self-convergence and trade-off studies
         compare these)."""
         np.savez(self.out_dir / "final_state.npz", x=self.state.x.numpy(), v=self.state.v.numpy(),
-                 X0=self.X0, mass=self.model.mass.numpy(), step=self.step, time=self.t)
+                 X0=self.X0, mass=self.model.mass.numpy(), body=self.model.body.numpy(), step=self.step,
+                 time=self.t)
+
+    def spilled(self) -> dict:
+        """Per fluid body and bowl-shaped body, the fraction of the fluid below
+        the bowl's rim plane outside it (mpm.diagnostics.spilled_fraction)."""
+        bodies = self.spec.scene.bodies
+        bowls = [b for b in bodies if isinstance(b.shape, mpm.scene.Bowl)]
+        fluids = [(i, b) for i, b in enumerate(bodies) if b.material.fluid]
+        if not bowls or not fluids:
+            return {}
+        x, body = self.state.x.numpy().astype(np.float64), self.model.body.numpy()
+        return {f"{b.name}/{bowl.name}": spilled_fraction(x[body == i], bowl.shape)
+                for i, b in fluids for bowl in bowls}
 
     def reference_errors(self, path: str) -> dict:
         """RMS difference of the final positions and velocities to a reference
@@ -310,9 +324,20 @@ class Run:
         if len(frac) > 1:
             row.update({f"fracture/{b.name}": float(f) for b, f in zip(self.spec.scene.bodies, frac)})
             row.update({f"fragments/{b.name}": float(c) for b, c in zip(self.spec.scene.bodies, pieces)})
+        inside = self.solver.inside_colliders(self.state)
+        if len(inside):
+            names = self.collider_names()
+            row["inside_colliders"] = float(inside.sum())
+            if len(inside) > 1:
+                row.update({f"inside_colliders/{n}": float(c) for n, c in zip(names, inside)})
+            self.inside_max = inside if self.inside_max is None else np.maximum(self.inside_max, inside)
+            self.inside_last = inside
         self.sink.scalars(self.step, self.t, row)
         self.fracture, self.fracture_step = (overall, frac), self.step
         return frac
+
+    def collider_names(self) -> list[str]:
+        return [c.name or f"{c.kind}{i}" for i, c in enumerate(self.spec.scene.colliders)]
 
     def announce_scheme(self) -> None:
         s = self.scheme
@@ -476,6 +501,12 @@ class Run:
             overall, per_body = self.fracture
             names = [b.name for b in self.spec.scene.bodies]
             m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
+            if self.inside_max is not None:  # particles more than a cell deep in a collider
+                m["inside_colliders"] = {n: {"final": int(a), "max": int(b)} for n, a, b in
+                                         zip(self.collider_names(), self.inside_last, self.inside_max)}
+            spilled = self.spilled()
+            if spilled:
+                m["spilled"] = spilled
             pieces = self.solver.fragments()  # exact at the end
             m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
             self.save_final_state()

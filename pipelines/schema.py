@@ -9,19 +9,20 @@ defined here because they describe a run, not the physics.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from mpm.colliders import BOUNDARIES, KINDS as COLLIDERS
 from mpm.materials import MATERIALS
 from mpm.scene import CONTACT_TYPES as CONTACTS
 from mpm.schemes import SCHEMES
 
 PRECISIONS = ("float32", "float64")
 DEVICES = ("cpu", "cuda")
-SHAPES = ("box", "sphere", "cylinder", "mesh", "compound")
-__all__ = ["CONTACTS", "DEVICES", "PRECISIONS", "SHAPES", "register"]
+SHAPES = ("box", "sphere", "cylinder", "bowl", "mesh", "compound")
+__all__ = ["BOUNDARIES", "COLLIDERS", "CONTACTS", "DEVICES", "PRECISIONS", "SHAPES", "register"]
 
 
 @dataclass
@@ -36,9 +37,13 @@ class KernelConfig:
 class ShapeConfig:
     """A shape: ``box`` (center, half_size), ``sphere`` (center, radius; a
     disc in 2D), ``cylinder`` (3D: center, radius, half_height, axis),
-    ``mesh`` (3D: a closed triangle mesh ``mesh`` - a USD/OBJ path or
+    ``bowl`` (a spherical cap shell: sphere center, inner radius, thickness,
+    rim height above the centre along ``axis``, the opening),
+    ``mesh`` (3D: a closed triangle mesh ``mesh`` - an OBJ/PLY/STL/USD path or
     ``warp:bunny`` - scaled to ``size``, centred at center, ``axis`` up) or
-    ``compound`` (the union of ``parts``, each a shape mapping)."""
+    ``compound`` (the union of ``parts``, each a shape mapping). ``rotation``
+    [degrees] turns any shape about its centre: an angle in 2D, three angles
+    about x, y, z in 3D, or ``random`` (drawn from the run's seed)."""
 
     type: str = "box"
     center: Optional[List[float]] = None  # [m]
@@ -49,7 +54,43 @@ class ShapeConfig:
     inner_radius: Optional[float] = None  # [m] cylinder or sphere: hollow inside this radius
     mesh: Optional[str] = None
     size: Optional[float] = None  # [m] largest side of the mesh's bounding box
+    thickness: Optional[float] = None  # [m] bowl wall
+    rim: Optional[float] = None  # [m] bowl: rim plane above the sphere's centre
+    rotation: Optional[Any] = None  # [deg] angle (2D), [x, y, z] angles (3D) or "random"
     parts: Optional[List[Any]] = None
+
+
+@dataclass
+class ColliderConfig:
+    """A rigid collider (mpm.colliders): ``type`` one of half_space (point,
+    normal), wedge (point, normals), box (center, half_size), sphere (center,
+    radius), cylinder (center, radius, half_height, axis), cup (center,
+    radius, depth, thickness, axis), bowl (center, radius, thickness, rim,
+    axis) or mesh (3D: mesh, center, size, axis); ``inside: true`` makes the
+    shape a container. ``boundary`` sticky | slip | separate with Coulomb
+    ``friction``; ``velocity`` [m/s] moves it while start <= t < end [s]."""
+
+    type: str = "half_space"
+    name: str = ""
+    boundary: str = "slip"
+    friction: float = 0.0
+    inside: bool = False
+    point: Optional[List[float]] = None  # [m]
+    normal: Optional[List[float]] = None
+    normals: Optional[List[Any]] = None
+    center: Optional[List[float]] = None  # [m]
+    half_size: Optional[List[float]] = None  # [m]
+    radius: Optional[float] = None  # [m]
+    half_height: Optional[float] = None  # [m]
+    depth: Optional[float] = None  # [m]
+    thickness: Optional[float] = None  # [m]
+    rim: Optional[float] = None  # [m]
+    axis: Optional[Any] = None  # 0, 1, 2 or a direction (default 1: +y)
+    mesh: Optional[str] = None
+    size: Optional[float] = None  # [m]
+    velocity: Optional[List[float]] = None  # [m/s]
+    start: float = 0.0  # [s]
+    end: Optional[float] = None  # [s]; null: forever
 
 
 @dataclass
@@ -103,6 +144,9 @@ class SceneConfig:
     contact_fill: float = 0.5  # node volume fraction the bodies must fill for contact
     bodies: List[BodyConfig] = field(default_factory=list)
     regions: List[RegionConfig] = field(default_factory=list)
+    colliders: List[ColliderConfig] = field(default_factory=list)
+    size: str = "default"  # a key of sizes: its values replace resolution, ppc, ...
+    sizes: Dict[str, Any] = field(default_factory=dict)  # name -> {resolution: ..., ppc: ...}
     particle_resolution: Optional[int] = None  # sample particles as on this grid (fixed particle set)
     solution: Optional[Any] = None  # closed-form solution: {type: vibrating_bar|vortex, ...}
 

@@ -28,6 +28,7 @@ class RunMeta:
     particle_radius: float  # [m]
     properties: dict = field(default_factory=dict)  # name -> {key: value}
     scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
+    colliders: list = field(default_factory=list)  # mpm.colliders.Collider (drawn by the sink)
 
 
 class Sink:

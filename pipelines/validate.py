@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+
+import numpy as np
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,13 +16,13 @@ from omegaconf import DictConfig, OmegaConf
 
 import mpm
 from mpm.materials import MATERIALS, Material
-from mpm.meshes import MeshShape, asset_path
+from mpm.meshes import MESH_SUFFIXES, MeshShape, asset_path, file_digest, mesh_assets
 from mpm.params import violations
 from mpm.scene import WALL_TYPES
 from mpm.schemes import AFFINE, CRITERIA
 from mpm.transfer import TRANSFERS
 
-from .schema import CONTACTS, DEVICES, PRECISIONS, SHAPES
+from .schema import BOUNDARIES, COLLIDERS, CONTACTS, DEVICES, PRECISIONS, SHAPES
 
 
 class ConfigError(ValueError):
@@ -67,6 +69,26 @@ class RunSpec:
     run: RunSettings
     log: LogSettings
     seed: int
+
+    @property
+    def meshes(self) -> dict[str, str]:
+        """Mesh file -> content digest, for every mesh the scene reads."""
+        found = []
+
+        def walk(shape):
+            if isinstance(shape, MeshShape):
+                found.append(shape.source)
+            for part in getattr(shape, "parts", ()):
+                walk(part)
+            if isinstance(shape, mpm.scene.Rotated):
+                walk(shape.shape)
+
+        for b in self.scene.bodies:
+            walk(b.shape)
+        for c in self.scene.colliders:
+            if c.mesh is not None:
+                walk(c.mesh)
+        return {name: file_digest(name) for name in sorted(set(found))}
 
     @property
     def end(self) -> tuple[int | None, float | None]:
@@ -168,17 +190,48 @@ def make_scheme(node, key: str = "scheme"):
 
 SHAPE_KEYS = {"box": ["center", "half_size"], "sphere": ["center", "radius"],
               "cylinder": ["center", "radius", "half_height"], "mesh": ["mesh", "center", "size"],
-              "compound": ["parts"]}
-SHAPE_OPTIONAL = {"cylinder": ["axis", "inner_radius"], "mesh": ["axis"], "sphere": ["inner_radius"]}
+              "bowl": ["center", "radius", "thickness", "rim"], "compound": ["parts"]}
+SHAPE_OPTIONAL = {"cylinder": ["axis", "inner_radius"], "mesh": ["axis"], "sphere": ["inner_radius"],
+                  "bowl": ["axis"]}
 
 
-def make_shape(node, key: str, dim: int):
+def _rotation(key: str, value, dim: int, rng):
+    """A rotation matrix from an angle (2D), three angles (3D) [degrees] or
+    ``random`` (uniform over rotations, drawn from ``rng``)."""
+    if isinstance(value, str):
+        if value != "random":
+            raise ConfigError(key, f"{value!r}; accepted: an angle in degrees (2D), three (3D), or random")
+        if rng is None:
+            raise ConfigError(key, "random rotation is not available here; accepted: angles in degrees")
+        if dim == 2:
+            return mpm.scene.rotation_matrix(360.0 * rng.random(), 2)
+        q = rng.normal(size=4)  # a uniformly random unit quaternion
+        w, x, y, z = q / np.linalg.norm(q)
+        return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    if dim == 2:
+        return mpm.scene.rotation_matrix(_number(key, value), 2)
+    return mpm.scene.rotation_matrix(_vector(key, value, 3), 3)
+
+
+def make_shape(node, key: str, dim: int, rng=None):
+    """A shape; ``rng`` draws random rotations (None: they are refused)."""
     d = _plain(node)
     if not isinstance(d, dict):
         raise ConfigError(key, f"{d!r}; accepted: a shape mapping with a type key")
+    d = dict(d)
+    rotation = d.pop("rotation", None)
+    shape = _make_shape(d, key, dim, rng)
+    if rotation is None:
+        return shape
+    return mpm.scene.Rotated(shape, _rotation(f"{key}.rotation", rotation, dim, rng))
+
+
+def _make_shape(d: dict, key: str, dim: int, rng):
     kind = _choice(f"{key}.type", d.get("type"), SHAPES)
     need = SHAPE_KEYS[kind]
-    allowed = need + SHAPE_OPTIONAL.get(kind, [])
+    allowed = need + SHAPE_OPTIONAL.get(kind, []) + ["rotation"]
     for k, v in d.items():
         if k != "type" and v is not None and k not in allowed:
             raise ConfigError(f"{key}.{k}", f"not used by a {kind}; accepted: {', '.join(allowed)}")
@@ -188,7 +241,7 @@ def make_shape(node, key: str, dim: int):
     if kind == "compound":
         if not isinstance(d["parts"], list) or not d["parts"]:
             raise ConfigError(f"{key}.parts", "accepted: a non-empty list of shapes")
-        return mpm.Compound(tuple(make_shape(p, f"{key}.parts[{i}]", dim)
+        return mpm.Compound(tuple(make_shape(p, f"{key}.parts[{i}]", dim, rng)
                                   for i, p in enumerate(d["parts"])))
     center = _vector(f"{key}.center", d["center"], dim)
     if kind == "box":
@@ -199,12 +252,15 @@ def make_shape(node, key: str, dim: int):
     if kind == "mesh":
         if dim != 3:
             raise ConfigError(f"{key}.type", "mesh is 3D only; accepted in 2D: box, sphere, compound")
-        if not os.path.exists(asset_path(d["mesh"])):
-            raise ConfigError(f"{key}.mesh", f"{d['mesh']!r}: no such file; accepted: a USD or OBJ "
-                                             "path, or warp:<asset> (e.g. warp:bunny)")
+        _mesh_file(f"{key}.mesh", d["mesh"])
         up = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
         return MeshShape(d["mesh"], center, _number(f"{key}.size", d["size"], gt=0.0), up)
     radius = _number(f"{key}.radius", d["radius"], gt=0.0)
+    if kind == "bowl":
+        axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=dim - 1)
+        thickness = _number(f"{key}.thickness", d["thickness"], gt=0.0)
+        rim = _number(f"{key}.rim", d["rim"], gt=-(radius + thickness), le=radius)
+        return mpm.scene.Bowl(center, radius, thickness, rim, axis)
     inner = 0.0 if d.get("inner_radius") is None else \
         _number(f"{key}.inner_radius", d["inner_radius"], ge=0.0)
     if inner >= radius:
@@ -216,6 +272,100 @@ def make_shape(node, key: str, dim: int):
     axis = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
     return mpm.Cylinder(center, radius, _number(f"{key}.half_height", d["half_height"], gt=0.0), axis,
                         inner)
+
+
+def _mesh_file(key: str, name) -> str:
+    if not isinstance(name, str) or not os.path.exists(asset_path(name)):
+        raise ConfigError(key, f"{name!r}: no such file; accepted: an OBJ, PLY, STL or USD path, or "
+                               f"warp:<asset> ({', '.join('warp:' + a for a in mesh_assets())})")
+    if not name.startswith("warp:") and not name.lower().endswith(MESH_SUFFIXES):
+        raise ConfigError(key, f"{name!r}: unknown format; accepted: {', '.join(MESH_SUFFIXES)}")
+    return name
+
+
+COLLIDER_KEYS = {"half_space": ["point", "normal"], "wedge": ["point", "normals"],
+                 "box": ["center", "half_size"], "sphere": ["center", "radius"],
+                 "cylinder": ["center", "radius", "half_height"],
+                 "cup": ["center", "radius", "depth", "thickness"],
+                 "bowl": ["center", "radius", "thickness", "rim"], "mesh": ["mesh", "center", "size"]}
+COLLIDER_COMMON = ["type", "name", "boundary", "friction", "inside", "velocity", "start", "end"]
+
+
+def make_collider(node, key: str, dim: int) -> mpm.Collider:
+    """A rigid collider (mpm.colliders) from its config mapping."""
+    d = _plain(node)
+    if not isinstance(d, dict):
+        raise ConfigError(key, f"{d!r}; accepted: a collider mapping with a type key")
+    kind = _choice(f"{key}.type", d.get("type"), COLLIDERS)
+    need = COLLIDER_KEYS[kind]
+    allowed = need + (["axis"] if kind in ("cylinder", "cup", "bowl", "mesh") else [])
+    for k, v in d.items():
+        if k not in COLLIDER_COMMON and v is not None and k not in allowed:
+            raise ConfigError(f"{key}.{k}", f"not used by a {kind} collider; accepted: "
+                                            f"{', '.join(COLLIDER_COMMON + allowed)}")
+    for k in need:
+        if d.get(k) is None:
+            raise ConfigError(f"{key}.{k}", f"missing for a {kind} collider")
+    if kind == "mesh" and dim != 3:
+        raise ConfigError(f"{key}.type", "mesh colliders are 3D only; accepted in 2D: "
+                                         f"{', '.join(c for c in COLLIDERS if c != 'mesh')}")
+    start = _number(f"{key}.start", d.get("start", 0.0), ge=0.0)
+    end = _number(f"{key}.end", d.get("end"), gt=start, optional=True)
+    common = dict(
+        kind=kind, name=d.get("name") or "",
+        boundary=_choice(f"{key}.boundary", d.get("boundary", "slip"), BOUNDARIES),
+        friction=_number(f"{key}.friction", d.get("friction", 0.0), ge=0.0),
+        inside=_flag(f"{key}.inside", d.get("inside", False)),
+        velocity=None if d.get("velocity") is None else _vector(f"{key}.velocity", d["velocity"], dim),
+        start=start, end=float("inf") if end is None else end)
+    geo = {}
+    if kind in ("half_space", "wedge"):
+        geo["point"] = _vector(f"{key}.point", d["point"], dim)
+        normals = [d["normal"]] if kind == "half_space" else d["normals"]
+        if kind == "wedge" and (not isinstance(normals, list) or len(normals) != 2):
+            raise ConfigError(f"{key}.normals", f"{normals!r}; accepted: two vectors of {dim} numbers")
+        vs = []
+        for i, n in enumerate(normals):
+            nk = f"{key}.normal" if kind == "half_space" else f"{key}.normals[{i}]"
+            v = _vector(nk, n, dim)
+            if np.linalg.norm(v) == 0.0:
+                raise ConfigError(nk, f"{list(v)}; accepted: a non-zero vector")
+            vs.append(v)
+        if kind == "half_space":
+            geo["normal"] = vs[0]
+        else:
+            geo["normals"] = tuple(vs)
+    else:
+        geo["center"] = _vector(f"{key}.center", d["center"], dim)
+    if kind == "box":
+        geo["half_size"] = tuple(_number(f"{key}.half_size[{i}]", h, gt=0.0)
+                                 for i, h in enumerate(_vector(f"{key}.half_size", d["half_size"], dim)))
+    for name in ("radius", "half_height", "depth", "thickness"):
+        if name in need:
+            geo[name] = _number(f"{key}.{name}", d[name], gt=0.0)
+    if kind == "bowl":
+        geo["rim"] = _number(f"{key}.rim", d["rim"], gt=-(geo["radius"] + geo["thickness"]),
+                             le=geo["radius"])
+    if kind in ("cylinder", "cup", "bowl"):
+        axis = d.get("axis", 1)
+        if isinstance(axis, list):
+            v = _vector(f"{key}.axis", axis, dim)
+            if np.linalg.norm(v) == 0.0:
+                raise ConfigError(f"{key}.axis", f"{list(v)}; accepted: a non-zero vector or 0..{dim - 1}")
+            geo["axis"] = v
+        else:
+            geo["axis"] = 1 if axis is None else _number(f"{key}.axis", axis, int, ge=0, le=dim - 1)
+    if kind == "mesh":
+        up = 1 if d.get("axis") is None else _number(f"{key}.axis", d["axis"], int, ge=0, le=2)
+        geo["mesh"] = MeshShape(_mesh_file(f"{key}.mesh", d["mesh"]), geo.pop("center"),
+                                _number(f"{key}.size", d["size"], gt=0.0), up)
+    return mpm.Collider(**common, **geo)
+
+
+def _flag(key: str, value) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(key, f"{value!r}; accepted: true, false")
+    return value
 
 
 def _matrix(key: str, value, dim: int):
@@ -317,8 +467,25 @@ def make_solution(d, key: str, dim: int, bodies: list, gravity: tuple):
         omega=_number(f"{key}.omega", d.get("omega", 3.141592653589793), gt=0.0))
 
 
-def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mpm.Scene, dict]:
+def _check_size(node, key: str) -> None:
+    """``scene.size`` must name one of ``scene.sizes`` (checked before the
+    scene's interpolations, which read the chosen size, are resolved)."""
+    if not OmegaConf.is_config(node):
+        return
+    size = node.get("size", "default")
+    sizes = node.get("sizes") or {}
+    names = list(sizes.keys()) if sizes else ["default"]
+    if size not in names:
+        raise ConfigError(f"{key}.size", f"{size!r} unknown for scene {node.get('name')}; "
+                                         f"accepted: {', '.join(names)}")
+
+
+def make_scene(node, default_material: Material, key: str = "scene",
+               seed: int = 0) -> tuple[mpm.Scene, dict]:
+    """The scene; ``seed`` draws random shape rotations (and nothing else)."""
+    _check_size(node, key)
     d = _plain(node)
+    rng = np.random.default_rng([seed, 1])
     dim = _number(f"{key}.dim", d["dim"], int)
     if dim not in (2, 3):
         raise ConfigError(f"{key}.dim", f"{dim}; accepted: 2, 3")
@@ -342,7 +509,7 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
             make_material(b["material"], f"{bkey}.material")
         w = _angular(f"{bkey}.angular_velocity", b.get("angular_velocity"), dim)
         bodies.append(mpm.Body(
-            shape=make_shape(b["shape"], f"{bkey}.shape", dim), material=material,
+            shape=make_shape(b["shape"], f"{bkey}.shape", dim, rng), material=material,
             name=b.get("name") or f"body{i}",
             velocity=None if b.get("velocity") is None else _vector(f"{bkey}.velocity", b["velocity"], dim),
             angular_velocity=w,
@@ -362,6 +529,8 @@ def make_scene(node, default_material: Material, key: str = "scene") -> tuple[mp
                  for i, r in enumerate(d.get("regions") or [])],
         particle_resolution=_number(f"{key}.particle_resolution", d.get("particle_resolution"), int,
                                     ge=1, optional=True),
+        colliders=[make_collider(c, f"{key}.colliders[{i}]", dim)
+                   for i, c in enumerate(d.get("colliders") or [])],
     )
     scene.solution = make_solution(d.get("solution"), f"{key}.solution", dim, bodies, scene.gravity)
     return scene, d
@@ -403,7 +572,8 @@ def resolve(cfg) -> RunSpec:
     kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
     transfer = _choice("kernel.transfer", cfg.kernel.transfer, TRANSFERS)
     material = make_material(cfg.material, "material")
-    scene, sd = make_scene(cfg.scene, material)
+    seed = _number("seed", cfg.seed, int, ge=0)
+    scene, sd = make_scene(cfg.scene, material, seed=seed)
     try:
         mpm.model.check_scene(scene, mpm.KERNELS[kernel_name])
     except mpm.SceneError as e:
@@ -427,6 +597,5 @@ def resolve(cfg) -> RunSpec:
 
         if not wp.is_cuda_available():
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
-    seed = _number("seed", cfg.seed, int)
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
                    kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed)

@@ -21,7 +21,7 @@ BAD_INPUTS = [
     (["material.E=0"], "material.E: 0.0 out of range; accepted: 0.0 < E"),
     (["material.rho=-1"], "material.rho: -1.0 out of range; accepted: 0.0 < rho"),
     (["material=fluid", "material.gamma=1"], "material.gamma: 1.0 out of range; accepted: 1.0 < gamma"),
-    (["scene=nope"], "scene=nope: unknown option; accepted: ball_in_cylinder, colliding_spheres,"),
+    (["scene=nope"], "scene=nope: unknown option; accepted: ball_in_cylinder, bowl_fsi,"),
     (["scene=ball_in_cylinder", "scheme=tlmpm"],
      "scene.contact: 'shared' (one grid for all bodies) needs scheme=empm"),
     (["scheme=nope"], "scheme=nope: unknown option; accepted: aulmpm, empm, tlmpm"),
