@@ -21,6 +21,8 @@ class Recording:
     scalars: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (steps, values)
     properties: dict[str, list]  # "config:overrides" -> [values], "provenance:git_commit" -> [value]
     update_steps: np.ndarray  # steps with a configuration-update event
+    colliders: dict = None  # name -> (vertices, triangles) in 3D, or a list of (n, 2) polylines in 2D
+    collider_shift: dict = None  # name -> (steps, translations) of a moving collider
 
     @property
     def dim(self) -> int:
@@ -70,8 +72,39 @@ def read(path: str | Path) -> Recording:
     events = data.reader(index="step", contents="/events").to_pandas()
     update_steps = [int(s) for s, u in zip(events.get("step", []), events.get("/events:update_step", []))
                     if u is not None]
+    colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
-                     props, np.asarray(update_steps, dtype=np.int64))
+                     props, np.asarray(update_steps, dtype=np.int64), colliders, shifts)
+
+
+def _colliders(data) -> tuple[dict, dict]:
+    """The colliders' static geometry and the translations of moving ones."""
+    meshes: dict = {}
+    strips: dict = {}
+    static = data.reader(index=None, contents="/colliders/**").to_pandas()
+    for c in static.columns:
+        if not c.startswith("/colliders/"):
+            continue
+        name, kind = c[len("/colliders/"):].split(":")[0], c.split(":")[-1]
+        values = static[c].dropna()
+        if not len(values):
+            continue
+        v = values.iloc[0]
+        if kind in ("vertex_positions", "triangle_indices"):
+            meshes.setdefault(name, {})[kind] = np.stack(v)
+        elif kind == "strips":
+            strips[name] = [np.stack(strip).astype(np.float64) for strip in v]
+    geo = {name: (m["vertex_positions"].astype(np.float64), m["triangle_indices"].astype(np.int64))
+           for name, m in meshes.items() if len(m) == 2}
+    geo.update(strips)
+    moving = data.reader(index="step", contents="/colliders/**").to_pandas()
+    shifts = {}
+    for c in moving.columns:
+        if c.startswith("/colliders/") and c.endswith(":translation"):
+            rows = moving[["step", c]].dropna()
+            shifts[c[len("/colliders/"):].split(":")[0]] = (
+                rows["step"].to_numpy(), np.stack([np.asarray(v).reshape(-1) for v in rows[c]]))
+    return geo, shifts
 
 
 TIMING_SCALARS = {"step_time_ms"}  # wall-clock figures, never reproducible

@@ -3,7 +3,11 @@
   (no option)     open it in the Rerun viewer (needs a display)
   --web           serve it to a browser with Rerun's web viewer
   --frames DIR    render the particles to PNG frames without a display (and
-                  DIR/video.mp4 where ffmpeg is installed)
+                  DIR/video.mp4 where ffmpeg is installed): a fixed camera on
+                  the domain, colliders drawn, particles coloured by body or
+                  (--color dJ, plastic_strain, ...) by a field with a colour
+                  bar; 3D in perspective (--view 3d, --elev, --azim) or
+                  projected (--view xy|xz|zy)
   --reproduce     re-run the recorded configuration (its command-line
                   overrides, into a fresh directory) and compare the two
                   recordings: bit for bit on the CPU, else the largest
@@ -43,37 +47,66 @@ def open_viewer(path: Path, web: bool) -> int:
     return subprocess.call(cmd)
 
 
+def _domain(rec: recordings.Recording, positions) -> np.ndarray:
+    """The domain's size [m] from the recorded config (else the particles' extent)."""
+    import yaml
+
+    text = (rec.properties.get("config:yaml") or [""])[0]
+    try:
+        return np.asarray(yaml.safe_load(text)["scene"]["domain"], float)
+    except (TypeError, KeyError, ValueError, yaml.YAMLError):
+        return np.concatenate(positions).max(axis=0)
+
+
+def _colours(rec: recordings.Recording, k: int, color: str):
+    """(RGB per particle, values or None) for frame ``k``: the body palette or a field."""
+    if color == "body":
+        if rec.colors is None:
+            return None, None
+        c = rec.colors  # RGBA packed as 0xRRGGBBAA
+        return np.stack([(c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255], axis=1) / 255.0, None
+    values = rec.dJ[k] if color == "dJ" else rec.fields[k].get(color)
+    if values is None:
+        known = ["body"] + (["dJ"] if rec.dJ and rec.dJ[0] is not None else []) + sorted(rec.fields[k])
+        raise ValueError(f"--color {color}: not in this recording; accepted: {', '.join(known)}")
+    return None, values
+
+
 def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: float = 6.0,
-                  view: str = "xy") -> list[Path]:
-    """One PNG per logged step (every ``every``-th), particles coloured by
-    body; 3D recordings are projected onto the ``view`` plane (back to front)."""
+                  view: str = "xy", color: str = "body", elev: float = 20.0,
+                  azim: float = -60.0) -> list[Path]:
+    """One PNG per logged step (every ``every``-th) with a fixed camera that
+    frames the domain, axes in metres and the colliders drawn. Particles are
+    coloured by body, or by a per-particle field (``color``: dJ, or a plastic
+    field such as plastic_strain) with a colour bar. 3D recordings are drawn
+    in perspective from (``elev``, ``azim``) degrees, y up; ``view`` (xy, xz,
+    zy) projects them onto a plane instead when it is not "3d"."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    axes = {"x": 0, "y": 1, "z": 2}
-    a, b = axes[view[0]], axes[view[1]]
-    depth = ({0, 1, 2} - {a, b}).pop() if rec.dim == 3 else None
-    all_x = np.concatenate(rec.positions)
-    lo, hi = all_x.min(axis=0), all_x.max(axis=0)
-    pad = 0.05 * np.max(hi - lo)
-    if rec.colors is not None:  # RGBA packed as 0xRRGGBBAA
-        c = rec.colors
-        rgb = np.stack([(c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255], axis=1) / 255.0
-    else:
-        rgb = None
+    L = _domain(rec, rec.positions)
+    fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
+    values = [v for _, v in fields if v is not None]
+    vmin, vmax = (min(float(v.min()) for v in values), max(float(v.max()) for v in values)) if values \
+        else (0.0, 1.0)
     written = []
-    for k in range(0, len(rec.positions), every):
+    for n, k in enumerate(range(0, len(rec.positions), every)):
         x = rec.positions[k]
-        order = np.argsort(x[:, depth]) if depth is not None else slice(None)
-        fig, ax = plt.subplots(figsize=(size, size))
-        ax.scatter(x[order, a], x[order, b], s=2.0, c=None if rgb is None else rgb[order],
-                   linewidths=0)
-        ax.set_xlim(lo[a] - pad, hi[a] + pad)
-        ax.set_ylim(lo[b] - pad, hi[b] + pad)
-        ax.set_aspect("equal")
+        rgb, val = fields[n]
+        shift = _collider_shifts(rec, rec.steps[k])
+        if rec.dim == 3 and view == "3d":
+            fig = plt.figure(figsize=(size, size))
+            ax = fig.add_subplot(projection="3d")
+            _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim)
+            mappable = ax.collections[0] if val is not None else None
+        else:
+            fig, ax = plt.subplots(figsize=(size, size))
+            mappable = _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift)
+        if mappable is not None:
+            fig.colorbar(mappable, ax=ax, shrink=0.7, label=color)
         ax.set_title(f"step {rec.steps[k]}, t = {rec.times[k]:.4f} s")
         path = out / f"frame_{len(written):05d}.png"
         fig.savefig(path, dpi=100)
@@ -84,6 +117,66 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
                         str(out / "frame_%05d.png"), "-pix_fmt", "yuv420p", str(out / "video.mp4")],
                        check=False)
     return written
+
+
+def _collider_shifts(rec: recordings.Recording, step: int) -> dict:
+    out = {}
+    for name, (steps, shifts) in (rec.collider_shift or {}).items():
+        i = np.searchsorted(steps, step, side="right") - 1
+        if i >= 0:
+            out[name] = shifts[i][:rec.dim]
+    return out
+
+
+def _paint(rgb, val, vmin, vmax) -> dict:
+    """Scatter colour arguments: a field on a colour map, or fixed colours."""
+    if val is not None:
+        return dict(c=val, cmap="viridis", vmin=vmin, vmax=vmax)
+    return dict(c=rgb) if rgb is not None else {}
+
+
+def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
+    """Perspective view, y up (matplotlib's z axis shows the scene's y)."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    swap = [0, 2, 1]
+    ax.scatter(x[:, 0], x[:, 2], x[:, 1], s=1.0, linewidths=0, depthshade=True, **_paint(rgb, val, vmin, vmax))
+    for name, geo in (rec.colliders or {}).items():
+        if isinstance(geo, tuple):
+            v, f = geo
+            v = v + shift.get(name, 0.0)
+            ax.add_collection3d(Poly3DCollection(v[:, swap][f], facecolor=(0.6, 0.6, 0.65, 0.25),
+                                                 edgecolor=(0.4, 0.4, 0.45, 0.15), linewidths=0.2))
+    ax.set_xlim(0, L[0])
+    ax.set_ylim(0, L[2])
+    ax.set_zlim(0, L[1])
+    ax.set_box_aspect((L[0], L[2], L[1]))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
+    ax.set_zlabel("y [m]")
+    ax.view_init(elev=elev, azim=azim)
+
+
+def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
+    """A 2D recording, or a 3D one projected onto ``view`` (back to front)."""
+    axes = {"x": 0, "y": 1, "z": 2}
+    a, b = (0, 1) if rec.dim == 2 else (axes[view[0]], axes[view[1]])
+    depth = ({0, 1, 2} - {a, b}).pop() if rec.dim == 3 else None
+    order = np.argsort(x[:, depth]) if depth is not None else slice(None)
+    sc = ax.scatter(x[order, a], x[order, b], s=2.0, linewidths=0,
+                    **_paint(None if rgb is None else rgb[order], None if val is None else val[order],
+                             vmin, vmax))
+    for name, geo in (rec.colliders or {}).items():
+        if rec.dim == 2 and isinstance(geo, list):
+            for line in geo:
+                line = line + shift.get(name, 0.0)
+                ax.plot(line[:, 0], line[:, 1], color=(0.35, 0.35, 0.4), linewidth=1.0)
+    ax.set_xlim(0, L[a])
+    ax.set_ylim(0, L[b])
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{'xyz'[a]} [m]")
+    ax.set_ylabel(f"{'xyz'[b]} [m]")
+    return sc if val is not None else None
 
 
 def reproduce(path: Path, workdir: Path | None = None) -> dict:
@@ -114,7 +207,12 @@ def main(argv=None) -> int:
     p.add_argument("--web", action="store_true", help="serve the web viewer")
     p.add_argument("--frames", type=Path, default=None, help="render PNG frames into this directory")
     p.add_argument("--every", type=int, default=1, help="with --frames: every N-th logged step")
-    p.add_argument("--view", default="xy", choices=["xy", "xz", "zy"], help="3D projection plane")
+    p.add_argument("--view", default="3d", choices=["3d", "xy", "xz", "zy"],
+                   help="3D recordings: perspective (3d) or a projection plane")
+    p.add_argument("--color", default="body",
+                   help="body, dJ, or a per-particle field of the recording (e.g. plastic_strain)")
+    p.add_argument("--elev", type=float, default=20.0, help="3d view: camera elevation [deg]")
+    p.add_argument("--azim", type=float, default=-60.0, help="3d view: camera azimuth [deg]")
     p.add_argument("--reproduce", action="store_true", help="re-run and compare")
     args = p.parse_args(argv)
     if not args.recording.is_file():
@@ -136,7 +234,12 @@ def main(argv=None) -> int:
             print(f"  largest deviation of {k}: {v:.3g}")
         return 1
     if args.frames is not None:
-        frames = render_frames(recordings.read(args.recording), args.frames, args.every, view=args.view)
+        try:
+            frames = render_frames(recordings.read(args.recording), args.frames, args.every, view=args.view,
+                                   color=args.color, elev=args.elev, azim=args.azim)
+        except ValueError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
         video = args.frames / "video.mp4"
         print(f"{len(frames)} frames in {args.frames}" + (f", {video}" if video.exists() else
                                                            " (no ffmpeg: no video)"))

@@ -24,6 +24,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from . import surfaces
 from .sinks import RunMeta, Sink
 
 APP_ID = "aulmpm"
@@ -44,6 +45,7 @@ class RerunSink(Sink):
         self._rows = 0
         self._buffer: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._points = None
+        self._moving = []
 
     # ---------------------------------------------------------------- static
     def start(self, meta: RunMeta) -> None:
@@ -56,7 +58,25 @@ class RerunSink(Sink):
         rec.log("particles", self._points.from_fields(colors=colors, radii=meta.particle_radius),
                 static=True)
         self._log_domain(meta)
+        self._log_colliders(meta)
         rec.send_blueprint(self._blueprint(meta))
+
+    def _log_colliders(self, meta: RunMeta) -> None:
+        """Each collider's surface (3D) or outline (2D) at its initial place,
+        static; a moving one is translated at every logged particle step."""
+        self._moving = []
+        for i, c in enumerate(meta.colliders):
+            path = f"colliders/{c.name or c.kind + str(i)}"
+            color = (150, 150, 160)
+            if meta.dim == 3:
+                v, f = surfaces.surface_3d(c, np.zeros(3), meta.domain)
+                self.rec.log(path, rr.Mesh3D(vertex_positions=v, triangle_indices=f,
+                                             albedo_factor=(150, 150, 160, 110)), static=True)
+            else:
+                self.rec.log(path, rr.LineStrips2D(surfaces.outline_2d(c, np.zeros(2), meta.domain),
+                                                   colors=[color]), static=True)
+            if c.velocity is not None:
+                self._moving.append((path, c))
 
     def _log_domain(self, meta: RunMeta) -> None:
         L = np.asarray(meta.domain)
@@ -77,7 +97,7 @@ class RerunSink(Sink):
                   for name, names in meta.scalar_groups.items()]
         return rrb.Blueprint(
             rrb.Horizontal(
-                view(name="particles", origin="/", contents=["/particles", "/domain"]),
+                view(name="particles", origin="/", contents=["/particles", "/domain", "/colliders/**"]),
                 rrb.Vertical(*series, rrb.TextLogView(name="events", origin="/events")),
                 column_shares=[3, 2],
             ),
@@ -88,6 +108,12 @@ class RerunSink(Sink):
     def particles(self, step, t, x, dJ, fields=None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
+        for path, c in self._moving:
+            shift = np.asarray(c.offset(t), float)
+            if len(shift) == 3:
+                self.rec.log(path, rr.Transform3D(translation=shift))
+            else:
+                self.rec.log(path, rr.Transform3D(translation=[*shift, 0.0]))
         values = dict(fields or {})
         if dJ is not None:
             values["dJ"] = dJ

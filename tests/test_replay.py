@@ -44,3 +44,24 @@ def test_compare_reports_the_largest_deviation(tmp_path):
     assert "scalar:elastic_energy" in diff["largest"]
     assert recs[0].properties["config:overrides"][-1].startswith("scene.bodies.0.material.E=")
     assert np.array_equal(recs[0].steps, [0, 10, 20])
+
+
+def test_frames_of_a_3d_scene_with_colliders(tmp_path):
+    """The cup is read back from the recording and drawn; a field colours the
+    particles; an unknown field is refused in one line."""
+    run_dir = tmp_path / "run"
+    p = run_cli(["scene=viscous_cup", "scene.resolution=20", "scene.wall_cells=1", "run.steps=4",
+                 "log.every=2", f"hydra.run.dir={run_dir}"], cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    rec = recordings.read(run_dir / "recording.rrd")
+    v, f = rec.colliders["cup"]
+    assert v.shape[1] == 3 and f.shape[1] == 3 and f.max() < len(v)
+    frames = tmp_path / "frames"
+    r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir / "recording.rrd"), "--frames",
+                        str(frames), "--color", "dJ"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert len(sorted(frames.glob("frame_*.png"))) == 3
+    r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir / "recording.rrd"), "--frames",
+                        str(frames), "--color", "nope"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [
+        "error: --color nope: not in this recording; accepted: body, dJ"]
