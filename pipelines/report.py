@@ -872,6 +872,23 @@ def section_fracture(jobs: list[Job], out: Path, style: dict) -> list[str]:
     return lines
 
 
+def section_spilled(jobs: list[Job], out: Path) -> list[str]:
+    """spilled.csv: the fraction of a fluid below a bowl's rim plane outside it (the leaking bowl)."""
+    have = [j for j in jobs if j.completed and j.metrics.get("spilled")]
+    if not have:
+        return []
+    rows = [[j.scene, j.label, j.resolution, j.rel, name, frac, (j.metrics.get("fragments") or {}).get(
+        name.split("/")[1])] for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, j.label))
+        for name, frac in j.metrics["spilled"].items()]
+    _write_csv(out / "spilled.csv", ["scene", "label", "resolution", "dir", "fluid/bowl", "spilled",
+                                     "bowl_fragments"], rows)
+    return ["## Leaks", "",
+            "Fraction of each fluid's particles that end below a bowl's rim plane and outside it, and "
+            "the bowl's pieces at the end ([spilled.csv](spilled.csv)).", "",
+            *_md_table(["scene", "label", "cells", "fluid / bowl", "spilled", "bowl fragments"],
+                       [[r[0], r[1], r[2], r[4], r[5], r[6]] for r in rows])]
+
+
 # -------------------------------------------------------------------- report
 def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     """Read the jobs of ``sweep_dir`` and write the tables, plots and report.md
@@ -879,7 +896,9 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     out = Path(out) if out is not None else sweep_dir
     out.mkdir(parents=True, exist_ok=True)
+    from .dam_break import section_dam_break
     from .granular import section_granular, section_plastic  # experiment families of their own
+    from .paper_tables import section_table3, section_table4
     from .tradeoff import section_tradeoff
 
     jobs, duplicates = load_jobs(sweep_dir)
@@ -900,6 +919,10 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         lines += section_granular(jobs, out)
         lines += section_plastic(jobs, out)
         lines += section_tradeoff(jobs, out)
+        lines += section_table3(jobs, out)
+        lines += section_table4(jobs, out)
+        lines += section_spilled(jobs, out)
+        lines += section_dam_break(jobs, out)
     path = out / "report.md"
     path.write_text("\n".join(lines).rstrip() + "\n")
     return path
