@@ -34,7 +34,7 @@ u (clamp(t, start, end) - start). Shapes (every one 2D and 3D except the mesh):
 
 ``inside: true`` turns any shape into a container (the solid is everything
 outside it). The kernels compile only the shapes a scene has
-(:func:`make_colliders`).
+(:func:`make_collide`, :func:`kinds_of`).
 """
 
 import functools
@@ -160,14 +160,13 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device) -> wp.array:
     record when there is no collider; the kernels then compile them out).
     ``meshes`` maps a collider index to its wp.Mesh (kept alive by the caller)."""
     Data = make_collider_data(t)
-    S = float
     out = []
     for i, c in enumerate(colliders or [Collider("half_space", point=(0.0,) * t.dim,
                                                  normal=(1.0,) + (0.0,) * (t.dim - 1))]):
         rec = c.record(t.dim)
         d = Data()
         d.kind, d.boundary, d.invert = rec["kind"], rec["boundary"], rec["invert"]
-        d.friction, d.r, d.a, d.w = (t.scalar(S(rec[k])) for k in ("friction", "r", "a", "w"))
+        d.friction, d.r, d.a, d.w = (t.scalar(float(rec[k])) for k in ("friction", "r", "a", "w"))
         for k in ("p", "n0", "n1", "h", "u"):
             setattr(d, k, t.vec(*rec[k]))
         d.window = wp.types.vector(2, t.scalar)(*rec["window"])
