@@ -118,6 +118,7 @@ class Solver:
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t, self.regions, self.collider_kinds) if self.contact else None
         self._inside = make_inside_count(t, self.collider_kinds) if colliders else None
+        self._collider_speed = max([c.speed() for c in colliders], default=0.0)  # [m/s], for the step
         self._measure = make_measure(t, per_particle_K=k.moment is None)
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
@@ -365,7 +366,7 @@ class Solver:
                     stiffening = float(report.stiffening[b])
                 rate = float(report.max_rate[b])
             speed = report.max_speed if report is not None else max_speed
-            speed = max([speed] + [c.speed() for c in m.scene.colliders])
+            speed = max(speed, self._collider_speed)
             c = body.material.wave_speed(min(max(J, 1e-3), 1.0)) * np.sqrt(stiffening)
             limits.append(step_limits(m.dx, min(max(s, 1e-3), 1.0), c, speed, cfl,
                                       body.material.kinematic_viscosity(), m.dim, rate))
