@@ -10,14 +10,20 @@ Elastic and fluid models give
   models only), and the stored energy ``psi`` per unit rest volume [J/m^3].
   One function for both, so a kernel that needs both decomposes ``F`` once;
   kernels that need one of them leave the other to dead-code elimination;
+* ``principal(sigma, params, history) -> (P_hat, psi, H)``: the same
+  elastic energy in principal stretches (singular values of F), with its
+  Hessian H_ij = d^2 psi / d sigma_i d sigma_j, for the stress differential
+  of the implicit integrator (mpm.materials.differential); a viscous model
+  names the index of eta in ``params`` as ``viscosity_param``;
 * ``project(F, params) -> F`` (optional): applied when the reference
   configuration is updated (every step for the Eulerian scheme), e.g. a fluid
   keeps only the volume change of ``F``.
 
 Plastic models (:class:`mpm.materials.plastic.Plastic`) instead give a return
 mapping and a stress in principal stretches, run every step by P2G on a
-per-particle plastic state; see that module for how the state relates to the
-reference configuration.
+per-particle plastic state (with ``elasticity_hessian`` for the implicit
+integrator); see that module for how the state relates to the reference
+configuration.
 
 ``params`` is the per-body vector returned by :meth:`Material.packed`, so
 bodies of one model share compiled code and a parameter sweep never
@@ -52,6 +58,8 @@ class Material:
     name: ClassVar[str] = ""
     stress_energy: ClassVar[Callable[[Types], Callable]]
     project: ClassVar[Callable[[Types], Callable] | None] = None
+    principal: ClassVar[Callable[[Types], Callable]]
+    viscosity_param: ClassVar[int | None] = None  # index of eta [Pa s] in packed(), if viscous
     plastic: ClassVar[bool] = False  # a return mapping runs every step (mpm.materials.plastic)
     needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
     stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?

@@ -40,7 +40,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import split_elasticity
+from .elasticity import split_elasticity, split_elasticity_hessian
 from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
 
 JE2_FLOOR = 1.0e-4  # smallest J_E^2 a tip projection may produce
@@ -120,6 +120,7 @@ class NACC(Plastic):
     name = "nacc"
     flow = staticmethod(_flow)
     elasticity = staticmethod(split_elasticity)
+    elasticity_hessian = staticmethod(split_elasticity_hessian)
     history_names = ("alpha", "plastic_strain")
     log_Jp = True
 

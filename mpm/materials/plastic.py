@@ -52,7 +52,9 @@ the sign convention of mpm.materials.decompositions):
   rate-independent projection would, so that a stress evaluation outside a
   step changes nothing);
 * ``elasticity(sigma, params, history) -> (P_hat, psi)``: the principal first
-  Piola-Kirchhoff stress and the energy per rest volume (mpm.materials.elasticity);
+  Piola-Kirchhoff stress and the energy per rest volume (mpm.materials.elasticity),
+  and ``elasticity_hessian(sigma, params, history) -> H`` its principal
+  Hessian (the implicit integrator's elastic predictor);
 * optionally ``stiffening(params, history) -> factor``: how much the squared
   wave speed has grown from the rest value (snow hardening), for the time step.
 """
@@ -83,6 +85,7 @@ class Plastic(Material):
     flows: ClassVar[bool] = True
     flow: ClassVar[Callable[[Types], Callable]]
     elasticity: ClassVar[Callable[[Types], Callable]]
+    elasticity_hessian: ClassVar[Callable[[Types], Callable]]
     stiffening: ClassVar[Callable[[Types], Callable] | None] = None
     history_names: ClassVar[tuple[str, str]] = ("", "plastic_strain")
     """names of the two history variables ("" for an unused slot)"""

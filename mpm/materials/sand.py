@@ -46,7 +46,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import hencky_elasticity
+from .elasticity import hencky_elasticity, hencky_elasticity_hessian
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
 DEG = math.pi / 180.0
@@ -120,6 +120,7 @@ class Sand(Plastic):
     name = "sand"
     flow = staticmethod(_flow)
     elasticity = staticmethod(hencky_elasticity)
+    elasticity_hessian = staticmethod(hencky_elasticity_hessian)
     history_names = ("volume_correction", "plastic_strain")
     log_Jp = None  # the volume correction is the unrecovered dilation, not ln J_P
 

@@ -22,7 +22,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_fixed_corotated
+from .elasticity import make_fixed_corotated, make_fixed_corotated_hessian
 from .plastic import STRETCH_FLOOR, Plastic
 
 
@@ -61,6 +61,19 @@ def _elasticity(t: Types):
 
 
 @functools.cache
+def _elasticity_hessian(t: Types):
+    S = t.scalar
+    hessian = make_fixed_corotated_hessian(t)
+
+    @wp.func
+    def elasticity_hessian(sigma: t.vec, params: t.params, history: t.history):
+        harden = wp.exp(params[4] * (S(1.0) - wp.exp(history[0])))
+        return hessian(sigma, harden * params[0], harden * params[1])
+
+    return elasticity_hessian
+
+
+@functools.cache
 def _stiffening(t: Types):
     S = t.scalar
 
@@ -78,6 +91,7 @@ class Snow(Plastic):
     name = "snow"
     flow = staticmethod(_flow)
     elasticity = staticmethod(_elasticity)
+    elasticity_hessian = staticmethod(_elasticity_hessian)
     stiffening = staticmethod(_stiffening)
     history_names = ("log_Jp", "plastic_strain")
     log_Jp = True

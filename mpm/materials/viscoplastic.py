@@ -29,7 +29,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import split_elasticity
+from .elasticity import split_elasticity, split_elasticity_hessian
 from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
 
 NEWTON_ITERATIONS = 40
@@ -85,6 +85,7 @@ class Viscoplastic(Plastic):
     name = "viscoplastic"
     flow = staticmethod(_flow)
     elasticity = staticmethod(split_elasticity)
+    elasticity_hessian = staticmethod(split_elasticity_hessian)
     history_names = ("", "plastic_strain")
 
     E: float = param(1.0e5, "Young's modulus of the elastic response [Pa]", gt=0.0)

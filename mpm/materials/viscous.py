@@ -23,6 +23,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import Material
+from .elasticity import make_tait_law
 
 
 @functools.cache
@@ -61,6 +62,17 @@ def _project(t: Types):
     return project
 
 
+@functools.cache
+def _principal(t: Types):
+    law = make_tait_law(t)
+
+    @wp.func
+    def principal(sigma: t.vec, params: t.params, history: t.history):
+        return law(sigma, params[0], params[1])
+
+    return principal
+
+
 @dataclass
 class Viscous(Material):
     """Weakly compressible Newtonian viscous fluid."""
@@ -68,6 +80,8 @@ class Viscous(Material):
     name = "viscous"
     stress_energy = staticmethod(_stress_energy)
     project = staticmethod(_project)
+    principal = staticmethod(_principal)
+    viscosity_param = 2  # params[2] is eta
     needs_velocity_gradient = True
     stiffens = True
     flows = True

@@ -27,7 +27,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import hencky_elasticity
+from .elasticity import hencky_elasticity, hencky_elasticity_hessian
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
 
@@ -63,6 +63,7 @@ class VonMises(Plastic):
     name = "von_mises"
     flow = staticmethod(_flow)
     elasticity = staticmethod(hencky_elasticity)
+    elasticity_hessian = staticmethod(hencky_elasticity_hessian)
     history_names = ("", "plastic_strain")
 
     E: float = param(1.0e6, "Young's modulus [Pa]", gt=0.0)
