@@ -314,6 +314,24 @@ def make_sdf(t: Types, kinds: tuple[str, ...]):
 
 
 @functools.cache
+def make_motion(t: Types):
+    """``motion(c, time) -> (displacement, velocity)`` of collider ``c``."""
+    S = t.scalar
+    vec = t.vec
+    Data = make_collider_data(t)
+
+    @wp.func
+    def motion(c: Data, time: S):
+        tc = wp.min(wp.max(time, c.window[0]), c.window[1])
+        u = vec()
+        if time >= c.window[0] and time < c.window[1]:
+            u = c.u
+        return (tc - c.window[0]) * c.u, u
+
+    return motion
+
+
+@functools.cache
 def make_collide(t: Types, kinds: tuple[str, ...]):
     """``collide(v, q, time, colliders) -> v``: every collider's boundary
     condition on a node at ``q`` with velocity ``v`` (see the module docstring)."""
@@ -321,15 +339,7 @@ def make_collide(t: Types, kinds: tuple[str, ...]):
     vec = t.vec
     Data = make_collider_data(t)
     sdf = make_sdf(t, kinds)
-
-    @wp.func
-    def motion(c: Data, time: S):
-        """(displacement, velocity) of the collider at ``time``."""
-        tc = wp.min(wp.max(time, c.window[0]), c.window[1])
-        u = vec()
-        if time >= c.window[0] and time < c.window[1]:
-            u = c.u
-        return (tc - c.window[0]) * c.u, u
+    motion = make_motion(t)
 
     @wp.func
     def collide(v: vec, q: vec, time: S, colliders: wp.array(dtype=Data)):
@@ -351,6 +361,57 @@ def make_collide(t: Types, kinds: tuple[str, ...]):
         return v
 
     return collide
+
+
+@functools.cache
+def make_remove_direction(t: Types):
+    """``remove_direction(Pi, n) -> Pi``: the orthogonal projector ``Pi``
+    onto a subspace, with the direction ``n`` taken out of that subspace."""
+    S = t.scalar
+
+    @wp.func
+    def remove_direction(Pi: t.mat, n: t.vec):
+        w = Pi * n
+        ww = wp.dot(w, w)
+        if ww > S(1.0e-12) * wp.dot(n, n):
+            return Pi - wp.outer(w, w) / ww
+        return Pi
+
+    return remove_direction
+
+
+@functools.cache
+def make_constrain(t: Types, kinds: tuple[str, ...]):
+    """``constrain(v, Pi, q, time, colliders) -> (v, Pi)``: the colliders as
+    constraints of an implicit solve, at the predicted velocity ``v``: a
+    node inside a sticky collider is fixed (v = u, Pi = 0); inside a slip
+    collider, or a separating one it approaches, its normal velocity is
+    fixed (v_n = u_n, n removed from the free subspace ``Pi``). Friction is
+    not a constraint: it acts on the solved velocity (:func:`make_collide`)."""
+    S = t.scalar
+    mat = t.mat
+    Data = make_collider_data(t)
+    sdf = make_sdf(t, kinds)
+    motion = make_motion(t)
+    remove_direction = make_remove_direction(t)
+
+    @wp.func
+    def constrain(v: t.vec, Pi: t.mat, q: t.vec, time: S, colliders: wp.array(dtype=Data)):
+        for k in range(colliders.shape[0]):
+            c = colliders[k]
+            shift, u = motion(c, time)
+            phi, n = sdf(c, q - shift)
+            if phi < S(0.0):
+                vn = wp.dot(v - u, n)
+                if c.boundary == STICKY:
+                    v = u
+                    Pi = mat()
+                elif c.boundary == SLIP or vn < S(0.0):
+                    v = v - vn * n
+                    Pi = remove_direction(Pi, n)
+        return v, Pi
+
+    return constrain
 
 
 @functools.cache

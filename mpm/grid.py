@@ -23,7 +23,7 @@ import functools
 
 import warp as wp
 
-from .colliders import make_collide, make_collider_data
+from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
 from .types import Types
 
@@ -67,7 +67,8 @@ def make_walls(t: Types):
 
 @functools.cache
 def make_kinematic(t: Types):
-    """``kinematic(v, q, m, kin_m, kin_id, time, u, gradient, center, window) -> v``."""
+    """``kinematic(v, q, m, kin_m, kin_id, time, u, gradient, center, window)
+    -> (active, v)``: whether a region prescribes the node's velocity, and the velocity."""
     S = t.scalar
 
     @wp.func
@@ -75,12 +76,12 @@ def make_kinematic(t: Types):
                   u: wp.array(dtype=t.vec), gradient: wp.array(dtype=t.mat),
                   center: wp.array(dtype=t.vec), window: wp.array(dtype=wp.types.vector(2, S))):
         if kin_id == 0 or kin_m < S(0.5) * m:
-            return v
+            return False, v
         r = kin_id - 1
         if time < window[r][0] or time >= window[r][1]:
-            return v
+            return False, v
         c = center[r] + (time - window[r][0]) * u[r]
-        return u[r] + gradient[r] * (q - c)
+        return True, u[r] + gradient[r] * (q - c)
 
     return kinematic
 
@@ -129,11 +130,77 @@ def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (
         if wp.static(len(colliders) > 0):
             v = collide(v, q, time, data.colliders)
         if wp.static(with_regions):
-            v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
-                          data.region_center, data.region_window)
+            active, v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
+                                  data.region_center, data.region_window)
         return v
 
     return conditions
+
+
+@functools.cache
+def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
+    """The boundary conditions as constraints of the implicit solve
+    (mpm.implicit): on every node with mass, from the predicted velocity v,
+    the constrained velocity and the orthogonal projector Pi onto the
+    velocities the solve may still change (I: free, 0: fixed). Sticky walls
+    and kinematic regions fix the node; a slip wall the node moves into, or
+    a slip collider, fixes the normal component. Nodes without mass get
+    Pi = 0 (not part of the system)."""
+    S = t.scalar
+    vec, mat = t.vec, t.mat
+    dim = t.dim
+    kinematic = make_kinematic(t)
+    constrain = make_constrain(t, colliders)
+    remove_direction = make_remove_direction(t)
+    Data = make_boundary_data(t)
+
+    @wp.func
+    def wall(v: t.vec, Pi: t.mat, d: int, outward: S, kind: int):
+        if kind == STICKY:
+            return vec(), mat()
+        if kind == SLIP and v[d] * outward > S(0.0):
+            v[d] = S(0.0)
+            e = vec()
+            e[d] = S(1.0)
+            Pi = remove_direction(Pi, e)
+        return v, Pi
+
+    @wp.kernel(module="unique")
+    def constraints(
+        grid_m: wp.array(dtype=S),
+        grid_q: wp.array(dtype=t.vec),
+        time: S,
+        data: Data,
+        grid_kin: wp.array(dtype=S),
+        grid_kin_id: wp.array(dtype=wp.int32),
+        grid_v: wp.array(dtype=t.vec),  # in: predicted, out: constrained
+        free: wp.array(dtype=t.mat),  # out: Pi
+    ):
+        i = wp.tid()
+        m = grid_m[i]
+        if m <= S(0.0):
+            free[i] = mat()
+            return
+        v = grid_v[i]
+        q = grid_q[i]
+        Pi = wp.identity(n=dim, dtype=S)
+        for d in range(wp.static(dim)):
+            if q[d] < data.band:
+                v, Pi = wall(v, Pi, d, S(-1.0), data.wall_lo[d])
+            if q[d] > data.domain[d] - data.band:
+                v, Pi = wall(v, Pi, d, S(1.0), data.wall_hi[d])
+        if wp.static(len(colliders) > 0):
+            v, Pi = constrain(v, Pi, q, time, data.colliders)
+        if wp.static(with_regions):
+            active, vk = kinematic(v, q, m, grid_kin[i], grid_kin_id[i], time, data.region_u,
+                                   data.region_gradient, data.region_center, data.region_window)
+            if active:
+                v = vk
+                Pi = mat()
+        grid_v[i] = v
+        free[i] = Pi
+
+    return constraints
 
 
 @functools.cache

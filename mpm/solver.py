@@ -21,11 +21,13 @@ from .configuration import make_update
 from .diagnostics import about_center_of_mass, diagnostic_names, make_measure
 from .fracture import fragments, make_fracture, neighbour_pairs
 from .contact import make_contact
-from .grid import make_boundary, make_boundary_data, make_grid_update, region_types
+from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
+from .implicit import ImplicitSolve, NewtonReport
+from .integrators import Explicit, Implicit
 from .layout import GridLayout
 from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
-from .timestep import StepLimits, step_limits
+from .timestep import StepLimits, displacement_dt, step_limits
 from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
                        STATUS_PER_BODY, TRANSFERS, make_g2p, make_p2g)
 
@@ -36,6 +38,8 @@ class SolverOptions:
     """write the per-particle dJ field every step (for logging)"""
     transfer: str = "mls"
     """mls | apic | pic (mpm.transfer.TRANSFERS)"""
+    integrator: Explicit | Implicit = field(default_factory=Explicit)
+    """forward or backward Euler on the grid velocities (mpm.integrators)"""
 
 
 @dataclass
@@ -56,9 +60,14 @@ class StepReport:
     box_hi: np.ndarray
     updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
     update_time: float = 0.0  # [s] deciding and updating
+    dt: float = 0.0  # [s] the step taken (an implicit step may have been halved)
+    newton: NewtonReport | None = None  # the implicit solve (None: explicit)
+    halvings: int = 0  # times the implicit step was halved after a failed solve
 
     @property
     def reason(self) -> str | None:
+        if self.newton is not None and not self.newton.converged:
+            return self.newton.reason
         if self.nonfinite:
             return f"{self.nonfinite} particles have non-finite position, velocity or F"
         if self.outside:
@@ -102,8 +111,9 @@ class Solver:
         self.regions = len(model.scene.regions) > 0
         solution = model.scene.solution
         self.forcing = solution if getattr(solution, "has_body_force", False) else None
+        self.implicit = isinstance(self.options.integrator, Implicit)
         self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
-                               lagrangian=not isinstance(scheme, EMPM)), g)
+                               lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit), g)
                      for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
@@ -114,9 +124,13 @@ class Solver:
         self.contact = nb > 1 and model.scene.contact == "frictionless"
         colliders = model.scene.colliders
         self.collider_kinds = kinds_of(colliders)
-        self._grid_update = make_grid_update(t, not self.contact, self.regions, self.collider_kinds)
+        # the boundary conditions act in the grid update, or after contact or the implicit solve
+        separate = self.contact or self.implicit
+        self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds)
         self._contact = make_contact(t) if self.contact else ()
-        self._boundary = make_boundary(t, self.regions, self.collider_kinds) if self.contact else None
+        self._boundary = make_boundary(t, self.regions, self.collider_kinds) if separate else None
+        self._constraints = (make_constraints(t, self.regions, self.collider_kinds) if self.implicit
+                             else None)
         self._inside = make_inside_count(t, self.collider_kinds) if colliders else None
         self._collider_speed = max([c.speed() for c in colliders], default=0.0)  # [m/s], for the step
         self._measure = make_measure(t, per_particle_K=k.moment is None)
@@ -153,6 +167,8 @@ class Solver:
                                            dtype=t.scalar)
                 self._fill = t.scalar(model.scene.contact_fill)
             self.diagnostics = wp.zeros(len(diagnostic_names(t.dim)), dtype=wp.float64)
+        self._solve = ImplicitSolve(self, self.options.integrator) if self.implicit else None
+        self._backup = None  # F^0s and history before an implicit step (plastic models, for a retry)
         self._capacity = 0
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
@@ -185,6 +201,7 @@ class Solver:
                                           self._fracture]
         ks += list(self._contact) + ([self._boundary] if self._boundary else [])
         ks += [self._inside] if self._inside else []
+        ks += [self._constraints] + self._solve.kernels() if self.implicit else []
         return ks + list(self._update.values())
 
     def load(self) -> float:
@@ -210,10 +227,24 @@ class Solver:
             self._launch_update(state, b)
 
     # ------------------------------------------------------------------ step
-    def advance(self, state: State, dt: float) -> StepReport:
-        """One step, then the configuration updates the scheme asks for."""
-        self.step(state, dt)
-        report = self.check()
+    def advance(self, state: State, dt: float, halvings: int = 0) -> StepReport:
+        """One step of ``dt`` [s], then the configuration updates the scheme
+        asks for. An implicit step whose Newton solve fails is retried with
+        half the step up to ``halvings`` times (the state is restored first);
+        ``report.dt`` is the step taken."""
+        for attempt in range(halvings + 1):
+            newton = self.step(state, dt)
+            if newton is None or newton.converged or attempt == halvings:
+                break
+            self._restore(state)
+            dt *= 0.5
+        if newton is not None and not newton.converged:
+            self._restore(state)  # the state the failed step started from
+            report = StepReport(0.0, 0, 0, *([np.zeros(self.n_bodies)] * 8))
+        else:
+            self._interpolate(state, self.model.types.scalar(dt))
+            report = self.check()
+        report.dt, report.newton, report.halvings = dt, newton, attempt
         if report.reason is None:
             t0 = time.perf_counter()
             report.updated = [b for b in range(self.n_bodies)
@@ -225,8 +256,10 @@ class Solver:
             report.update_time = time.perf_counter() - t0
         return report
 
-    def step(self, state: State, dt: float) -> None:
-        """Advance ``state`` by ``dt`` [s] in the current reference configurations."""
+    def step(self, state: State, dt: float) -> NewtonReport | None:
+        """Advance the grid of ``state`` by ``dt`` [s] in the current reference
+        configurations, up to the grid velocities (G2P follows in
+        :meth:`advance`); the implicit solve's report, or None (explicit)."""
         t0 = self.time
         self._time = self.model.types.scalar(t0)
         self.time += dt
@@ -234,12 +267,35 @@ class Solver:
         self._clear()
         if self.forcing is not None:
             self._apply_forcing(t0)
+        if self.implicit and self.model.plastic:
+            self._save(state)
         self._rasterize(state, dt)
         self._update_grid(dt)
+        newton = None
+        if self.implicit:
+            newton = self._solve.solve(state, dt)
+            if not newton.converged:
+                self.time = t0
+                return newton
         if self.contact:
             self._resolve_contact()
+        if self._boundary is not None:
             self._apply_boundary()
-        self._interpolate(state, dt)
+        return newton
+
+    def _save(self, state: State) -> None:
+        """Keep F^0s and the history: P2G's return mapping overwrites them."""
+        if self._backup is None:
+            self._backup = (wp.empty_like(state.F0s), wp.empty_like(state.history))
+        wp.copy(self._backup[0], state.F0s)
+        wp.copy(self._backup[1], state.history)
+
+    def _restore(self, state: State) -> None:
+        """Undo a failed implicit step (the grid is scratch; only P2G's plastic
+        write-back and the clock changed the state)."""
+        if self._backup is not None:
+            wp.copy(state.F0s, self._backup[0])
+            wp.copy(state.history, self._backup[1])
 
     def _clear(self):
         """Zero the grid, the status buffer and the energy sum."""
@@ -343,6 +399,15 @@ class Solver:
                 n_kin = self._capacity if self.regions else 1
                 self.grid_kin = wp.zeros(n_kin, dtype=t.scalar)
                 self.grid_kin_id = wp.zeros(n_kin, dtype=wp.int32)
+
+    def displacement_dt(self, report: StepReport | None = None, max_speed: float = 0.0) -> float:
+        """The implicit integrator's step limit [s]: a particle moves at most
+        ``integrator.displacement`` cells per step at the speed of the last
+        step (or ``max_speed`` before the first), the colliders' included;
+        independent of the wave speed (mpm.timestep.displacement_dt)."""
+        speed = report.max_speed if report is not None else max_speed
+        return displacement_dt(self.model.dx, max(speed, self._collider_speed),
+                               self.options.integrator.displacement)
 
     def stable_dt(self, cfl: float, report: StepReport | None = None, max_speed: float = 0.0) -> float:
         """The explicit step limit [s] after ``report``'s step (at rest without

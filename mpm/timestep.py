@@ -8,7 +8,8 @@ and right after a configuration update):
     viscous      dt <= cfl (s dx)^2 / (2 d nu)        viscous diffusion, nu kinematic viscosity
     strain_rate  dt <= STRAIN_STEP cfl / |L|          the strain increment of one step
 
-The step is the smallest term. ``fresh`` is the same bound with s = 1: the
+The step is the smallest term. The implicit integrator is not bound by
+these: its step is a displacement limit (:func:`displacement_dt`). ``fresh`` is the same bound with s = 1: the
 step the body would be allowed right after a configuration update, so
 ``dt / fresh`` is what the Lagrangian reference costs in step size (the
 quantity A-ULMPM's step-driven criterion watches, mpm.schemes).
@@ -28,6 +29,12 @@ def cfl_dt(dx: float, wave_speed: float, max_speed: float, cfl: float,
     """dt = cfl dx / (c + max|v|), and the viscous bound when nu > 0 [s]: the
     limit of an undeformed reference with no strain rate."""
     return step_limits(dx, 1.0, wave_speed, max_speed, cfl, kinematic_viscosity, dim, 0.0).dt
+
+
+def displacement_dt(dx: float, max_speed: float, fraction: float) -> float:
+    """The implicit integrator's step [s]: dt = fraction dx / max|v|, no
+    particle moves more than ``fraction`` of a cell (inf at rest)."""
+    return fraction * dx / max_speed if max_speed > 0 else math.inf
 
 
 @dataclass(frozen=True)

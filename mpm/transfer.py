@@ -71,16 +71,16 @@ def make_min_stretch2(t: Types):
 
 
 def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-             with_body_force: bool = False, lagrangian: bool = True):
+             with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True):
     """P2G for the particles of one material model: see :func:`_make_p2g`
     (``lagrangian`` matters to plastic models only: one kernel otherwise)."""
     return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian or not material.plastic)
+                     lagrangian or not material.plastic, with_stress)
 
 
 @functools.cache
 def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-              with_body_force: bool, lagrangian: bool):
+              with_body_force: bool, lagrangian: bool, with_stress: bool = True):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
@@ -92,7 +92,9 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored;
     ``lagrangian`` False (EMPM) knows F^sn = I here and stores F_E as it is.
     A model that hardens records its largest stiffening factor per body in
-    ``status`` (for the time step)."""
+    ``status`` (for the time step). ``with_stress`` False leaves the stress
+    impulse out (the implicit integrator adds the stress of the step's end,
+    mpm.implicit); the return mapping and the energy stay."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
@@ -176,6 +178,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
             P, psi = stress_energy(Fs * F0, L, body_params[b])
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
+        if wp.static(not with_stress):
+            stress = t.mat()
         mv = m * v[p]
         if wp.static(with_body_force):
             mv = mv + (m * dt) * body_force[p]

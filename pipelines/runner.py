@@ -30,7 +30,10 @@ from .validate import RunSpec
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}
 
 
-def scalar_groups(dim: int, marked: list[str], error: bool = False) -> dict:
+IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
+
+
+def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
     """Time-series views of the recording's blueprint."""
     momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
                 ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
@@ -43,6 +46,8 @@ def scalar_groups(dim: int, marked: list[str], error: bool = False) -> dict:
     }
     if error:
         groups["error"] = ["error/displacement", "error/velocity"]
+    if implicit:
+        groups["implicit solve"] = IMPLICIT_SCALARS
     return groups
 
 
@@ -172,7 +177,12 @@ class Run:
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
         self.record_dJ = log.every > 0 and log.dJ
         self.solver = mpm.Solver(self.model, spec.scheme,
-                                 mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer))
+                                 mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer,
+                                                   integrator=spec.integrator))
+        self.implicit = self.solver.implicit
+        self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
+        self.halvings = 0  # implicit steps retried with half the step
+        self._dt_scale = 1.0  # the adaptive implicit step's factor after halvings (recovers x2 per step)
         self.scheme = self.solver.scheme  # defaults resolved
         self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes,
                             scene=spec.scene_name, resolution=spec.scene.resolution, dx=self.model.dx,
@@ -205,7 +215,8 @@ class Run:
             properties=self.properties, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
                                         + (self.stretch_names if self.scheme.name != "empm" else []),
-                                        self.solution is not None or self.spec.run.reference is not None))
+                                        self.solution is not None or self.spec.run.reference is not None,
+                                        self.implicit))
 
     # ------------------------------------------------------------ logging
     def measure(self, extra: dict) -> None:
@@ -384,23 +395,36 @@ class Run:
                 extra[name] = float(s)
         if self.solution is not None:
             extra.update(self.errors())
+        if report.newton is not None:
+            n = report.newton
+            extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg),
+                         newton_residual=n.residual)
         return extra
 
     # ------------------------------------------------------------ loop
     def next_dt(self, report: mpm.StepReport | None, duration: float | None) -> float:
         """The solver's stable step (mpm.Solver.stable_dt) capped by run.dt_max,
-        unless run.dt fixes it; the last step ends on the duration."""
+        unless run.dt fixes it; the implicit integrator's step is the
+        displacement limit instead (mpm.Solver.displacement_dt), times a
+        factor that halves with a failed solve and recovers; the last step
+        ends on the duration."""
         run = self.spec.run
-        limits = self.solver.step_limits(run.cfl, report, self._v0)
-        limit = min(limits, key=lambda lim: lim.dt)
-        self._fresh_dt = min(run.dt_max, min(lim.fresh for lim in limits))
-        self._reference_factor = limit.reference_factor
+        if self.implicit:
+            limit_dt = self._dt_scale * self.solver.displacement_dt(report, self._v0)
+            self._fresh_dt, self._reference_factor = limit_dt, 1.0
+            binding = "displacement"
+        else:
+            limits = self.solver.step_limits(run.cfl, report, self._v0)
+            limit = min(limits, key=lambda lim: lim.dt)
+            self._fresh_dt = min(run.dt_max, min(lim.fresh for lim in limits))
+            self._reference_factor = limit.reference_factor
+            limit_dt, binding = limit.dt, limit.binding
         if run.dt is not None:
             dt = run.dt
             self.dt_binding["fixed"] += 1
         else:
-            dt = min(run.dt_max, limit.dt)
-            self.dt_binding["dt_max" if run.dt_max <= limit.dt else limit.binding] += 1
+            dt = min(run.dt_max, limit_dt)
+            self.dt_binding["dt_max" if run.dt_max <= limit_dt else binding] += 1
             if self._dt0 is None:
                 self._dt0 = dt
         self._stable_dt = dt
@@ -451,15 +475,23 @@ class Run:
                 self.unstable(collapse)
                 break
             t0 = time.perf_counter()
-            report = self.solver.advance(self.state, dt)
+            halvings = self.spec.integrator.halvings if self.implicit and self.spec.run.dt is None else 0
+            report = self.solver.advance(self.state, dt, halvings)
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
-            self.update_ms.append(1e3 * report.update_time)
-            self.dts.append(dt)
-            self.reference_factors.append(self._reference_factor)
-            self.step += 1
-            self.t += dt
             if self._pending:
                 self.emit(self.solver.step_energy())
+            if report.newton is not None and not report.newton.converged:  # the state is the step's start
+                n = report.newton
+                self.unstable(report.reason, newton_iterations=n.newton, cg_iterations=n.cg,
+                              newton_residual=n.residual, halvings=report.halvings)
+                break
+            self.update_ms.append(1e3 * report.update_time)
+            self.dts.append(report.dt)
+            self.reference_factors.append(self._reference_factor)
+            self.step += 1
+            self.t += report.dt
+            if report.newton is not None:
+                self.record_newton(report)
             if report.reason:
                 self.unstable(report.reason, nonfinite=report.nonfinite, outside=report.outside)
                 break
@@ -476,6 +508,32 @@ class Run:
             progress.update(self.step, self.t, self.step_ms[-1])
         else:
             self.metrics["status"], self.metrics["reason"] = "completed", ""
+
+    def record_newton(self, report: mpm.StepReport) -> None:
+        """Iteration counts of an implicit step; halvings as events."""
+        n = report.newton
+        self.newton.append((n.newton, n.cg, n.residual))
+        if report.halvings:
+            self.halvings += report.halvings
+            self._dt_scale *= 0.5 ** report.halvings
+            self.sink.event(self.step, self.t, f"implicit step halved {report.halvings} time(s) to "
+                                               f"{report.dt:.3g} s after a failed Newton solve",
+                            level="WARN", halvings=report.halvings, dt=report.dt)
+        else:
+            self._dt_scale = min(1.0, 2.0 * self._dt_scale)
+
+    def implicit_summary(self) -> dict:
+        """metrics.json ``implicit``: Newton and CG iterations per step."""
+        opt = self.spec.integrator
+        out = {"newton_max": opt.newton_max, "newton_tol": opt.newton_tol, "cg_max": opt.cg_max,
+               "cg_tol": opt.cg_tol, "halvings": self.halvings}
+        if self.newton:
+            a = np.array(self.newton, dtype=float)
+            out.update(newton_mean=float(a[:, 0].mean()), newton_max_seen=int(a[:, 0].max()),
+                       cg_mean=float(a[:, 1].mean()), cg_max_seen=int(a[:, 1].max()),
+                       cg_per_newton=float(a[:, 1].sum() / max(a[:, 0].sum(), 1.0)),
+                       residual_max=float(a[:, 2].max()))
+        return out
 
     def unstable(self, reason: str, **values) -> None:
         self.metrics["status"] = "unstable"
@@ -548,6 +606,9 @@ class Run:
                 update_time_ms=float(np.mean(self.update_ms)) if self.update_ms else None)
             if self.scheme.name == "aulmpm":
                 m.update(epsilon=self.scheme.epsilon, eta=self.scheme.eta, affine=self.scheme.affine)
+            m["integrator"] = self.spec.integrator.name
+            if self.implicit:
+                m["implicit"] = self.implicit_summary()
         if self.drift is not None:
             m.update(self.drift.summary())
 

@@ -15,6 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from mpm.colliders import BOUNDARIES, KINDS as COLLIDERS
+from mpm.integrators import INTEGRATORS
 from mpm.materials import MATERIALS
 from mpm.scene import CONTACT_TYPES as CONTACTS
 from mpm.schemes import SCHEMES
@@ -157,7 +158,7 @@ class RunConfig:
 
     steps: Optional[int] = None  # number of steps (exclusive with duration)
     duration: Optional[float] = None  # simulated time [s]; null: the scene's
-    dt: Optional[float] = None  # fixed time step [s]; null: CFL every step
+    dt: Optional[float] = None  # fixed time step [s]; null: adaptive (explicit: CFL; implicit: displacement)
     cfl: float = 0.4  # CFL number of the adaptive step
     dt_max: float = 1.0e-3  # largest adaptive step [s]
     dt_collapse: float = 1.0e-4  # unstable when the adaptive step falls below this fraction of the first
@@ -183,6 +184,7 @@ class LogConfig:
 @dataclass
 class Config:
     scheme: Any = MISSING
+    integrator: Any = MISSING
     kernel: KernelConfig = MISSING
     material: Any = MISSING
     scene: SceneConfig = MISSING
@@ -202,3 +204,5 @@ def register() -> None:
         cs.store(group="material", name=f"{name}_schema", node=cls)
     for name, cls in SCHEMES.items():
         cs.store(group="scheme", name=f"{name}_schema", node=cls)
+    for name, cls in INTEGRATORS.items():
+        cs.store(group="integrator", name=f"{name}_schema", node=cls)

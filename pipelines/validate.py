@@ -9,12 +9,13 @@ import dataclasses
 import os
 
 import numpy as np
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
 import mpm
+from mpm.integrators import INTEGRATORS, Explicit
 from mpm.materials import MATERIALS, Material
 from mpm.meshes import MESH_SUFFIXES, MeshShape, asset_path, file_digest, mesh_assets
 from mpm.params import violations
@@ -69,6 +70,7 @@ class RunSpec:
     run: RunSettings
     log: LogSettings
     seed: int
+    integrator: Any = field(default_factory=Explicit)  # mpm.integrators
 
     @property
     def meshes(self) -> dict[str, str]:
@@ -172,13 +174,26 @@ def _material_value(key: str, value, field: dataclasses.Field):
     return _number(key, value, optional="None" in str(field.type))
 
 
-def make_scheme(node, key: str = "scheme"):
+def _named(node, key: str, registry: dict):
+    """The dataclass of ``registry`` named by ``node.name``, built from the
+    node and range-checked."""
     d = dict(_plain(node) or {})
-    name = _choice(f"{key}.name", d.get("name"), list(mpm.SCHEMES))
-    cls = mpm.SCHEMES[name]
-    scheme = cls(**d)
-    for fname, value, accepted in violations(scheme):
+    name = _choice(f"{key}.name", d.get("name"), list(registry))
+    obj = registry[name](**d)
+    for fname, value, accepted in violations(obj):
         raise ConfigError(f"{key}.{fname}", f"{value} out of range; accepted: {accepted}")
+    return obj, d
+
+
+def make_integrator(node, key: str = "integrator"):
+    integrator, _ = _named(node, key, INTEGRATORS)
+    for fname, message in integrator.problems():
+        raise ConfigError(f"{key}.{fname}", message)
+    return integrator
+
+
+def make_scheme(node, key: str = "scheme"):
+    scheme, d = _named(node, key, mpm.SCHEMES)
     if d.get("affine") is not None:
         _choice(f"{key}.affine", d["affine"], AFFINE)
     if d.get("criterion") is not None:
@@ -569,6 +584,7 @@ def resolve(cfg) -> RunSpec:
     """Validate a composed :class:`pipelines.schema.Config`."""
     run = make_run(cfg.run)
     scheme = make_scheme(cfg.scheme)
+    integrator = make_integrator(cfg.integrator) if "integrator" in cfg else Explicit()
     kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
     transfer = _choice("kernel.transfer", cfg.kernel.transfer, TRANSFERS)
     material = make_material(cfg.material, "material")
@@ -598,4 +614,5 @@ def resolve(cfg) -> RunSpec:
         if not wp.is_cuda_available():
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
-                   kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed)
+                   kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed,
+                   integrator=integrator)

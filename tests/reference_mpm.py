@@ -448,3 +448,78 @@ def plastic_step(x, v, C, F, hist, mass, vol, mats, dx, cells, gravity, walls, d
     x, v, C, F = step(x, v, C, F, mass, vol, [m.name for m in mats], [None] * len(x), dx, cells,
                       gravity, walls, dt, wall_cells, elastic_state=elastic_state)
     return x, v, C, F, hist
+
+
+class ImplicitSystem:
+    """Backward Euler on the grid of one body in its reference configuration
+    (quadratic B-spline, MLS, no boundary condition acting), assembled
+    densely: the unknowns are the velocities of the stencil nodes, in the
+    order of ``nodes``. ``s``: dict x, v, C, F0s, Fsn, X of the step's start.
+
+        R(v) = M (v - v*) + dt sum_p V_p P(F_p(v)) F0s_p^T g_ip,
+        F_p(v) = (Fsn_p + dt sum_i v_i g_ip^T) F0s_p,   g_ip = K r_ip w_ip,
+        A = dR/dv = M + dt^2 sum_p V_p dP/dF : (e_a w_jp^T) . w_ip,  w_ip = F0s^T g_ip,
+    with dP/dF by centred differences of :func:`stress`."""
+
+    def __init__(self, s, mass, vol, model, prm, dx, gravity, dt):
+        n, d = s["x"].shape
+        self.d, self.dt, self.model, self.prm, self.vol = d, dt, model, prm, vol
+        self.F0s, self.Fsn = s["F0s"], s["Fsn"]
+        offsets = np.stack(np.meshgrid(*([np.arange(3)] * d), indexing="ij"), -1).reshape(-1, d)
+        K = 4.0 / dx**2
+        index = {}
+        self.stencil = []  # per particle: (node numbers, weights, gradients g_ip)
+        for p in range(n):
+            base = np.floor(s["X"][p] / dx - 0.5).astype(int)
+            fx = s["X"][p] / dx - base
+            w = quadratic_weights(fx)
+            ids, ws, gs, rs = [], [], [], []
+            for off in offsets:
+                ids.append(index.setdefault(tuple(base + off), len(index)))
+                ws.append(np.prod([w[off[a], a] for a in range(d)]))
+                rs.append((off - fx) * dx)
+                gs.append(K * ws[-1] * rs[-1])
+            self.stencil.append((np.array(ids), np.array(ws), np.array(gs), np.array(rs)))
+        self.nodes = list(index)
+        N = len(index)
+        m = np.zeros(N)
+        mv = np.zeros((N, d))
+        for p, (ids, ws, gs, rs) in enumerate(self.stencil):
+            for i, w, r in zip(ids, ws, rs):
+                m[i] += w * mass[p]
+                mv[i] += w * mass[p] * (s["v"][p] + s["C"][p] @ r)
+        self.m = m
+        self.v_star = mv / m[:, None] + dt * np.asarray(gravity)
+
+    def F(self, v):
+        """Per particle F_p(v) for node velocities v (N, d)."""
+        return np.array([(Fs + self.dt * sum(np.outer(v[i], g) for i, g in zip(ids, gs))) @ F0
+                         for (ids, _, gs, _), Fs, F0 in zip(self.stencil, self.Fsn, self.F0s)])
+
+    def residual(self, v):
+        R = self.m[:, None] * (v - self.v_star)
+        for p, ((ids, _, gs, _), F) in enumerate(zip(self.stencil, self.F(v))):
+            S = self.vol[p] * stress(self.model, F, np.zeros((self.d, self.d)), self.prm) @ self.F0s[p].T
+            for i, g in zip(ids, gs):
+                R[i] += self.dt * S @ g
+        return R
+
+    def matrix(self, v, h=1e-6):
+        d = self.d
+        A = np.diag(np.repeat(self.m, d))
+        for p, ((ids, _, gs, _), F) in enumerate(zip(self.stencil, self.F(v))):
+            T = np.zeros((d, d, d, d))  # dP_ac / dF_be
+            for b in range(d):
+                for e in range(d):
+                    E = np.zeros((d, d))
+                    E[b, e] = h
+                    T[:, :, b, e] = (stress(self.model, F + E, 0 * E, self.prm)
+                                     - stress(self.model, F - E, 0 * E, self.prm)) / (2 * h)
+            W = np.array([self.F0s[p].T @ g for g in gs])  # w_ip
+            block = self.dt**2 * self.vol[p] * np.einsum("acbe,ic,je->iajb", T, W, W)
+            rows = (ids[:, None] * d + np.arange(d)).ravel()
+            A[np.ix_(rows, rows)] += block.reshape(len(ids) * d, len(ids) * d)
+        return A
+
+    def particle_velocities(self, v):
+        return np.array([ws @ v[ids] for ids, ws, _, _ in self.stencil])
