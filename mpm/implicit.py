@@ -48,7 +48,8 @@ import numpy as np
 import warp as wp
 
 from .kernels import Kernel
-from .materials.differential import make_principal_stress, make_tangent_action, make_tangent_type
+from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
+                                     make_tangent_type)
 from .stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
                       weight_matrix_type)
 from .types import Types
@@ -112,7 +113,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     principal_stress = make_principal_stress(t, material, psd)
-    action = make_tangent_action(t)
+    quadratic = make_tangent_quadratic(t)
     per_particle_K = kernel.moment is None
     viscous = material.viscosity_param is not None
     eta_index = material.viscosity_param or 0
@@ -178,7 +179,9 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
             e += dt * J * eta * wp.ddot(symL, symL)
             visc[p] = k_visc
         wp.atomic_add(acc, ENERGY, f64(S(n_grids) * V0 * e))
-        F0T = wp.transpose(F0)
+        # A's diagonal, (dt^2 / G) V0 e_k . dP(e_k wv^T) wv with wv = F0^T g, in the
+        # principal frames: u_k = U^T e_k (row k of U), z = V^T wv
+        VF0T = wp.transpose(T.V) * wp.transpose(F0)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache)
             for a in range(Ks):
@@ -187,14 +190,11 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
                         w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                         gi = weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx)
                         wp.atomic_add(residual, i, dt * (stress * gi))
-                        # A's diagonal: (dt^2 / G) V0 e_k . dP(e_k wv^T) wv, wv = F0^T g
-                        wv = F0T * gi
+                        z = VF0T * gi
                         y = FinvT * gi
                         dg = vec()
                         for k in range(wp.static(dim)):
-                            ek = vec()
-                            ek[k] = S(1.0)
-                            dg[k] = (dt * dt * S(inv_G) * V0) * (action(T, wp.outer(ek, wv)) * wv)[k]
+                            dg[k] = (dt * dt * S(inv_G) * V0) * quadratic(T, T.U[k], z)
                             if wp.static(viscous):
                                 dg[k] += dt * k_visc * (wp.dot(y, y) + y[k] * y[k]) * S(half_inv_G)
                         wp.atomic_add(diag, i, dg)
@@ -460,6 +460,16 @@ class ImplicitSolve:
             wp.launch(self._cg_direction, n, device=m.device, inputs=[S(rz / rz_old), self.z, self.d])
         return self.options.cg_max
 
+    def begin(self) -> None:
+        """Keep the predictor v* and constrain grid_v: the solve's start."""
+        s, m = self.solver, self.solver.model
+        n = s.layout.n_nodes
+        self._grow(s._capacity)
+        wp.copy(self.v_star, s.grid_v, count=n)
+        wp.launch(s._constraints, n, device=m.device, inputs=[
+            s.grid_m, s.grid_q, s._time, s._boundary_data, s.grid_kin, s.grid_kin_id, s.grid_v,
+            self.free])
+
     # ------------------------------------------------------------ solve
     def solve(self, state, dt) -> NewtonReport:
         """The grid velocities of the step: on entry ``solver.grid_v`` holds the
@@ -468,12 +478,8 @@ class ImplicitSolve:
         conditions' friction and contact (mpm.solver)."""
         s, m, opt = self.solver, self.solver.model, self.options
         n = s.layout.n_nodes
-        self._grow(s._capacity)
         dtS = self.t.scalar(dt)
-        wp.copy(self.v_star, s.grid_v, count=n)
-        wp.launch(s._constraints, n, device=m.device, inputs=[
-            s.grid_m, s.grid_q, s._time, s._boundary_data, s.grid_kin, s.grid_kin_id, s.grid_v,
-            self.free])
+        self.begin()
         v, v_try = s.grid_v, self.v_trial
         E, R = self._energy_residual(state, v, dtS)
         rep = NewtonReport(residual0=R)

@@ -10,7 +10,7 @@ import warp as wp
 
 from mpm.materials import MATERIALS
 from mpm.materials.differential import (make_principal_stress, make_tangent_action,
-                                        make_tangent_type)
+                                        make_tangent_quadratic, make_tangent_type)
 from mpm.types import make_types
 
 
@@ -116,3 +116,40 @@ def test_projected_tangent_is_symmetric_semidefinite(model, dim):
     assert (fixed_min > -1e-9 * scale).all()
     convex = raw_min > 1e-9 * scale
     np.testing.assert_allclose(fixed[convex], raw[convex], rtol=0, atol=1e-9 * scale)
+
+
+@functools.cache
+def quadratic_evaluator(t):
+    action = make_tangent_action(t)
+    quadratic = make_tangent_quadratic(t)
+
+    @wp.kernel(module="unique")
+    def evaluate(T: wp.array(dtype=make_tangent_type(t)), a: wp.array(dtype=t.vec), b: wp.array(dtype=t.vec),
+                 full: wp.array(dtype=t.scalar), fast: wp.array(dtype=t.scalar)):
+        i = wp.tid()
+        Ti = T[i]
+        M = wp.outer(a[i], b[i])
+        full[i] = wp.ddot(M, action(Ti, M))
+        fast[i] = quadratic(Ti, wp.transpose(Ti.U) * a[i], wp.transpose(Ti.V) * b[i])
+
+    return evaluate
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_tangent_quadratic_form_of_a_rank_one_direction(dim):
+    """(a b^T) : dP(a b^T) from the principal frames (the implicit system's
+    diagonal) equals the full differential's contraction."""
+    material = MATERIALS["snow"]()
+    rng = np.random.default_rng(7)
+    F = random_F(dim, 16, rng, spread=0.5)
+    t = make_types(dim, "float64")
+    n = len(F)
+    T = wp.zeros(n, dtype=make_tangent_type(t))
+    scratch = [wp.zeros(n, dtype=t.mat) for _ in range(3)]
+    wp.launch(evaluator(t, type(material), True), n,
+              inputs=[wp.array(F, dtype=t.mat), wp.array(F, dtype=t.mat), t.params(*material.packed_padded()),
+                      t.history(*material.initial_history()), *scratch, T])
+    full, fast = wp.zeros(n, dtype=t.scalar), wp.zeros(n, dtype=t.scalar)
+    wp.launch(quadratic_evaluator(t), n, inputs=[T, wp.array(rng.standard_normal((n, dim)), dtype=t.vec),
+                                                 wp.array(rng.standard_normal((n, dim)), dtype=t.vec), full, fast])
+    np.testing.assert_allclose(fast.numpy(), full.numpy(), rtol=1e-10, atol=1e-10 * np.abs(full.numpy()).max())

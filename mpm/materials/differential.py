@@ -190,3 +190,28 @@ def make_principal_stress(t: Types, cls, psd: bool):
         return U * wp.diag(P_hat) * wp.transpose(V), psi, tangent(U, sigma, V, P_hat, H)
 
     return principal_stress
+
+
+@functools.cache
+def make_tangent_quadratic(t: Types):
+    """``tangent_quadratic(T, u, z) -> (a b^T) : dP(a b^T)`` for u = U^T a and
+    z = V^T b (the rank-one direction in the principal frames): with
+    c = u * z (per component), s and w the pairs' (u_i z_j +- u_j z_i) / 2,
+    it is c^T H c + 2 sum_pairs (lam_s s^2 + lam_a w^2) - the diagonal of
+    the implicit system without a full :func:`make_tangent_action`."""
+    S = t.scalar
+    n_pairs = 1 if t.dim == 2 else 3
+
+    @wp.func
+    def tangent_quadratic(T: make_tangent_type(t), u: t.vec, z: t.vec):
+        c = wp.cw_mul(u, z)
+        q = wp.dot(c, T.H * c)
+        for k in range(wp.static(n_pairs)):
+            i = k // 2  # pairs (0, 1), (0, 2), (1, 2)
+            j = (k + 3) // 2
+            s = S(0.5) * (u[i] * z[j] + u[j] * z[i])
+            w = S(0.5) * (u[i] * z[j] - u[j] * z[i])
+            q += S(2.0) * (T.lam_s[k] * s * s + T.lam_a[k] * w * w)
+        return q
+
+    return tangent_quadratic
