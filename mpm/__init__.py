@@ -6,6 +6,7 @@ Build a :class:`Scene`, turn it into a :class:`Model` and initial
 
 from . import analytic  # noqa: F401 - mpm.analytic
 from .colliders import Collider
+from .integrators import INTEGRATORS, Explicit, Implicit
 from .kernels import KERNELS, Kernel
 from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
 from .model import Model, SceneError, State, build
@@ -15,7 +16,7 @@ from .solver import Solver, SolverOptions, StepReport
 from .timestep import cfl_dt
 
 __all__ = [
-    "Collider", "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
+    "Collider", "INTEGRATORS", "Explicit", "Implicit", "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
     "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
     "KinematicRegion",
     "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",

@@ -382,14 +382,16 @@ def make_remove_direction(t: Types):
 
 @functools.cache
 def make_constrain(t: Types, kinds: tuple[str, ...]):
-    """``constrain(v, Pi, q, time, colliders) -> (v, Pi)``: the colliders as
-    constraints of an implicit solve, at the predicted velocity ``v``: a
-    node inside a sticky collider is fixed (v = u, Pi = 0); inside a slip
-    collider, or a separating one it approaches, its normal velocity is
+    """``constrain(v, Pi, q, time, colliders) -> (v, Pi, mu, u, n)``: the
+    colliders as constraints of an implicit solve, at the predicted velocity
+    ``v``: a node inside a sticky collider is fixed (v = u, Pi = 0); inside a
+    slip collider, or a separating one it approaches, its normal velocity is
     fixed (v_n = u_n, n removed from the free subspace ``Pi``). Friction is
-    not a constraint: it acts on the solved velocity (:func:`make_collide`)."""
+    not a constraint: the last frictional contact's coefficient ``mu``,
+    velocity ``u`` and normal ``n`` are returned for the friction applied
+    after the solve with the solve's normal reaction (mpm.implicit)."""
     S = t.scalar
-    mat = t.mat
+    vec, mat = t.vec, t.mat
     Data = make_collider_data(t)
     sdf = make_sdf(t, kinds)
     motion = make_motion(t)
@@ -397,6 +399,9 @@ def make_constrain(t: Types, kinds: tuple[str, ...]):
 
     @wp.func
     def constrain(v: t.vec, Pi: t.mat, q: t.vec, time: S, colliders: wp.array(dtype=Data)):
+        mu = S(0.0)
+        uf = vec()
+        nf = vec()
         for k in range(colliders.shape[0]):
             c = colliders[k]
             shift, u = motion(c, time)
@@ -409,7 +414,11 @@ def make_constrain(t: Types, kinds: tuple[str, ...]):
                 elif c.boundary == SLIP or vn < S(0.0):
                     v = v - vn * n
                     Pi = remove_direction(Pi, n)
-        return v, Pi
+                    if c.friction > S(0.0):
+                        mu = c.friction
+                        uf = u
+                        nf = n
+        return v, Pi, mu, uf, nf
 
     return constrain
 

@@ -138,13 +138,16 @@ def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (
 
 
 @functools.cache
-def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
+def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = (),
+                     with_friction: bool = False):
     """The boundary conditions as constraints of the implicit solve
-    (mpm.implicit): on every node with mass, from the predicted velocity v,
+    (mpm.implicit): on every node with mass, from the predicted velocity v*,
     the constrained velocity and the orthogonal projector Pi onto the
     velocities the solve may still change (I: free, 0: fixed). Sticky walls
     and kinematic regions fix the node; a slip wall the node moves into, or
-    a slip collider, fixes the normal component. Nodes without mass get
+    a slip collider, fixes the normal component. ``with_friction``: per node
+    the friction coefficient, velocity and normal of its frictional collider
+    (mu = 0: none), for the friction after the solve. Nodes without mass get
     Pi = 0 (not part of the system)."""
     S = t.scalar
     vec, mat = t.vec, t.mat
@@ -175,9 +178,14 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),  # in: predicted, out: constrained
         free: wp.array(dtype=t.mat),  # out: Pi
+        friction: wp.array(dtype=S),  # out (with_friction): mu
+        friction_u: wp.array(dtype=t.vec),  # out (with_friction): the collider's velocity
+        friction_n: wp.array(dtype=t.vec),  # out (with_friction): its normal
     ):
         i = wp.tid()
         m = grid_m[i]
+        if wp.static(with_friction):
+            friction[i] = S(0.0)
         if m <= S(0.0):
             free[i] = mat()
             return
@@ -190,13 +198,19 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
             if q[d] > data.domain[d] - data.band:
                 v, Pi = wall(v, Pi, d, S(1.0), data.wall_hi[d])
         if wp.static(len(colliders) > 0):
-            v, Pi = constrain(v, Pi, q, time, data.colliders)
+            v, Pi, mu, uf, nf = constrain(v, Pi, q, time, data.colliders)
+            if wp.static(with_friction):
+                friction[i] = mu
+                friction_u[i] = uf
+                friction_n[i] = nf
         if wp.static(with_regions):
             active, vk = kinematic(v, q, m, grid_kin[i], grid_kin_id[i], time, data.region_u,
                                    data.region_gradient, data.region_center, data.region_window)
             if active:
                 v = vk
                 Pi = mat()
+                if wp.static(with_friction):
+                    friction[i] = S(0.0)
         grid_v[i] = v
         free[i] = Pi
 

@@ -277,9 +277,10 @@ def make_node_kernels(t: Types):
     def finish_residual(m: wp.array(dtype=S), v: wp.array(dtype=vec), v_star: wp.array(dtype=vec),
                         free: wp.array(dtype=t.mat), residual: wp.array(dtype=vec),
                         diag: wp.array(dtype=vec), inv_diag: wp.array(dtype=vec),
-                        acc: wp.array(dtype=f64)):
-        """R = Pi (m (v - v*) + R_stress), the kinetic part of E, |R|^2, and
-        the inverse of A's diagonal (0 on fixed components)."""
+                        reaction: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
+        """R = Pi (m (v - v*) + R_stress), the kinetic part of E, |R|^2, the
+        inverse of A's diagonal (0 on fixed components) and the constraints'
+        reaction (I - Pi) (m (v - v*) + R_stress) / m [m/s]."""
         i = wp.tid()
         mi = m[i]
         if mi <= S(0.0):
@@ -288,8 +289,10 @@ def make_node_kernels(t: Types):
             return
         dv = v[i] - v_star[i]
         Pi = free[i]
-        R = Pi * (mi * dv + residual[i])
+        full = mi * dv + residual[i]
+        R = Pi * full
         residual[i] = R
+        reaction[i] = (full - R) / mi
         wp.atomic_add(acc, ENERGY, f64(S(0.5) * mi * wp.dot(dv, dv)))
         wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(R, R)))
         wp.atomic_add(acc, MOMENTUM2, f64(mi * mi * wp.dot(v_star[i], v_star[i])))
@@ -360,6 +363,31 @@ def make_node_kernels(t: Types):
     return finish_residual, finish_apply, cg_start, cg_step, cg_direction, trial
 
 
+@functools.cache
+def make_friction(t: Types):
+    """Kernel: Coulomb friction after the solve (ImplicitSolve.finish)."""
+    S = t.scalar
+    vec = t.vec
+
+    @wp.kernel(module="unique")
+    def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
+                 mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
+                 v: wp.array(dtype=vec)):
+        i = wp.tid()
+        if m[i] <= S(0.0) or mu[i] <= S(0.0):
+            return
+        push = wp.dot(reaction[i], normal[i])  # > 0: the constraint held the node out of the collider
+        if push <= S(0.0):
+            return
+        vr = v[i] - u[i]
+        vt = free[i] * vr
+        lt = wp.length(vt)
+        if lt > S(0.0):
+            v[i] = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt)
+
+    return friction
+
+
 class ImplicitSolve:
     """The Newton solve of one step on a solver's grid (mpm.solver.Solver
     owns the grid, the layout and the stencil cache)."""
@@ -376,6 +404,8 @@ class ImplicitSolve:
         self._apply = make_apply(t, k, solver.options.transfer, self.viscous)
         (self._finish_residual, self._finish_apply, self._cg_start, self._cg_step, self._cg_direction,
          self._trial) = make_node_kernels(t)
+        self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
+        self._friction = make_friction(t) if self.with_friction else None
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         with wp.ScopedDevice(m.device):
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
@@ -386,7 +416,7 @@ class ImplicitSolve:
     def kernels(self) -> list:
         return ([k for k, _ in self._evaluate] + [self._apply, self._finish_residual, self._finish_apply,
                                                   self._cg_start, self._cg_step, self._cg_direction,
-                                                  self._trial])
+                                                  self._trial] + ([self._friction] if self._friction else []))
 
     def _grow(self, n: int) -> None:
         if n <= self._capacity:
@@ -395,8 +425,11 @@ class ImplicitSolve:
         with wp.ScopedDevice(self.solver.model.device):
             vec = self.t.vec
             (self.v_star, self.v_trial, self.residual, self.diag, self.inv_diag, self.delta, self.r, self.z,
-             self.d, self.Ad) = (wp.zeros(n, dtype=vec) for _ in range(10))
+             self.d, self.Ad, self.reaction) = (wp.zeros(n, dtype=vec) for _ in range(11))
             self.free = wp.zeros(n, dtype=self.t.mat)
+            k = n if self._friction is not None else 1
+            self.friction = wp.zeros(k, dtype=self.t.scalar)
+            self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
 
     def _sum(self) -> np.ndarray:
         return self.acc.numpy()
@@ -416,7 +449,8 @@ class ImplicitSolve:
                 state.stencils, v, s._dx, s._K, dt, g.start, self.tangent, self.visc, self.residual,
                 self.diag, self.acc])
         wp.launch(self._finish_residual, n, device=m.device, inputs=[
-            s.grid_m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.acc])
+            s.grid_m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.reaction,
+            self.acc])
         a = self._sum()
         self.momentum = float(np.sqrt(a[MOMENTUM2]))
         self.stiffness = float(np.sqrt(a[STIFFNESS2]))
@@ -461,14 +495,27 @@ class ImplicitSolve:
         return self.options.cg_max
 
     def begin(self) -> None:
-        """Keep the predictor v* and constrain grid_v: the solve's start."""
+        """The solve's start: keep the predictor v*, constrain grid_v, and the
+        projectors onto the free velocities (and the frictional contacts)."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
         self._grow(s._capacity)
         wp.copy(self.v_star, s.grid_v, count=n)
         wp.launch(s._constraints, n, device=m.device, inputs=[
             s.grid_m, s.grid_q, s._time, s._boundary_data, s.grid_kin, s.grid_kin_id, s.grid_v,
-            self.free])
+            self.free, self.friction, self.friction_u, self.friction_n])
+
+    def finish(self) -> None:
+        """Coulomb friction on the solved velocities of the nodes in frictional
+        contact: the tangential velocity relative to the collider loses mu
+        times the normal velocity the constraint removed (|(I - Pi) R| / m at
+        the solution, while it pushes into the collider) - the explicit
+        step's rule with the implicit normal impulse."""
+        s, m = self.solver, self.solver.model
+        if self._friction is not None:
+            wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
+                s.grid_m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
+                s.grid_v])
 
     # ------------------------------------------------------------ solve
     def solve(self, state, dt) -> NewtonReport:
@@ -527,4 +574,6 @@ class ImplicitSolve:
         rep.residual = R / rep.residual0 if rep.newton > 0 else 0.0
         if v is not s.grid_v:
             wp.copy(s.grid_v, v, count=n)
+        if rep.converged:
+            self.finish()
         return rep

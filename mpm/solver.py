@@ -129,8 +129,9 @@ class Solver:
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds)
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t, self.regions, self.collider_kinds) if separate else None
-        self._constraints = (make_constraints(t, self.regions, self.collider_kinds) if self.implicit
-                             else None)
+        self._constraints = (make_constraints(t, self.regions, self.collider_kinds,
+                                              any(c.friction > 0 for c in colliders))
+                             if self.implicit else None)
         self._inside = make_inside_count(t, self.collider_kinds) if colliders else None
         self._collider_speed = max([c.speed() for c in colliders], default=0.0)  # [m/s], for the step
         self._measure = make_measure(t, per_particle_K=k.moment is None)

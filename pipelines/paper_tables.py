@@ -15,12 +15,14 @@ PAPER_TABLE4 = {"twisting_bar": (0.125, 0.178), "yoyo": (0.71, 0.54), "snow_bunn
                 "water_bunny": (0.73, 0.73), "viscous_cup": (4.31, 4.25)}
 
 
-def _pairs(jobs: list[Job], scenes) -> dict:
-    """(scene, kernel, resolution) -> {scheme: job} for completed jobs of ``scenes``."""
+def _pairs(jobs: list[Job], scenes, schemes=("empm", "aulmpm"), integrator: bool = False) -> dict:
+    """(scene, kernel, resolution[, integrator]) -> {scheme: job} for completed
+    jobs of ``scenes`` and ``schemes``."""
     out: dict = {}
     for j in jobs:
-        if j.completed and j.scene in scenes and j.scheme in ("empm", "aulmpm"):
-            out.setdefault((j.scene, j.kernel, j.resolution), {}).setdefault(j.scheme, j)
+        if j.completed and j.scene in scenes and j.scheme in schemes:
+            key = (j.scene, j.kernel, j.resolution) + ((j.integrator,) if integrator else ())
+            out.setdefault(key, {}).setdefault(j.scheme, j)
     return out
 
 
@@ -52,27 +54,37 @@ def section_table3(jobs: list[Job], out: Path) -> list[str]:
 
 
 def section_table4(jobs: list[Job], out: Path) -> list[str]:
-    """table4.csv: mean time step [ms] of A-ULMPM and EMPM beside the paper's."""
+    """table4.csv: mean time step [ms] and steps of A-ULMPM, EMPM and TLMPM
+    per integrator, beside the paper's (A-ULMPM, EMPM)."""
     title = "Table 4 of the A-ULMPM paper (journal version): mean time step"
-    pairs = _pairs(jobs, PAPER_TABLE4)
+    pairs = _pairs(jobs, PAPER_TABLE4, ("empm", "aulmpm", "tlmpm"), integrator=True)
     if not pairs:
-        return _absent(title, "no completed EMPM or A-ULMPM job on the Table 4 scenes")
+        return _absent(title, "no completed EMPM, TLMPM or A-ULMPM job on the Table 4 scenes")
+
+    def dt_ms(j):
+        return 1e3 * j.num("dt") if j is not None and j.num("dt") else None
+
+    def steps(j):
+        return _int_or(j.num("steps")) if j is not None else None
+
     rows = []
-    for (scene, kernel, res), by in sorted(pairs.items(), key=lambda kv: tuple(map(str, kv[0]))):
-        a, e = by.get("aulmpm"), by.get("empm")
-        da = 1e3 * a.num("dt") if a is not None and a.num("dt") else None
-        de = 1e3 * e.num("dt") if e is not None and e.num("dt") else None
+    for (scene, kernel, res, integrator), by in sorted(pairs.items(), key=lambda kv: tuple(map(str, kv[0]))):
+        a, e, t = by.get("aulmpm"), by.get("empm"), by.get("tlmpm")
+        da, de = dt_ms(a), dt_ms(e)
         pa, pe = PAPER_TABLE4[scene]
-        particles = (a or e).num("particles")
-        rows.append([scene, kernel, res, _int_or(particles), da, de, da / de if da and de else None,
-                     pa, pe, pa / pe])
-    _write_csv(out / "table4.csv", ["scene", "kernel", "resolution", "particles", "aulmpm_dt_ms", "empm_dt_ms",
-                                    "ratio", "paper_aulmpm_dt_ms", "paper_empm_dt_ms", "paper_ratio"], rows)
+        particles = next(j for j in (a, e, t) if j is not None).num("particles")
+        rows.append([scene, kernel, res, integrator, _int_or(particles), da, de, da / de if da and de else None,
+                     dt_ms(t), steps(a), steps(e), steps(t), pa, pe, pa / pe])
+    _write_csv(out / "table4.csv", ["scene", "kernel", "resolution", "integrator", "particles", "aulmpm_dt_ms",
+                                    "empm_dt_ms", "ratio", "tlmpm_dt_ms", "aulmpm_steps", "empm_steps",
+                                    "tlmpm_steps", "paper_aulmpm_dt_ms", "paper_empm_dt_ms", "paper_ratio"], rows)
     return [f"## {title}", "",
-            "Mean time step [ms] (simulated time over steps) of A-ULMPM and EMPM with the adaptive "
-            "explicit step, beside the paper's Table 4 (its viscous armadillos ran implicitly) "
+            "Mean time step [ms] (simulated time over steps) and steps of A-ULMPM, EMPM and TLMPM with "
+            "the adaptive step of each integrator (explicit: the CFL limit; implicit: the displacement "
+            "limit), beside the paper's Table 4 (its viscous armadillos ran implicitly) "
             "([table4.csv](table4.csv)).", "",
-            *_md_table(["scene", "kernel", "cells", "particles", "A-ULMPM [ms]", "EMPM [ms]", "ratio",
+            *_md_table(["scene", "kernel", "cells", "integrator", "particles", "A-ULMPM [ms]", "EMPM [ms]",
+                        "ratio", "TLMPM [ms]", "A-ULMPM steps", "EMPM steps", "TLMPM steps",
                         "paper: A-ULMPM", "paper: EMPM", "paper: ratio"], rows)]
 
 

@@ -51,7 +51,7 @@ DRIFT_FLOOR = 1e-17  # smallest drift drawn on the log axis
 LABEL_KEYS = ("scheme", "kernel", "transfer")
 # overrides already part of a label or a column of their own
 COVERED_KEYS = {"scheme", "scheme.name", "kernel", "kernel.name", "kernel.transfer", "scene",
-                "scene.name"}
+                "scene.name", "integrator", "integrator.name"}
 RESOLUTION_KEYS = {"scene.resolution", "scene.particle_resolution"}
 UNSTABLE = ("unstable", "failed", "interrupted", "invalid")
 
@@ -234,6 +234,10 @@ class Job:
         return str(self._pick("transfer", "kernel", "transfer", override="kernel.transfer") or "")
 
     @property
+    def integrator(self) -> str:
+        return str(self._pick("integrator", "integrator", "name", override="integrator") or "explicit")
+
+    @property
     def resolution(self) -> int | None:
         """Grid cells along x."""
         r = _num(self._pick("resolution", "scene", "resolution", override="scene.resolution"))
@@ -317,7 +321,8 @@ def load_jobs(sweep_dir: Path) -> tuple[list[Job], int]:
 
 
 def assign_labels(jobs: list[Job]) -> None:
-    """Label each job "scheme · kernel · transfer" plus every override whose
+    """Label each job "scheme · kernel · transfer" (and "implicit" for the
+    implicit integrator) plus every override whose
     value varies across the sweep (resolutions, run.force, log.* and hydra* aside:
     a sweep over run.dt or run.precision compares different methods)."""
     values: dict[str, set] = defaultdict(set)
@@ -332,6 +337,7 @@ def assign_labels(jobs: list[Job]) -> None:
     for j in jobs:
         j.extras = {k: j.overrides[k] for k in varying if k in j.overrides}
         parts = [p for p in (j.scheme, j.kernel, j.transfer) if p]
+        parts += ["implicit"] if j.integrator == "implicit" else []
         parts += [f"{k}={v}" for k, v in j.extras.items()]
         j.label = " · ".join(parts) or "(unknown)"
 
@@ -420,7 +426,7 @@ def _run_time(j: Job) -> float | None:
 
 
 # ------------------------------------------------------------------ sections
-RUN_COLUMNS = ["dir", "label", "scene", "scheme", "kernel", "transfer", "resolution", "dx", "particles",
+RUN_COLUMNS = ["dir", "label", "scene", "scheme", "kernel", "transfer", "integrator", "resolution", "dx", "particles",
                "status", "reason", "steps", "sim_time", "step_time_ms", "particle_steps_per_s",
                "loop_time_s", "wall_time_s", "compile_time_s", "error_kind", "error_reference",
                "error_displacement", "error_velocity", "updates_per_1e4_steps", "update_time_ms",
@@ -433,7 +439,7 @@ def section_runs(jobs: list[Job], out: Path, duplicates: int) -> list[str]:
     rows = []
     for j in jobs:
         m = j.metrics
-        rows.append([j.rel, j.label, j.scene, j.scheme, j.kernel, j.transfer, j.resolution, j.dx,
+        rows.append([j.rel, j.label, j.scene, j.scheme, j.kernel, j.transfer, j.integrator, j.resolution, j.dx,
                      _int(j.num("particles")), j.status, m.get("reason") or "", _int(j.num("steps")),
                      j.num("sim_time"),
                      j.num("step_time_ms"), j.num("particle_steps_per_s"), j.num("loop_time_s"),
@@ -898,6 +904,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     from .dam_break import section_dam_break
     from .granular import section_granular, section_plastic  # experiment families of their own
+    from .integration import section_integration
     from .paper_tables import section_table3, section_table4
     from .tradeoff import section_tradeoff
 
@@ -923,6 +930,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         lines += section_table4(jobs, out)
         lines += section_spilled(jobs, out)
         lines += section_dam_break(jobs, out)
+        lines += section_integration(jobs, out)
     path = out / "report.md"
     path.write_text("\n".join(lines).rstrip() + "\n")
     return path

@@ -366,6 +366,16 @@ class Run:
             text += f"; affine matrix: {s.affine}"
         params = {k: v for k, v in vars(s).items() if isinstance(v, (int, float, str))}
         self.sink.event(0, 0.0, text, scheme=s.name, **params)
+        if self.implicit:
+            i = self.spec.integrator
+            step = (f"fixed step {self.spec.run.dt:g} s" if self.spec.run.dt is not None else
+                    f"adaptive step: at most {i.displacement:g} cell per step, halved up to {i.halvings} "
+                    "times after a failed solve")
+            kind = ("the semi-implicit update (one Newton step)" if i.newton_max == 1 else
+                    f"Newton to {i.newton_tol:g} of the initial residual in at most {i.newton_max} iterations")
+            self.sink.event(0, 0.0, f"implicit: backward Euler, {kind}; CG to {i.cg_tol:g} in at most "
+                                    f"{i.cg_max} iterations; {step}",
+                            **{k: v for k, v in vars(i).items() if isinstance(v, (int, float, str))})
 
     def record_updates(self, report: mpm.StepReport) -> None:
         counts = self.solver.body_counts

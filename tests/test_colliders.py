@@ -149,7 +149,7 @@ THETA = np.radians(30.0)
 
 
 def _incline(mu: float, scheme: str = "empm", boundary: str = "separate", res: int = 64,
-             duration: float = 0.3):
+             duration: float = 0.3, integrator=None, dt_factor: float = 1.0):
     """A flat elastic block on the left face of a wedge inclined at 30 deg.
     Returns (t, velocity along the slope, displacement [m]) of its centre of mass."""
     n1 = np.array([-np.sin(THETA), np.cos(THETA)])
@@ -164,18 +164,19 @@ def _incline(mu: float, scheme: str = "empm", boundary: str = "separate", res: i
                      normals=(tuple(n1), (np.sin(THETA), np.cos(THETA))))
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[body], gravity=(0.0, -G),
                       ppc=4, colliders=[wedge])
-    return _track(scene, scheme, duration, down)
+    return _track(scene, scheme, duration, down, integrator, dt_factor)
 
 
-def _track(scene, scheme, duration, direction):
+def _track(scene, scheme, duration, direction, integrator=None, dt_factor=1.0):
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision="float64")
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](),
+                        mpm.SolverOptions(integrator=integrator or mpm.integrators.Explicit()))
     solver.prepare(state)
     m = model.mass.numpy()
     x0 = m @ state.x.numpy() / m.sum()
     t, report, ts, vs = 0.0, None, [], []
     while t < duration:
-        dt = min(solver.stable_dt(0.4, report), 1e-3)
+        dt = min(dt_factor * solver.stable_dt(0.4, report), 1e-3 * dt_factor)
         report = solver.advance(state, dt)
         assert report.reason is None, report.reason
         t += dt

@@ -296,3 +296,55 @@ def test_residual_and_hessian_are_derivatives_of_the_potential(dim, kernel, tran
         sol._apply_A(state, wp.array(e, dtype=vec), Ad_e, S(dt))
         assert Ad_e.numpy()[i, k] == pytest.approx(1.0 / inv_diag[i, k], rel=1e-9)
 
+
+
+def test_implicit_viscosity_at_ten_times_the_explicit_step():
+    """The viscous shear wave (conf/scene/shear_wave_2d, eta = 10 Pa s) with
+    backward Euler at 10x the explicit limit (the viscous term binds there):
+    the decay rate still gives eta within 5 %. Backward Euler decays a mode of
+    rate lam = nu k^2 by 1 / (1 + lam dt) per step, so the fitted rate is
+    ln(1 + lam dt) / dt, lam dt ~ 0.04 here: about 2 % low."""
+    from test_plastic_schemes import shear_wave_viscosity
+
+    eta = shear_wave_viscosity(["integrator=implicit", "integrator.newton_tol=1e-8"], dt_factor=10.0)
+    assert eta == pytest.approx(10.0, rel=0.05)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_implicit_block_slides_down_a_wedge_at_coulomb_acceleration(mu):
+    """The wedge collider as a constraint of the implicit solve (its normal
+    fixed, friction on the predictor): a block slides down the 30 deg face at
+    a = g (sin theta - mu cos theta) within 3 %, at 10x the explicit step,
+    and no particle sinks into the wedge."""
+    from test_colliders import G, THETA, _acceleration, _incline
+
+    ts, vs, _, solver, state = _incline(mu, integrator=Implicit(), dt_factor=10.0)
+    assert _acceleration(ts, vs) == pytest.approx(G * (np.sin(THETA) - mu * np.cos(THETA)), rel=0.03)
+    assert solver.inside_colliders(state).tolist() == [0]
+
+
+def test_kinematic_region_is_dirichlet_in_the_implicit_solve():
+    """A bar clamped at its top by a kinematic region and pulled down at its
+    bottom by another (0.2 m/s): with backward Euler at 20x the explicit
+    step, the regions' particles move exactly with their prescribed
+    velocities (their nodes are fixed in the solve) and the bar stretches."""
+    top = mpm.KinematicRegion(body=0, select=mpm.Box((0.5, 0.79), (0.05, 0.06)))
+    bottom = mpm.KinematicRegion(body=0, select=mpm.Box((0.5, 0.41), (0.05, 0.06)), velocity=(0.0, -0.2))
+    bar = mpm.Body(mpm.Box((0.5, 0.6), (0.03, 0.25)), mpm.NeoHookean(E=2e4, nu=0.3))
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=48, bodies=[bar], gravity=(0.0, -9.81),
+                      walls=("slip",) * 4, regions=[top, bottom], ppc=4)
+    solver, state = make(scene, mpm.TLMPM(), Implicit())
+    x0 = state.x.numpy().copy()
+    dt = 20 * solver.stable_dt(0.4, max_speed=0.2)
+    steps = int(0.2 / dt)
+    for _ in range(steps):
+        assert solver.advance(state, dt).reason is None
+    x, v = state.x.numpy(), state.v.numpy()
+    held = np.abs(x0[:, 1] - 0.79) < 0.01  # stencils entirely on the regions' nodes
+    pulled = np.abs(x0[:, 1] - 0.41) < 0.01
+    np.testing.assert_allclose(v[held], 0.0, atol=1e-9)
+    np.testing.assert_allclose(v[pulled], np.broadcast_to([0.0, -0.2], v[pulled].shape), atol=1e-9)
+    np.testing.assert_allclose(x[pulled] - x0[pulled], np.broadcast_to([0.0, -0.2 * steps * dt], x[pulled].shape),
+                               atol=1e-9)
+    middle = np.abs(x0[:, 1] - 0.6) < 0.01
+    assert x[middle, 1].mean() - x0[middle, 1].mean() < -0.01  # the free part followed, stretched

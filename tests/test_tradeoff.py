@@ -78,3 +78,38 @@ def test_report_reads_a_tradeoff_sweep(tmp_path):
     # distortion (fastest), empm (faster than paper... 5 s, better than distortion), paper (best);
     # distortion_s0.9 is dominated by empm
     assert "distortion," in front and "empm" in front and "paper" in front and "s0.9" not in front
+
+
+def test_report_reads_a_stiff_integration_sweep(tmp_path):
+    """Reference, explicit and implicit points: RMS errors against the
+    reference (same particles), the cheapest point per error target, the plot."""
+    from pipelines.integration import cheapest, rms
+
+    rng = np.random.default_rng(3)
+    x_ref = rng.uniform(0.3, 0.7, size=(500, 2))
+    points = {  # name: (integrator, run time [s], shift of the final positions [m])
+        "reference": ("explicit", 80.0, 0.0), "explicit": ("explicit", 10.0, 1e-4),
+        "implicit_dt1e-4": ("implicit", 20.0, 5e-4), "implicit_dt1e-3": ("implicit", 2.0, 5e-3)}
+    for name, (integrator, t, shift) in points.items():
+        x = x_ref + [shift, 0.0]
+        metrics = _metrics("empm", "quadratic", 32, scene="elastic_ball_2d", loop_time_s=t, config_hash=name,
+                           integrator=integrator)
+        if integrator == "implicit":
+            metrics["implicit"] = {"newton_mean": 2.0, "cg_per_newton": 30.0}
+        _job(tmp_path, name, metrics, ["scene=elastic_ball_2d", f"+stiff={name}", "+experiment=implicit_stiff"],
+             state={"x": x, "v": np.zeros_like(x), "X0": x_ref, "mass": np.ones(len(x))})
+    write_report(tmp_path)
+    rows = {r["point"]: r for r in csv.DictReader(open(tmp_path / "integration.csv"))}
+    assert set(rows) == set(points) and rows["reference"]["position error [m]"] == ""
+    for name, (_, _, shift) in points.items():
+        if name != "reference":
+            assert float(rows[name]["position error [m]"]) == pytest.approx(shift, rel=1e-9)
+    assert float(rows["implicit_dt1e-4"]["Newton / step"]) == 2.0
+    text = (tmp_path / "report.md").read_text()
+    assert "position error <= 0.0001 m (1x the explicit point's): fastest `explicit`" in text
+    assert "(10x the explicit point's): fastest `explicit`" in text
+    assert "(100x the explicit point's): fastest `implicit_dt1e-3` in 2 s" in text
+    assert (tmp_path / "integration.png").is_file()
+    pts = [("a", 1.0, 3.0), ("b", 2.0, 1.0)]
+    assert cheapest(pts, 2.0)[0] == "b" and cheapest(pts, 0.5) is None
+    assert rms(np.zeros((2, 2)), np.ones((2, 2))) == pytest.approx(np.sqrt(2))
