@@ -1,13 +1,16 @@
-"""The explicit MPM step, as a short list of named stages.
+"""The MPM step, as a short list of named stages.
 
 One formulation serves every scheme (mpm.schemes): each body has its own
 reference grid (mpm.layout); a step rasterises the particles to it, updates
-the nodal velocities, interpolates back and leaves the configuration update
-to the scheme's rule, evaluated by :meth:`Solver.advance`.
+the nodal velocities - forward Euler, or backward Euler by Newton's method
+(mpm.integrators, mpm.implicit) - applies contact and the boundary
+conditions, interpolates back and leaves the configuration update to the
+scheme's rule, evaluated by :meth:`Solver.advance`.
 
 The solver compiles only what the model uses: one P2G per material model
 present, one configuration update per distinct plasticity projection, one
-G2P, grid update and diagnostics kernel for the dimension and precision.
+G2P, grid update and diagnostics kernel for the dimension and precision;
+the implicit integrator's kernels only when it is chosen.
 """
 
 import time
