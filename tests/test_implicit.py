@@ -32,7 +32,7 @@ def stretch(state, rate, center):
     d = x.shape[1]
     G = rate * np.diag([1.0, -1.0, 0.0][:d])
     v = (x - np.asarray(center)) @ G.T
-    dtype = x.dtype if state.x.dtype == mpm.model.wp.types.vector(d, mpm.model.wp.float64) else np.float32
+    dtype = state.v.numpy().dtype
     state.v.assign((state.v.numpy() + v).astype(dtype))
     state.C.assign(np.broadcast_to(G, (len(x), d, d)).astype(dtype))
 
