@@ -101,6 +101,35 @@ def _specialisation(t: Types, kernel: Kernel, transfer: str):
 
 
 @functools.cache
+def make_gather(t: Types, kernel: Kernel, transfer: str):
+    """``gather(p, body, shape, cache, v, dx, K, Kp) -> D_p(v) = 1/G sum_g sum_i
+    v_i g_ip^T``: the velocity gradient in the reference configuration that
+    G2P will take (F^sn += dt D), for grid velocities (or a direction) v."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    mls, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    Cache = make_stencil_cache(t, kernel)
+    inv_G = 1.0 / G
+    mat = t.mat
+
+    @wp.func
+    def gather(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, v: wp.array(dtype=t.vec),
+               dx: S, K: S, Kp: t.mat):
+        inv_dx = S(1.0) / dx
+        D = mat()
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        D += wp.outer(v[i], weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
+        return S(inv_G) * D
+
+    return gather
+
+
+@functools.cache
 def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     """Per particle of one material model at the iterate v: F_p(v), the
     energy, the tangent (stored), the viscous factor V^0 J 2 eta (stored),
@@ -114,6 +143,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     Tangent = make_tangent_type(t)
     principal_stress = make_principal_stress(t, material, psd)
     quadratic = make_tangent_quadratic(t)
+    gather = make_gather(t, kernel, transfer)
     per_particle_K = kernel.moment is None
     viscous = material.viscosity_param is not None
     eta_index = material.viscosity_param or 0
@@ -152,15 +182,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
         Kp = mat()
         if wp.static(per_particle_K):
             Kp = cache.K[p]
-        D = mat()
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
-            for a in range(Ks):
-                for bb in range(Ks):
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        D += wp.outer(v[i], weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
-        D = S(inv_G) * D
+        D = gather(p, b, shape, cache, v, dx, K, Kp)
         P, psi, T = principal_stress((Fs + dt * D) * F0, body_params[b], history[p])
         tangent[p] = T
         stress = V0 * P * wp.transpose(F0)
@@ -212,8 +234,8 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     action = make_tangent_action(t)
+    gather = make_gather(t, kernel, transfer)
     per_particle_K = kernel.moment is None
-    inv_G = 1.0 / G
     mat = t.mat
 
     @wp.kernel(module="unique")
@@ -239,15 +261,7 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
         Kp = mat()
         if wp.static(per_particle_K):
             Kp = cache.K[p]
-        D = mat()
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
-            for a in range(Ks):
-                for bb in range(Ks):
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        D += wp.outer(dv[i], weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
-        D = S(inv_G) * D
+        D = gather(p, b, shape, cache, dv, dx, K, Kp)
         dS = volume[p] * action(tangent[p], dt * D * F0) * wp.transpose(F0)
         if wp.static(viscous):
             Finv = wp.inverse(Fsn[p])

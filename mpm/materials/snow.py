@@ -49,12 +49,13 @@ def _flow(t: Types):
 
 @functools.cache
 def _elasticity(t: Types):
-    S = t.scalar
     fixed_corotated = make_fixed_corotated(t)
+
+    hardening = _stiffening(t)
 
     @wp.func
     def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        harden = wp.exp(params[4] * (S(1.0) - wp.exp(history[0])))
+        harden = hardening(params, history)
         return fixed_corotated(sigma, harden * params[0], harden * params[1])
 
     return elasticity
@@ -62,12 +63,13 @@ def _elasticity(t: Types):
 
 @functools.cache
 def _elasticity_hessian(t: Types):
-    S = t.scalar
     hessian = make_fixed_corotated_hessian(t)
+
+    hardening = _stiffening(t)
 
     @wp.func
     def elasticity_hessian(sigma: t.vec, params: t.params, history: t.history):
-        harden = wp.exp(params[4] * (S(1.0) - wp.exp(history[0])))
+        harden = hardening(params, history)
         return hessian(sigma, harden * params[0], harden * params[1])
 
     return elasticity_hessian
@@ -75,6 +77,8 @@ def _elasticity_hessian(t: Types):
 
 @functools.cache
 def _stiffening(t: Types):
+    """The hardening factor exp(xi (1 - J_P)) that scales the moduli (and the
+    squared wave speed)."""
     S = t.scalar
 
     @wp.func
