@@ -35,7 +35,12 @@ conjugate gradients with the Jacobi preconditioner (the exact diagonal of
 A), then a backtracking line search on E (Armijo, or a halving of |R|, which
 is what progress looks like once E's decrease is below its round-off). Constrained nodes (mpm.grid
 ``make_constraints``) take part through the projector Pi_i onto their free
-velocities: R, A dv and the preconditioner are projected.
+velocities: R, A dv and the preconditioner are projected. Bodies in contact
+add the linear constraints B v = 0 of mpm.contact (equal normal velocities
+of two approaching bodies in a global bin): the start is projected onto them
+and CG runs projected (Gould, Hribar & Nocedal 2001), z = W (r - B^T lambda)
+with W = Pi D^-1 Pi and lambda making B z = 0, so every iterate keeps them;
+the residual is measured without the constraints' reaction.
 
 A plastic model's return mapping has run in P2G: F^0s is the returned
 elastic state, so the energy is the elastic predictor's for the step.
@@ -47,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .contact import make_contact_constraint
 from .kernels import Kernel
 from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
@@ -291,8 +297,10 @@ def make_node_kernels(t: Types):
     def finish_residual(m: wp.array(dtype=S), v: wp.array(dtype=vec), v_star: wp.array(dtype=vec),
                         free: wp.array(dtype=t.mat), residual: wp.array(dtype=vec),
                         diag: wp.array(dtype=vec), inv_diag: wp.array(dtype=vec),
-                        reaction: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
-        """R = Pi (m (v - v*) + R_stress), the kinetic part of E, |R|^2, the
+                        reaction: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                        acc: wp.array(dtype=f64)):
+        """R = Pi (m (v - v*) + R_stress), the kinetic part of E, |R|^2 (but at
+        the nodes of contact constraints, ``contact`` and cbin >= 0), the
         inverse of A's diagonal (0 on fixed components) and the constraints'
         reaction (I - Pi) (m (v - v*) + R_stress) / m [m/s]."""
         i = wp.tid()
@@ -308,7 +316,8 @@ def make_node_kernels(t: Types):
         residual[i] = R
         reaction[i] = (full - R) / mi
         wp.atomic_add(acc, ENERGY, f64(S(0.5) * mi * wp.dot(dv, dv)))
-        wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(R, R)))
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(R, R)))
         wp.atomic_add(acc, MOMENTUM2, f64(mi * mi * wp.dot(v_star[i], v_star[i])))
         d = diag[i]
         inv = vec()
@@ -336,8 +345,9 @@ def make_node_kernels(t: Types):
     @wp.kernel(module="unique")
     def cg_start(residual: wp.array(dtype=vec), free: wp.array(dtype=t.mat), inv_diag: wp.array(dtype=vec),
                  delta: wp.array(dtype=vec), r: wp.array(dtype=vec), z: wp.array(dtype=vec),
-                 d: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
-        """delta = 0, r = -R, z = Pi (inv_diag . r), d = z, r . z."""
+                 d: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                 acc: wp.array(dtype=f64)):
+        """delta = 0, r = -R, z = Pi (inv_diag . r), d = z, r . z (as finish_residual)."""
         i = wp.tid()
         ri = -residual[i]
         zi = free[i] * wp.cw_mul(inv_diag[i], ri)
@@ -345,21 +355,25 @@ def make_node_kernels(t: Types):
         r[i] = ri
         z[i] = zi
         d[i] = zi
-        wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
 
     @wp.kernel(module="unique")
     def cg_step(alpha: S, d: wp.array(dtype=vec), Ad: wp.array(dtype=vec), free: wp.array(dtype=t.mat),
                 inv_diag: wp.array(dtype=vec), delta: wp.array(dtype=vec), r: wp.array(dtype=vec),
-                z: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
-        """delta += alpha d, r -= alpha A d, z = Pi (inv_diag . r), |r|^2 and r . z."""
+                z: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                acc: wp.array(dtype=f64)):
+        """delta += alpha d, r -= alpha A d, z = Pi (inv_diag . r), |r|^2 and r . z
+        (as finish_residual)."""
         i = wp.tid()
         delta[i] = delta[i] + alpha * d[i]
         ri = r[i] - alpha * Ad[i]
         r[i] = ri
         zi = free[i] * wp.cw_mul(inv_diag[i], ri)
         z[i] = zi
-        wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(ri, ri)))
-        wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(ri, ri)))
+            wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
 
     @wp.kernel(module="unique")
     def cg_direction(beta: S, z: wp.array(dtype=vec), d: wp.array(dtype=vec)):
@@ -421,7 +435,12 @@ class ImplicitSolve:
         self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
         self._friction = make_friction(t) if self.with_friction else None
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
+        self.contact = solver.contact
+        self._contact = make_contact_constraint(t) if self.contact else ()
         with wp.ScopedDevice(m.device):
+            if self.contact:
+                self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
+                self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
             self.visc = wp.zeros(m.n_particles if self.viscous else 1, dtype=t.scalar)
             self.acc = wp.zeros(6, dtype=wp.float64)
@@ -430,7 +449,8 @@ class ImplicitSolve:
     def kernels(self) -> list:
         return ([k for k, _ in self._evaluate] + [self._apply, self._finish_residual, self._finish_apply,
                                                   self._cg_start, self._cg_step, self._cg_direction,
-                                                  self._trial] + ([self._friction] if self._friction else []))
+                                                  self._trial] + ([self._friction] if self._friction else [])
+                + list(self._contact))
 
     def _grow(self, n: int) -> None:
         if n <= self._capacity:
@@ -444,6 +464,9 @@ class ImplicitSolve:
             k = n if self._friction is not None else 1
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
+            k = n if self.contact else 1
+            self.cbin = wp.full(k, -1, dtype=wp.int32)
+            self.coef = wp.zeros(k, dtype=vec)
 
     def _sum(self) -> np.ndarray:
         return self.acc.numpy()
@@ -464,7 +487,9 @@ class ImplicitSolve:
                 self.diag, self.acc])
         wp.launch(self._finish_residual, n, device=m.device, inputs=[
             s.grid_m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.reaction,
-            self.acc])
+            self.cbin, int(self.contact), self.acc])
+        if self.contact:
+            self._project(1, self.residual)
         a = self._sum()
         self.momentum = float(np.sqrt(a[MOMENTUM2]))
         self.stiffness = float(np.sqrt(a[STIFFNESS2]))
@@ -489,7 +514,11 @@ class ImplicitSolve:
         S = self.t.scalar
         self.acc.zero_()
         wp.launch(self._cg_start, n, device=m.device, inputs=[
-            self.residual, self.free, self.inv_diag, self.delta, self.r, self.z, self.d, self.acc])
+            self.residual, self.free, self.inv_diag, self.delta, self.r, self.z, self.d, self.cbin,
+            int(self.contact), self.acc])
+        if self.contact:
+            self._project(2, self.r, self.z)
+            wp.copy(self.d, self.z, count=n)
         rz = float(self._sum()[DOT_B])
         if rz <= 0.0:
             return 0
@@ -500,7 +529,10 @@ class ImplicitSolve:
             alpha = rz / dAd
             self.acc.zero_()
             wp.launch(self._cg_step, n, device=m.device, inputs=[
-                S(alpha), self.d, self.Ad, self.free, self.inv_diag, self.delta, self.r, self.z, self.acc])
+                S(alpha), self.d, self.Ad, self.free, self.inv_diag, self.delta, self.r, self.z, self.cbin,
+                int(self.contact), self.acc])
+            if self.contact:
+                self._project(2, self.r, self.z)
             a = self._sum()
             if np.sqrt(a[RESIDUAL2]) <= tol:
                 return it
@@ -508,9 +540,45 @@ class ImplicitSolve:
             wp.launch(self._cg_direction, n, device=m.device, inputs=[S(rz / rz_old), self.z, self.d])
         return self.options.cg_max
 
+    def _activate(self) -> None:
+        """The contact constraints of the step, from the constrained
+        predictor in grid_v: the approaching two-body bins, each node's bin
+        and coefficient c_i (mpm.contact)."""
+        s, m = self.solver, self.solver.model
+        lay, n_global = s.layout, m.n_nodes
+        splat = s._contact[0]
+        activate, couple = self._contact[:2]
+        s.contact_M.zero_()
+        s.contact_P.zero_()
+        s.contact_dV.zero_()  # the normals here
+        common = [lay.offset_d, s.n_bodies, m.kernel.n_grids, s._inv_dx, s._cells, s._global_strides, n_global]
+        wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
+            s.grid_m, s.grid_v, s.grid_q, *common, s.contact_M, s.contact_P])
+        wp.launch(activate, n_global, device=m.device, inputs=[
+            s.n_bodies, s._cells, s._global_strides, n_global, s._rest_mass, s._fill, s.contact_M,
+            s.contact_P, s.contact_dV])
+        wp.launch(couple, lay.n_nodes, device=m.device, inputs=[
+            s.grid_m, s.grid_q, *common, s.contact_M, s.contact_dV, self.cbin, self.coef])
+
+    def _project(self, mode: int, x, z=None) -> None:
+        """Project x onto the contact constraints (mpm.contact
+        ``make_contact_constraint``, modes 0-2)."""
+        s, m = self.solver, self.solver.model
+        n = s.layout.n_nodes
+        sums, project = self._contact[2:]
+        self.contact_num.zero_()
+        self.contact_den.zero_()
+        common = [mode, self.cbin, self.coef, self.free, s.grid_m, self.inv_diag]
+        wp.launch(sums, n, device=m.device, inputs=[*common, x, self.contact_num, self.contact_den])
+        wp.launch(project, n, device=m.device, inputs=[
+            *common, self.contact_num, self.contact_den, x, z if z is not None else x, self.acc,
+            RESIDUAL2, DOT_B])
+
     def begin(self) -> None:
         """The solve's start: keep the predictor v*, constrain grid_v, and the
-        projectors onto the free velocities (and the frictional contacts)."""
+        projectors onto the free velocities (and the frictional contacts);
+        with contact, the constraints between bodies and grid_v projected
+        onto them."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
         self._grow(s._capacity)
@@ -518,6 +586,9 @@ class ImplicitSolve:
         wp.launch(s._constraints, n, device=m.device, inputs=[
             s.grid_m, s.grid_q, s._time, s._boundary_data, s.grid_kin, s.grid_kin_id, s.grid_v,
             self.free, self.friction, self.friction_u, self.friction_n])
+        if self.contact:
+            self._activate()
+            self._project(0, s.grid_v)
 
     def finish(self) -> None:
         """Coulomb friction on the solved velocities of the nodes in frictional
@@ -536,7 +607,7 @@ class ImplicitSolve:
         """The grid velocities of the step: on entry ``solver.grid_v`` holds the
         predictor v* (momentum / mass + dt g) and ``solver.grid_q`` the node
         positions; on exit grid_v holds the solution, before the boundary
-        conditions' friction and contact (mpm.solver)."""
+        conditions' friction and the explicit contact pass (mpm.solver)."""
         s, m, opt = self.solver, self.solver.model, self.options
         n = s.layout.n_nodes
         dtS = self.t.scalar(dt)

@@ -349,22 +349,92 @@ def test_kinematic_region_is_dirichlet_in_the_implicit_solve():
     assert x[middle, 1].mean() - x0[middle, 1].mean() < -0.01  # the free part followed, stretched
 
 
+def contact_kkt(solver, state, dt, scene):
+    """One implicit step of two bodies (EMPM, quadratic, no gravity, open
+    walls) checked against the constrained problem assembled independently
+    in NumPy (ImplicitSystem per body): the approaching two-body lattice
+    nodes (volume fill >= scene.contact_fill, normal n_a = normalize(grad(M_b
+    - M_a)) by central differences, (v*_a - v*_b) . n_a > 0) must be the
+    solver's, and at the solver's velocities the first-order conditions of
+        min E_a(v_a) + E_b(v_b)  s.t.  (v_a - v_b) . n_a = 0 at those nodes
+    hold: R = 0 elsewhere, R_a = -R_b parallel to n_a and pushing the bodies
+    apart there. The state is left at the step's start; returns the number
+    of constrained nodes."""
+    s = state.numpy()
+    mat = scene.bodies[0].material
+    dx, d = solver.model.dx, 2
+    body = solver.model.body.numpy()
+    lay = solver.layout
+    systems, nodes = [], []
+    for b in range(2):
+        sel = body == b
+        sb = {k: v[sel] for k, v in s.items() if len(v) == len(sel)}
+        system = ImplicitSystem(sb, solver.model.mass.numpy()[sel], solver.model.volume.numpy()[sel], mat.name,
+                                mat.packed(), dx, scene.gravity, dt)
+        lo, shape, offset = lay.lo_d.numpy()[b], lay.shape_d.numpy()[b], lay.offset_d.numpy()[b]
+        flat = [offset + int(np.dot(np.array(n) - lo, [shape[1], 1])) for n in system.nodes]
+        systems.append(system)
+        nodes.append(flat)
+    solver.contact = False  # the solve's velocities, without the explicit contact pass after it
+    try:
+        report = solver.step(state, dt)
+    finally:
+        solver.contact = True
+    assert report.converged
+    grid_v = solver.grid_v.numpy()
+    M = [dict(zip(sy.nodes, sy.m)) for sy in systems]
+    V = [dict(zip(sy.nodes, sy.v_star)) for sy in systems]
+    R = [dict(zip(sy.nodes, sy.residual(grid_v[f]))) for sy, f in zip(systems, nodes)]
+    v = [dict(zip(sy.nodes, grid_v[f])) for sy, f in zip(systems, nodes)]
+    scale = max(np.linalg.norm(sy.residual(sy.v_star)) for sy in systems)
+    active = {}
+    for n in set(M[0]) & set(M[1]):
+        if (M[0][n] + M[1][n]) / (mat.rho * dx**d) < scene.contact_fill:
+            continue
+        grad = np.array([sum((M[1].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)
+                              - M[0].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)) * e for e in (1, -1))
+                         for k in range(d)])
+        normal = grad / np.linalg.norm(grad)
+        if np.dot(V[0][n] - V[1][n], normal) > 0:
+            active[n] = normal
+    cbin = solver._solve.cbin.numpy()
+    assert sorted(n for f in nodes for n in f if cbin[n] >= 0) == sorted(
+        f for sy, fl in zip(systems, nodes) for n, f in zip(sy.nodes, fl) if n in active)
+    for b in range(2):
+        for n, r in R[b].items():
+            if n not in active:
+                assert np.linalg.norm(r) <= 1e-7 * scale
+    for n, normal in active.items():
+        assert abs(np.dot(v[0][n] - v[1][n], normal)) <= 1e-9
+        np.testing.assert_allclose(R[0][n], -R[1][n], atol=1e-7 * scale)
+        assert abs(np.cross(R[0][n], normal)) <= 1e-7 * scale
+    assert sum(np.dot(R[0][n], normal) for n, normal in active.items()) < -1e-3 * scale  # a push, not a pull
+    solver.time -= dt  # the step is taken again by Solver.advance
+    return len(active)
+
+
 def test_two_bodies_in_contact_keep_their_momentum():
     """Two elastic discs thrown at each other (no gravity, no walls acting):
-    backward Euler per body grid, frictionless contact on the solved
-    velocities; the total momentum stays zero to the Newton tolerance
-    (internal forces sum to zero, contact exchanges momentum) and the discs
-    bounce apart."""
+    contact is a constraint of the implicit system, checked against the
+    NumPy first-order conditions (contact_kkt) on the first contact steps;
+    the total momentum stays zero to the Newton tolerance (internal forces
+    sum to zero, the constraint exchanges momentum) and the discs bounce
+    apart."""
     bodies = [mpm.Body(mpm.Sphere((0.35, 0.5), 0.1), mpm.FixedCorotated(E=1e5), velocity=(1.0, 0.0)),
               mpm.Body(mpm.Sphere((0.65, 0.5), 0.1), mpm.FixedCorotated(E=1e5), velocity=(-1.0, 0.0))]
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, ppc=4, gravity=(0.0, 0.0),
                       walls=("open",) * 4, bodies=bodies)
     solver, state = make(scene, mpm.EMPM(), Implicit(newton_tol=1e-10))
-    assert solver.contact
+    assert solver.contact and solver._solve.contact
     mass, body = solver.model.mass.numpy(), solver.model.body.numpy()
     dt = 5 * solver.stable_dt(0.4, max_speed=1.0)
+    checked = []
     for _ in range(int(0.15 / dt)):
+        if len(checked) < 2 and solver._solve._capacity and (solver._solve.cbin.numpy() >= 0).any():
+            # the last step had contact
+            checked.append(contact_kkt(solver, state, dt, scene))
         assert solver.advance(state, dt).reason is None
+    assert min(checked) >= 4
     v = state.v.numpy()
     momentum = mass @ v
     assert np.abs(momentum).max() <= 1e-8 * mass.sum()
