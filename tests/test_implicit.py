@@ -407,7 +407,7 @@ def contact_kkt(solver, state, dt, scene):
     for n, normal in active.items():
         assert abs(np.dot(v[0][n] - v[1][n], normal)) <= 1e-9
         np.testing.assert_allclose(R[0][n], -R[1][n], atol=1e-7 * scale)
-        assert abs(np.cross(R[0][n], normal)) <= 1e-7 * scale
+        assert abs(R[0][n][0] * normal[1] - R[0][n][1] * normal[0]) <= 1e-7 * scale  # normal
     assert sum(np.dot(R[0][n], normal) for n, normal in active.items()) < -1e-3 * scale  # a push, not a pull
     solver.time -= dt  # the step is taken again by Solver.advance
     return len(active)
