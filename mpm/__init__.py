@@ -13,6 +13,7 @@ from .model import Model, SceneError, State, build
 from .scene import WALL_TYPES, Body, Box, Compound, Cylinder, KinematicRegion, Scene, Sphere
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
 from .solver import Solver, SolverOptions, StepReport
+from .stability import DETECTION_ACTIONS, Detection, Detector
 from .timestep import cfl_dt
 
 __all__ = [
@@ -20,5 +21,5 @@ __all__ = [
     "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
     "KinematicRegion",
     "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
-    "StepReport", "cfl_dt",
+    "StepReport", "cfl_dt", "DETECTION_ACTIONS", "Detection", "Detector",
 ]

@@ -17,11 +17,19 @@ conditions, evaluated at the node's current position q_i:
   G r = omega x r, plus any prescribed ``velocity_gradient``).
 
 Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
+
+The work of the conditions on a node, the positive part of J . v_bc with
+J = m_i (v_bc - v_i) their impulse, is summed into the status buffer (slot
+STATUS_WORK): static walls and colliders do none (J is normal to v_bc, or
+v_bc = 0; friction's is negative), moving colliders and regions do J . u,
+and mpm.stability counts it as energy put in.
 """
 
 import functools
 
 import warp as wp
+
+from .transfer import STATUS_WORK
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
@@ -218,6 +226,23 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
 
 
 @functools.cache
+def make_work(t: Types):
+    """``work(m, v, v_bc, status)``: add the positive part of the work
+    J . v_bc [J] of the impulse J = m (v_bc - v) that turns v into v_bc (force
+    times the distance the node moves at v_bc) to the status buffer's
+    STATUS_WORK."""
+    S = t.scalar
+
+    @wp.func
+    def work(m: S, v: t.vec, v_bc: t.vec, status: wp.array(dtype=wp.float64)):
+        W = m * wp.dot(v_bc - v, v_bc)
+        if W > S(0.0):
+            wp.atomic_add(status, STATUS_WORK, wp.float64(W))
+
+    return work
+
+
+@functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
                      colliders: tuple[str, ...] = ()):
     """Momentum to velocity and gravity; the boundary conditions too unless
@@ -225,6 +250,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     S = t.scalar
     conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
+    work = make_work(t)
 
     @wp.kernel(module="unique")
     def grid_update(
@@ -237,6 +263,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
         grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position, out: position
+        status: wp.array(dtype=wp.float64),  # STATUS_WORK += the energy the conditions gave
     ):
         i = wp.tid()
         m = grid_m[i]
@@ -245,7 +272,9 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         vi = grid_v[i] / m + dt * gravity
         qi = grid_q[i] / m
         if wp.static(with_boundary):
-            vi = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
+            vb = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
+            work(m, vi, vb, status)
+            vi = vb
         grid_v[i] = vi
         grid_q[i] = qi
 
@@ -258,6 +287,7 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ())
     S = t.scalar
     conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
+    work = make_work(t)
 
     @wp.kernel(module="unique")
     def boundary(
@@ -268,11 +298,15 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ())
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),
+        status: wp.array(dtype=wp.float64),  # STATUS_WORK += the energy the conditions gave
     ):
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
-        grid_v[i] = conditions(grid_v[i], grid_q[i], m, grid_kin[i], grid_kin_id[i], time, data)
+        vi = grid_v[i]
+        vb = conditions(vi, grid_q[i], m, grid_kin[i], grid_kin_id[i], time, data)
+        work(m, vi, vb, status)
+        grid_v[i] = vb
 
     return boundary

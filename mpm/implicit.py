@@ -53,6 +53,7 @@ import numpy as np
 import warp as wp
 
 from .contact import make_contact_constraint
+from .grid import make_work
 from .kernels import Kernel
 from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
@@ -392,6 +393,26 @@ def make_node_kernels(t: Types):
 
 
 @functools.cache
+def make_boundary_work(t: Types):
+    """Kernel: the work of the constraints on each node at the solution, the
+    positive part of J . v with J = m reaction their impulse (v - reaction:
+    the velocity without it), into the status buffer's STATUS_WORK
+    (mpm.grid ``make_work``, mpm.stability)."""
+    S = t.scalar
+    vec = t.vec
+    work = make_work(t)
+
+    @wp.kernel(module="unique")
+    def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
+                      status: wp.array(dtype=wp.float64)):
+        i = wp.tid()
+        if m[i] > S(0.0):
+            work(m[i], v[i] - reaction[i], v[i], status)
+
+    return boundary_work
+
+
+@functools.cache
 def make_friction(t: Types):
     """Kernel: Coulomb friction after the solve (ImplicitSolve.finish)."""
     S = t.scalar
@@ -434,6 +455,7 @@ class ImplicitSolve:
          self._trial) = make_node_kernels(t)
         self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
         self._friction = make_friction(t) if self.with_friction else None
+        self._work = make_boundary_work(t)
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact
         self._contact = make_contact_constraint(t) if self.contact else ()
@@ -449,7 +471,8 @@ class ImplicitSolve:
     def kernels(self) -> list:
         return ([k for k, _ in self._evaluate] + [self._apply, self._finish_residual, self._finish_apply,
                                                   self._cg_start, self._cg_step, self._cg_direction,
-                                                  self._trial] + ([self._friction] if self._friction else [])
+                                                  self._trial, self._work]
+                + ([self._friction] if self._friction else [])
                 + list(self._contact))
 
     def _grow(self, n: int) -> None:
@@ -591,12 +614,15 @@ class ImplicitSolve:
             self._project(0, s.grid_v)
 
     def finish(self) -> None:
-        """Coulomb friction on the solved velocities of the nodes in frictional
+        """The constraints' work (:func:`make_boundary_work`), then Coulomb
+        friction on the solved velocities of the nodes in frictional
         contact: the tangential velocity relative to the collider loses mu
         times the normal velocity the constraint removed (|(I - Pi) R| / m at
         the solution, while it pushes into the collider) - the explicit
         step's rule with the implicit normal impulse."""
         s, m = self.solver, self.solver.model
+        wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
+            s.grid_m, self.reaction, s.grid_v, s.status])
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid_m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,

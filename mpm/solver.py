@@ -32,7 +32,7 @@ from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
 from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
-                       STATUS_PER_BODY, TRANSFERS, make_g2p, make_p2g)
+                       STATUS_PER_BODY, STATUS_SPEED, STATUS_WORK, TRANSFERS, make_g2p, make_p2g)
 
 
 @dataclass
@@ -43,6 +43,8 @@ class SolverOptions:
     """mls | apic | pic (mpm.transfer.TRANSFERS)"""
     integrator: Explicit | Implicit = field(default_factory=Explicit)
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
+    track_J: bool = False
+    """report every body's smallest det F (for inversion detection, mpm.stability)"""
 
 
 @dataclass
@@ -66,6 +68,8 @@ class StepReport:
     dt: float = 0.0  # [s] the step taken (an implicit step may have been halved)
     newton: NewtonReport | None = None  # the implicit solve (None: explicit)
     halvings: int = 0  # times the implicit step was halved after a failed solve
+    body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s]
+    boundary_work: float = 0.0  # [J] kinetic energy the boundary conditions gave the grid (all grids)
 
     @property
     def reason(self) -> str | None:
@@ -120,7 +124,8 @@ class Solver:
                      for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
-                             track_compression=any(b.material.stiffens for b in model.scene.bodies))
+                             track_compression=self.options.track_J
+                             or any(b.material.stiffens for b in model.scene.bodies))
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -335,7 +340,7 @@ class Solver:
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
         wp.launch(self._grid_update, self.layout.n_nodes, device=self.model.device, inputs=[
             self.grid_m, self._gravity, dt, self._time, self._boundary_data, self.grid_kin,
-            self.grid_kin_id, self.grid_v, self.grid_q])
+            self.grid_kin_id, self.grid_v, self.grid_q, self.status])
 
     def _resolve_contact(self):
         """Frictionless contact between bodies on the global lattice."""
@@ -359,7 +364,7 @@ class Solver:
         """Walls, after contact."""
         wp.launch(self._boundary, self.layout.n_nodes, device=self.model.device, inputs=[
             self.grid_m, self.grid_q, self._time, self._boundary_data, self.grid_kin,
-            self.grid_kin_id, self.grid_v])
+            self.grid_kin_id, self.grid_v, self.status])
 
     def _interpolate(self, state: State, dt):
         """G2P: velocities, affine matrices, positions, F^sn, the criterion."""
@@ -403,6 +408,15 @@ class Solver:
                 n_kin = self._capacity if self.regions else 1
                 self.grid_kin = wp.zeros(n_kin, dtype=t.scalar)
                 self.grid_kin_id = wp.zeros(n_kin, dtype=wp.int32)
+
+    def boundary_speed(self) -> float:
+        """The fastest collider or kinematic region [m/s] (a region's rotation
+        and stretch bounded over the domain's diagonal)."""
+        scene = self.model.scene
+        diagonal = float(np.linalg.norm(scene.domain))
+        regions = [float(np.linalg.norm(r.velocity if r.velocity is not None else 0.0))
+                   + float(np.linalg.norm(r.gradient(scene.dim), 2)) * diagonal for r in scene.regions]
+        return max([self._collider_speed] + regions)
 
     def displacement_dt(self, report: StepReport | None = None, max_speed: float = 0.0) -> float:
         """The implicit integrator's step limit [s]: a particle moves at most
@@ -454,7 +468,8 @@ class Solver:
             outside=int(s[STATUS_OUTSIDE]), marked=field_[0].astype(np.int64),
             max_dJ=field_[1].copy(), min_J=field_[2].copy(), min_stretch=np.sqrt(field_[3]),
             max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
-            box_hi=box[1].copy())
+            box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
+            boundary_work=float(s[STATUS_WORK]))
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

@@ -42,10 +42,13 @@ affine momentum, force and F from the kernel gradient (Jiang et al. 2015);
 pic: no affine term, force and F from the kernel gradient."""
 
 # layout of the per-step status buffer (float64): see Solver.check
-STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_HEADER = 0, 1, 2, 3
-STATUS_PER_BODY = 6  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2,
-#                      largest stiffening factor (P2G, plastic models that harden)
+# header: the largest |v|^2, non-finite and outside counts, the kinetic energy the
+# boundary conditions gave the grid (mpm.grid, mpm.implicit: for mpm.stability)
+STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_HEADER = 0, 1, 2, 3, 4
+STATUS_PER_BODY = 7  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2,
+#                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2
 STATUS_STIFFENING = 5
+STATUS_SPEED = 6
 
 
 @functools.cache
@@ -224,7 +227,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
     EMPM F^sn = I at the start of every step: it is C);
-    ``track_compression``: a material stiffens under compression (a fluid).
+    ``track_compression``: a material stiffens under compression (a fluid),
+    or det F is watched for inversion (mpm.stability).
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
@@ -233,7 +237,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
     step must shrink with it), the largest velocity gradient |L| (the strain
     increment dt |L| of a step must stay small), and the bounding box of the
-    new positions (min per axis, then max per axis).
+    new positions (min per axis, then max per axis), and the largest |v_p|^2.
     """
     S = t.scalar
     f64 = wp.float64
@@ -339,7 +343,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))
 
         # stability monitor and bounding box of the new positions
-        wp.atomic_max(status, STATUS_MAX_V2, f64(wp.dot(vp, vp)))
+        v2 = f64(wp.dot(vp, vp))
+        wp.atomic_max(status, STATUS_MAX_V2, v2)
+        wp.atomic_max(status, STATUS_HEADER + STATUS_SPEED * n_bodies + b, v2)
         if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:

@@ -164,6 +164,7 @@ class Run:
         self.error_last: dict | None = None
         self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
+        self.detector: mpm.Detector | None = None  # blow-up detection (mpm.stability)
         self._dt0: float | None = None  # the first adaptive step [s]
         self.interrupts = Interrupts()
         self._stable_dt = math.inf
@@ -176,9 +177,11 @@ class Run:
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
         self.record_dJ = log.every > 0 and log.dJ
+        detect = spec.detect.action != "off"
+        track_J = detect and any(not b.material.invertible for b in spec.scene.bodies)
         self.solver = mpm.Solver(self.model, spec.scheme,
                                  mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer,
-                                                   integrator=spec.integrator))
+                                                   integrator=spec.integrator, track_J=track_J))
         self.implicit = self.solver.implicit
         self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
         self.halvings = 0  # implicit steps retried with half the step
@@ -224,16 +227,23 @@ class Run:
         next step's P2G (or from :meth:`finish`)."""
         self._pending[:] = [self.step, self.t, self.solver.measure(self.state, elastic=False), extra]
 
-    def emit(self, elastic_energy: float) -> None:
+    def emit(self, elastic_energy: float) -> list:
+        """Send the pending scalar row with its elastic energy; the energy
+        criterion's trips for that state (mpm.stability)."""
         step, t, d, extra = self._pending
         d[self.names.index("elastic_energy")] = elastic_energy
         self.drift.add(d)
+        trips = []
+        if self.detector is not None:
+            trips = self.detector.energy(*(float(d[self.names.index(k)]) for k in
+                                           ("kinetic_energy", "elastic_energy", "potential_energy")))
         if self.spec.log.scalars:
             row = dict(zip(self.names, d.tolist()))
             row["total_energy"] = self.drift.energy(d)
             row.update(extra)
             self.sink.scalars(step, t, row)
         self._pending.clear()
+        return trips
 
     def particles(self) -> None:
         """Particles, dJ and the plastic fields of the current state."""
@@ -461,6 +471,10 @@ class Run:
         self.announce_scheme()
         progress = Progress(steps_end, duration, log.progress)
         self._v0 = float(np.max(np.linalg.norm(self.state.v.numpy(), axis=1)))
+        if self.spec.detect.action != "off":
+            self.detector = mpm.Detector(self.spec.detect, self.spec.scene, self.solver.boundary_speed(),
+                                         self._v0, self.model.kernel.n_grids,
+                                         float(self.model.mass.numpy().astype(np.float64).sum()))
         self.metrics["status"], self.metrics["reason"] = "running", ""
 
         def done() -> bool:
@@ -482,17 +496,16 @@ class Run:
             dt = self.next_dt(report, duration)
             collapse = self.collapsed()
             if collapse:
-                self.unstable(collapse)
+                self.unstable(collapse, "dt_collapse")
                 break
             t0 = time.perf_counter()
             halvings = self.spec.integrator.halvings if self.implicit and self.spec.run.dt is None else 0
             report = self.solver.advance(self.state, dt, halvings)
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
-            if self._pending:
-                self.emit(self.solver.step_energy())
+            trips = self.emit(self.solver.step_energy()) if self._pending else []
             if report.newton is not None and not report.newton.converged:  # the state is the step's start
                 n = report.newton
-                self.unstable(report.reason, newton_iterations=n.newton, cg_iterations=n.cg,
+                self.unstable(report.reason, "newton", newton_iterations=n.newton, cg_iterations=n.cg,
                               newton_residual=n.residual, halvings=report.halvings)
                 break
             self.update_ms.append(1e3 * report.update_time)
@@ -502,13 +515,18 @@ class Run:
             self.t += report.dt
             if report.newton is not None:
                 self.record_newton(report)
+            # the detection names the cause when particles also left the domain in this step
+            if (self.detector is not None and not report.nonfinite
+                    and self.react(trips + self.detector.step(report))):
+                break
             if report.reason:
-                self.unstable(report.reason, nonfinite=report.nonfinite, outside=report.outside)
+                self.unstable(report.reason, "nonfinite" if report.nonfinite else "outside",
+                              nonfinite=report.nonfinite, outside=report.outside)
                 break
             self.record_updates(report)
             t1 = time.perf_counter()
             last = done()
-            if log.scalars or last:
+            if log.scalars or last or (self.detector is not None and self.detector.energy_on):
                 self.measure(self.row_extra(dt, report))
             if log.every and (self.step % log.every == 0 or last):
                 self.particles()
@@ -545,10 +563,31 @@ class Run:
                        residual_max=float(a[:, 2].max()))
         return out
 
-    def unstable(self, reason: str, **values) -> None:
+    def react(self, trips: list) -> bool:
+        """Act on the detection's trips (mpm.stability): with detect.action
+        ``stop`` the first ends the run unstable (True); with ``warn`` each is
+        an event and a line of metrics.json ``detect_warnings``."""
+        for trip in trips:
+            if self.spec.detect.action == "stop":
+                self.unstable(trip.message, trip.criterion, trip.body, value=trip.value, limit=trip.limit)
+                return True
+            self.metrics.setdefault("detect_warnings", []).append(
+                {"step": self.step, "time": self.t, "criterion": trip.criterion, "body": trip.body,
+                 "message": trip.message})
+            self.sink.event(self.step, self.t, f"stability warning: {trip.message}", level="WARN",
+                            value=trip.value, limit=trip.limit)
+        return False
+
+    def unstable(self, reason: str, criterion: str, body: str | None = None, **values) -> None:
+        """End the run as unstable at this step: ``criterion`` (nonfinite,
+        outside, dt_collapse, newton, or a detection criterion of
+        mpm.stability) and the ``body`` it names, if any."""
         self.metrics["status"] = "unstable"
         self.metrics["reason"] = f"step {self.step} (t = {self.t:.6g} s): {reason}"
         self.metrics["unstable_step"] = self.step
+        self.metrics["unstable_time"] = self.t
+        self.metrics["unstable_criterion"] = criterion
+        self.metrics["unstable_body"] = body
         if self.spec.log.every:
             self.particles()
         self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR", **values)
@@ -621,6 +660,8 @@ class Run:
                 m["implicit"] = self.implicit_summary()
         if self.drift is not None:
             m.update(self.drift.summary())
+        if self.detector is not None:
+            m["detect"] = self.detector.summary()
 
 
 def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),

@@ -16,6 +16,7 @@ from omegaconf import MISSING
 
 from mpm.colliders import BOUNDARIES, KINDS as COLLIDERS
 from mpm.integrators import INTEGRATORS
+from mpm.stability import Detection
 from mpm.materials import MATERIALS
 from mpm.scene import CONTACT_TYPES as CONTACTS
 from mpm.schemes import SCHEMES
@@ -190,6 +191,7 @@ class Config:
     scene: SceneConfig = MISSING
     run: RunConfig = field(default_factory=RunConfig)
     log: LogConfig = field(default_factory=LogConfig)
+    detect: Detection = field(default_factory=Detection)  # blow-up detection (mpm.stability)
     seed: int = 0
     scale: Any = None  # sizes of the named experiments (conf/scale), read by conf/experiment
 

@@ -71,6 +71,7 @@ class RunSpec:
     log: LogSettings
     seed: int
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
+    detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
 
     @property
     def meshes(self) -> dict[str, str]:
@@ -562,6 +563,22 @@ def _reference(key: str, path) -> str | None:
     return os.path.abspath(p)
 
 
+def make_detect(node, key: str = "detect") -> mpm.Detection:
+    d = dict(_plain(node) or {})
+    unknown = sorted(set(d) - {f.name for f in dataclasses.fields(mpm.Detection)})
+    if unknown:
+        raise ConfigError(f"{key}.{unknown[0]}", f"unknown; accepted: "
+                                                 f"{', '.join(f.name for f in dataclasses.fields(mpm.Detection))}")
+    action = _choice(f"{key}.action", d.get("action", "stop"), list(mpm.DETECTION_ACTIONS))
+    det = mpm.Detection(action=action,
+                        energy_growth=_number(f"{key}.energy_growth", d.get("energy_growth", 0.5), gt=0.0),
+                        speed_factor=_number(f"{key}.speed_factor", d.get("speed_factor", 10.0), gt=0.0),
+                        min_J=_number(f"{key}.min_J", d.get("min_J", 0.0), ge=0.0, le=1.0))
+    for fname, message in det.problems():
+        raise ConfigError(f"{key}.{fname}", message)
+    return det
+
+
 def make_run(node, key: str = "run") -> RunSettings:
     d = _plain(node)
     steps = _number(f"{key}.steps", d["steps"], int, ge=1, optional=True)
@@ -585,6 +602,7 @@ def resolve(cfg) -> RunSpec:
     run = make_run(cfg.run)
     scheme = make_scheme(cfg.scheme)
     integrator = make_integrator(cfg.integrator) if "integrator" in cfg else Explicit()
+    detect = make_detect(cfg.detect) if "detect" in cfg else mpm.Detection()
     kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
     transfer = _choice("kernel.transfer", cfg.kernel.transfer, TRANSFERS)
     material = make_material(cfg.material, "material")
@@ -615,4 +633,4 @@ def resolve(cfg) -> RunSpec:
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
                    kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed,
-                   integrator=integrator)
+                   integrator=integrator, detect=detect)

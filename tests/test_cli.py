@@ -76,7 +76,8 @@ def test_unstable_run_stops_cleanly(tmp_path):
     assert metrics["status"] == "unstable"
     assert metrics["reason"].startswith(f"step {metrics['unstable_step']} (t = ")
     assert metrics["steps"] == metrics["unstable_step"] < 500
-    assert "non-finite" in metrics["reason"] or "left the domain" in metrics["reason"]
+    # caught by the blow-up detection (mpm.stability), or at the latest when values turn non-finite
+    assert metrics["unstable_criterion"] in ("energy", "speed", "nonfinite", "outside")
     assert metrics["reason"] in p.stderr
     verify(tmp_path / "recording.rrd")
 

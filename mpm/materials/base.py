@@ -63,6 +63,7 @@ class Material:
     plastic: ClassVar[bool] = False  # a return mapping runs every step (mpm.materials.plastic)
     needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
     stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?
+    invertible: ClassVar[bool] = False  # is the energy defined at det F <= 0 (mpm.stability)?
     flows: ClassVar[bool] = False
     """does the material flow without bound (fluids, plastic solids)? A-ULMPM
     then takes its defaults for flowing bodies (mpm.schemes)"""

@@ -53,6 +53,7 @@ class FixedCorotated(Material):
     """Fixed corotated hyperelastic solid."""
 
     name = "fixed_corotated"
+    invertible = True  # |F - R|^2 and (J - 1)^2 hold for any F
     stress_energy = staticmethod(_stress_energy)
     principal = staticmethod(_principal)
 

@@ -93,6 +93,7 @@ class Snow(Plastic):
     """Elastoplastic snow with hardening."""
 
     name = "snow"
+    invertible = True  # fixed corotated elasticity (its hardening reads the plastic J only)
     flow = staticmethod(_flow)
     elasticity = staticmethod(_elasticity)
     elasticity_hessian = staticmethod(_elasticity_hessian)
