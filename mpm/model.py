@@ -146,6 +146,15 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
         raise SceneError("ppc", f"{scene.ppc}; accepted: an integer >= 1")
     if not 0.0 <= scene.jitter <= 1.0:
         raise SceneError("jitter", f"{scene.jitter}; accepted: 0 <= jitter <= 1")
+    if scene.lattice_offset is not None and (len(scene.lattice_offset) != d
+                                             or not np.all(np.isfinite(scene.lattice_offset))):
+        raise SceneError("lattice_offset", f"{scene.lattice_offset}; accepted: {d} finite numbers [cells]")
+    for i, b in enumerate(scene.bodies):
+        if b.deformation is not None:
+            F = np.asarray(b.deformation, float)
+            if F.shape != (d, d) or not np.all(np.isfinite(F)) or abs(np.linalg.det(F)) < 1e-6:
+                raise SceneError(f"bodies[{i}].deformation",
+                                 f"{b.deformation}; accepted: {d} rows of {d} finite numbers, det F != 0")
     if not scene.bodies:
         raise SceneError("bodies", "empty; accepted: at least one body")
     for r, reg in enumerate(scene.regions):
@@ -198,12 +207,12 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     samples = []
     for i, b in enumerate(scene.bodies):
         ppc = b.ppc or scene.ppc
-        x = sample_shape(b.shape, d, dxp, ppc, scene.jitter, rng)
+        x = sample_shape(b.shape, d, dxp, ppc, scene.jitter, rng, scene.lattice_offset)
         if len(x) == 0:
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
         samples.append((x, ppc))
 
-    xs, vs, Cs, ms, Vs, ids, hs = [], [], [], [], [], [], []
+    xs, vs, Cs, ms, Vs, ids, hs, Fs = [], [], [], [], [], [], [], []
     body_ranges = [None] * len(scene.bodies)
     groups: list[MaterialGroup] = []
     start = 0
@@ -211,6 +220,12 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
         b, (x, ppc) = scene.bodies[i], samples[i]
         n = len(x)
         vol = dxp**d / ppc
+        F = np.eye(d)
+        if b.deformation is not None:  # sampled in the reference shape, placed deformed
+            F = np.asarray(b.deformation, float)
+            c = 0.5 * (np.asarray(b.shape.bounds()[0], float) + np.asarray(b.shape.bounds()[1], float))
+            x = c + (x - c) @ F.T
+        Fs.append(np.broadcast_to(F, (n, d, d)))
         v, C = _rigid_velocity(b, x, d)
         if scene.solution is not None:
             v, C = scene.solution.velocity(x, 0.0), scene.solution.velocity_gradient(x, 0.0)
@@ -255,7 +270,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             x=wp.array(x.astype(S), dtype=t.vec),
             v=wp.array(np.concatenate(vs).astype(S), dtype=t.vec),
             C=wp.array(np.concatenate(Cs).astype(S), dtype=t.mat),
-            F0s=wp.array(eye, dtype=t.mat),
+            F0s=wp.array(np.concatenate(Fs).astype(S), dtype=t.mat),
             Fsn=wp.array(eye, dtype=t.mat),
             X=wp.array(x.astype(S), dtype=t.vec),
             dJ=wp.zeros(n, dtype=t.scalar),

@@ -219,6 +219,11 @@ class Body:
 
     ``velocity`` [m/s] and ``angular_velocity`` [rad/s] (a scalar in 2D, a
     vector in 3D, about the shape's centre) set the initial rigid motion.
+    ``deformation`` (d x d rows) is an initial deformation gradient F: the
+    particles are sampled in the shape (the reference configuration, which
+    sets their volume and mass) and placed at x = c + F (X - c), c the
+    shape's centre, with F as their elastic deformation (det F < 0: an
+    inverted body).
     """
 
     shape: Shape
@@ -227,6 +232,7 @@ class Body:
     velocity: Sequence[float] | None = None
     angular_velocity: float | Sequence[float] | None = None
     ppc: int | None = None
+    deformation: Sequence[Sequence[float]] | None = None
 
 
 @dataclass
@@ -247,6 +253,10 @@ class Scene:
     regular sub-lattice, anything else uniform random points per cell"""
     jitter: float = 0.0
     """random displacement of lattice samples, as a fraction of their spacing"""
+    lattice_offset: Sequence[float] | None = None
+    """shift of the regular sampling lattice per axis [sampling cells]: with
+    ppc = 1, (0.5, 0.5) puts the particles on grid nodes and (0.5, 0) on
+    cell faces (default: sub-cell centres)"""
     contact: str = "frictionless"
     """between bodies: "frictionless" (mpm.contact), "none" (they pass through)
     or "shared" (Eulerian scheme only: all bodies on one grid, as in standard

@@ -129,6 +129,20 @@ class Detector:
                                   f"model ({self.materials[b].name}) cannot invert"))
         return self._new(trips)
 
+    def initial(self, F: np.ndarray, body: np.ndarray) -> list[Trip]:
+        """Inversion in the initial state (per-particle F and body index): a
+        model that cannot invert must not start with det F <= min_J."""
+        J = np.linalg.det(np.asarray(F, np.float64))
+        trips = []
+        for b, name in enumerate(self.names):
+            if self.check_J[b] and (body == b).any():
+                J_min = float(J[body == b].min())
+                if not J_min > self.options.min_J:
+                    trips.append(Trip("inversion", name, J_min, self.options.min_J,
+                                      f"initial det F = {J_min:.4g} <= {self.options.min_J:g} in body "
+                                      f"'{name}', whose model ({self.materials[b].name}) cannot invert"))
+        return self._new(trips)
+
     def energy(self, kinetic: float, elastic: float, potential: float) -> list[Trip]:
         """The energy criterion for one state's energies [J]."""
         if not self.energy_on:

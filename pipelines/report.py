@@ -906,6 +906,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     from .granular import section_granular, section_plastic  # experiment families of their own
     from .integration import section_integration
     from .paper_tables import section_table3, section_table4
+    from .stability import section_extreme, section_stability, write_stability_md
     from .tradeoff import section_tradeoff
 
     jobs, duplicates = load_jobs(sweep_dir)
@@ -931,6 +932,9 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         lines += section_spilled(jobs, out)
         lines += section_dam_break(jobs, out)
         lines += section_integration(jobs, out)
+        maps, extreme = section_stability(jobs, out), section_extreme(jobs, out)
+        write_stability_md(out, maps, extreme)
+        lines += maps + extreme
     path = out / "report.md"
     path.write_text("\n".join(lines).rstrip() + "\n")
     return path

@@ -65,8 +65,13 @@ def run(cfg: DictConfig) -> dict:
                   f"(hash {identity['config_hash']}); run.force=true runs it again", file=sys.stderr)
             _last_status.append(done["status"])
             return done
-    metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
-                      identity=identity)
+    if spec.stability_map is not None:  # a stability map: its points in this process
+        from .stability import run_map
+
+        metrics = run_map(spec, spec.stability_map, out_dir, identity)
+    else:
+        metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
+                          identity=identity)
     _last_status.append(metrics["status"])
     summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")

@@ -476,6 +476,9 @@ class Run:
                                          self._v0, self.model.kernel.n_grids,
                                          float(self.model.mass.numpy().astype(np.float64).sum()))
         self.metrics["status"], self.metrics["reason"] = "running", ""
+        if self.detector is not None and self.react(self.detector.initial(self.state.numpy()["F"],
+                                                                          self.model.body.numpy())):
+            return
 
         def done() -> bool:
             return self.step >= steps_end if steps_end is not None else self.t >= duration * (1 - 1e-12)

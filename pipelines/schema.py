@@ -106,6 +106,7 @@ class BodyConfig:
     velocity: Optional[List[float]] = None  # [m/s]
     angular_velocity: Optional[Any] = None  # [rad/s]: scalar (2D) or 3-vector (3D)
     ppc: Optional[int] = None  # particles per cell, overrides the scene's
+    deformation: Optional[Any] = None  # initial deformation gradient F (d x d rows; det < 0: inverted)
 
 
 @dataclass
@@ -141,6 +142,7 @@ class SceneConfig:
     wall_cells: int = 3  # wall thickness [cells]
     ppc: int = 4  # particles per cell
     jitter: float = 0.0  # random displacement of lattice samples [fraction of spacing]
+    lattice_offset: Optional[List[float]] = None  # shift of the sampling lattice [cells]; ppc 1 + 0.5: on nodes
     log_every: int = 1  # particle logging cadence when log.every is null
     contact: str = "frictionless"  # between bodies: frictionless | none | shared (one grid, EMPM)
     contact_fill: float = 0.5  # node volume fraction the bodies must fill for contact
@@ -194,6 +196,8 @@ class Config:
     detect: Detection = field(default_factory=Detection)  # blow-up detection (mpm.stability)
     seed: int = 0
     scale: Any = None  # sizes of the named experiments (conf/scale), read by conf/experiment
+    stability_map: Optional[Any] = None  # {E, dt_cfl, steps}: the job is a stability map (pipelines.stability)
+    expected: Optional[str] = None  # the outcome a case of the extreme suite should have (conf/extreme)
 
 
 def register() -> None:

@@ -59,6 +59,30 @@ class LogSettings:
 
 
 @dataclass
+class MapSpec:
+    """The points of a stability map (pipelines.stability)."""
+
+    E: list[float]  # stiffness [Pa]: Young's modulus (a fluid's bulk modulus)
+    dt_cfl: list[float]  # fixed step [multiples of the explicit CFL limit]
+    steps: int  # steps per point
+
+
+def make_map(node, key: str = "stability_map") -> MapSpec | None:
+    d = _plain(node)
+    if d is None:
+        return None
+    if not isinstance(d, dict) or set(d) != {"E", "dt_cfl", "steps"}:
+        raise ConfigError(key, f"{d!r}; accepted: a mapping with E, dt_cfl and steps")
+    lists = {}
+    for name in ("E", "dt_cfl"):
+        values = d[name] if isinstance(d[name], list) else [d[name]]
+        if not values:
+            raise ConfigError(f"{key}.{name}", "empty; accepted: a list of numbers > 0")
+        lists[name] = [_number(f"{key}.{name}[{i}]", v, gt=0.0) for i, v in enumerate(values)]
+    return MapSpec(E=lists["E"], dt_cfl=lists["dt_cfl"], steps=_number(f"{key}.steps", d["steps"], int, ge=1))
+
+
+@dataclass
 class RunSpec:
     """Everything a run needs, validated."""
 
@@ -72,6 +96,7 @@ class RunSpec:
     seed: int
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
     detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
+    stability_map: MapSpec | None = None  # the job is a stability map (pipelines.stability)
 
     @property
     def meshes(self) -> dict[str, str]:
@@ -529,7 +554,8 @@ def make_scene(node, default_material: Material, key: str = "scene",
             name=b.get("name") or f"body{i}",
             velocity=None if b.get("velocity") is None else _vector(f"{bkey}.velocity", b["velocity"], dim),
             angular_velocity=w,
-            ppc=_number(f"{bkey}.ppc", b.get("ppc"), int, ge=1, optional=True)))
+            ppc=_number(f"{bkey}.ppc", b.get("ppc"), int, ge=1, optional=True),
+            deformation=_matrix(f"{bkey}.deformation", b.get("deformation"), dim)))
     scene = mpm.Scene(
         dim=dim, domain=domain,
         resolution=_number(f"{key}.resolution", d["resolution"], int, ge=4),
@@ -539,6 +565,8 @@ def make_scene(node, default_material: Material, key: str = "scene",
         wall_cells=_number(f"{key}.wall_cells", d["wall_cells"], int, ge=1),
         ppc=_number(f"{key}.ppc", d["ppc"], int, ge=1),
         jitter=_number(f"{key}.jitter", d["jitter"], ge=0.0, le=1.0),
+        lattice_offset=None if d.get("lattice_offset") is None else
+        _vector(f"{key}.lattice_offset", d["lattice_offset"], dim),
         contact=_choice(f"{key}.contact", d["contact"], CONTACTS),
         contact_fill=_number(f"{key}.contact_fill", d["contact_fill"], gt=0.0),
         regions=[make_region(r, f"{key}.regions[{i}]", dim, [b.name for b in bodies])
@@ -603,6 +631,7 @@ def resolve(cfg) -> RunSpec:
     scheme = make_scheme(cfg.scheme)
     integrator = make_integrator(cfg.integrator) if "integrator" in cfg else Explicit()
     detect = make_detect(cfg.detect) if "detect" in cfg else mpm.Detection()
+    stability_map = make_map(cfg.get("stability_map"))
     kernel_name = _choice("kernel.name", cfg.kernel.name, list(mpm.KERNELS))
     transfer = _choice("kernel.transfer", cfg.kernel.transfer, TRANSFERS)
     material = make_material(cfg.material, "material")
@@ -633,4 +662,4 @@ def resolve(cfg) -> RunSpec:
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
                    kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed,
-                   integrator=integrator, detect=detect)
+                   integrator=integrator, detect=detect, stability_map=stability_map)
