@@ -31,8 +31,9 @@ from .layout import GridLayout
 from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
-from .transfer import (STATUS_HEADER, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
-                       STATUS_PER_BODY, STATUS_SPEED, STATUS_WORK, TRANSFERS, make_g2p, make_p2g)
+from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
+                       STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED, STATUS_WORK, TRANSFERS, make_g2p,
+                       make_p2g)
 
 
 @dataclass
@@ -45,6 +46,8 @@ class SolverOptions:
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
     track_J: bool = False
     """report every body's smallest det F (for inversion detection, mpm.stability)"""
+    track_energy: bool = False
+    """report the new state's kinetic and potential energy every step (mpm.stability)"""
 
 
 @dataclass
@@ -69,7 +72,9 @@ class StepReport:
     newton: NewtonReport | None = None  # the implicit solve (None: explicit)
     halvings: int = 0  # times the implicit step was halved after a failed solve
     body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s]
-    boundary_work: float = 0.0  # [J] kinetic energy the boundary conditions gave the grid (all grids)
+    boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
+    kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)
+    potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
 
     @property
     def reason(self) -> str | None:
@@ -125,7 +130,8 @@ class Solver:
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=self.options.track_J
-                             or any(b.material.stiffens for b in model.scene.bodies))
+                             or any(b.material.stiffens for b in model.scene.bodies),
+                             track_energy=self.options.track_energy)
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -373,7 +379,7 @@ class Solver:
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
             state.stencils,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
-            state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status])
+            state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status, m.mass, self._gravity])
 
     # -------------------------------------------------- configuration update
     def update_configuration(self, state: State, bodies: list[int], lo: np.ndarray,
@@ -469,7 +475,9 @@ class Solver:
             max_dJ=field_[1].copy(), min_J=field_[2].copy(), min_stretch=np.sqrt(field_[3]),
             max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
-            boundary_work=float(s[STATUS_WORK]))
+            boundary_work=float(s[STATUS_WORK]),
+            kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),
+            potential=float(s[STATUS_POTENTIAL]) if self.options.track_energy else float("nan"))
 
     def _prepare_fracture(self, x: np.ndarray) -> None:
         m = self.model

@@ -28,7 +28,8 @@ Three criteria, checked after every step (:class:`Detector`):
   (every model but fixed corotated and snow: their energies take log J or
   log of the singular values).
 
-The energy of a state is complete one step later (its elastic energy comes
+The energy of a state is complete one step later (G2P sums its kinetic and
+potential energy, ``SolverOptions.track_energy``; its elastic energy comes
 with the next step's P2G), so the energy criterion sees a state one step
 behind the other two.
 """

@@ -42,9 +42,11 @@ affine momentum, force and F from the kernel gradient (Jiang et al. 2015);
 pic: no affine term, force and F from the kernel gradient."""
 
 # layout of the per-step status buffer (float64): see Solver.check
-# header: the largest |v|^2, non-finite and outside counts, the kinetic energy the
-# boundary conditions gave the grid (mpm.grid, mpm.implicit: for mpm.stability)
-STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_HEADER = 0, 1, 2, 3, 4
+# header: the largest |v|^2, non-finite and outside counts, the work the boundary
+# conditions did on the grid (mpm.grid, mpm.implicit), the kinetic and potential
+# energy of the new state (G2P with ``track_energy``): for mpm.stability
+STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL = range(6)
+STATUS_HEADER = 6
 STATUS_PER_BODY = 7  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2,
 #                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2
 STATUS_STIFFENING = 5
@@ -221,14 +223,16 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 
 @functools.cache
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
-             lagrangian: bool, track_compression: bool):
+             lagrangian: bool, track_compression: bool, track_energy: bool = False):
     """G2P for all particles.
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
     EMPM F^sn = I at the start of every step: it is C);
     ``track_compression``: a material stiffens under compression (a fluid),
-    or det F is watched for inversion (mpm.stability).
+    or det F is watched for inversion (mpm.stability);
+    ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
+    potential energy -m g . x [J] (mpm.stability; no extra pass).
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
@@ -279,6 +283,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         F0s: wp.array(dtype=t.mat),
         dJ: wp.array(dtype=S),
         status: wp.array(dtype=f64),
+        # with track_energy:
+        mass: wp.array(dtype=S),
+        gravity: t.vec,
     ):
         p = wp.tid()
         b = body[p]
@@ -345,6 +352,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         # stability monitor and bounding box of the new positions
         v2 = f64(wp.dot(vp, vp))
         wp.atomic_max(status, STATUS_MAX_V2, v2)
+        if wp.static(track_energy):
+            wp.atomic_add(status, STATUS_KINETIC, f64(0.5) * f64(mass[p]) * v2)
+            wp.atomic_add(status, STATUS_POTENTIAL, -f64(mass[p]) * f64(wp.dot(gravity, xp)))
         wp.atomic_max(status, STATUS_HEADER + STATUS_SPEED * n_bodies + b, v2)
         if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))

@@ -165,6 +165,7 @@ class Run:
         self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
         self.detector: mpm.Detector | None = None  # blow-up detection (mpm.stability)
+        self._energies = (0.0, 0.0)  # kinetic and potential energy [J] of the last state reached
         self._dt0: float | None = None  # the first adaptive step [s]
         self.interrupts = Interrupts()
         self._stable_dt = math.inf
@@ -181,7 +182,8 @@ class Run:
         track_J = detect and any(not b.material.invertible for b in spec.scene.bodies)
         self.solver = mpm.Solver(self.model, spec.scheme,
                                  mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer,
-                                                   integrator=spec.integrator, track_J=track_J))
+                                                   integrator=spec.integrator, track_J=track_J,
+                                                   track_energy=detect))
         self.implicit = self.solver.implicit
         self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
         self.halvings = 0  # implicit steps retried with half the step
@@ -227,23 +229,16 @@ class Run:
         next step's P2G (or from :meth:`finish`)."""
         self._pending[:] = [self.step, self.t, self.solver.measure(self.state, elastic=False), extra]
 
-    def emit(self, elastic_energy: float) -> list:
-        """Send the pending scalar row with its elastic energy; the energy
-        criterion's trips for that state (mpm.stability)."""
+    def emit(self, elastic_energy: float) -> None:
         step, t, d, extra = self._pending
         d[self.names.index("elastic_energy")] = elastic_energy
         self.drift.add(d)
-        trips = []
-        if self.detector is not None:
-            trips = self.detector.energy(*(float(d[self.names.index(k)]) for k in
-                                           ("kinetic_energy", "elastic_energy", "potential_energy")))
         if self.spec.log.scalars:
             row = dict(zip(self.names, d.tolist()))
             row["total_energy"] = self.drift.energy(d)
             row.update(extra)
             self.sink.scalars(step, t, row)
         self._pending.clear()
-        return trips
 
     def particles(self) -> None:
         """Particles, dJ and the plastic fields of the current state."""
@@ -476,9 +471,13 @@ class Run:
                                          self._v0, self.model.kernel.n_grids,
                                          float(self.model.mass.numpy().astype(np.float64).sum()))
         self.metrics["status"], self.metrics["reason"] = "running", ""
-        if self.detector is not None and self.react(self.detector.initial(self.state.numpy()["F"],
-                                                                          self.model.body.numpy())):
-            return
+        if self.detector is not None:
+            d0 = self._pending[2]  # the initial state's energies; then each step's G2P sums them
+            self._energies = (float(d0[self.names.index("kinetic_energy")]),
+                              float(d0[self.names.index("potential_energy")]))
+            if self.react(self.detector.initial(self.state.numpy()["F"], self.model.body.numpy())):
+                progress.close()
+                return
 
         def done() -> bool:
             return self.step >= steps_end if steps_end is not None else self.t >= duration * (1 - 1e-12)
@@ -505,7 +504,14 @@ class Run:
             halvings = self.spec.integrator.halvings if self.implicit and self.spec.run.dt is None else 0
             report = self.solver.advance(self.state, dt, halvings)
             self.step_ms.append(1e3 * (time.perf_counter() - t0))
-            trips = self.emit(self.solver.step_energy()) if self._pending else []
+            if self._pending:
+                self.emit(self.solver.step_energy())
+            trips = []
+            if self.detector is not None and (report.newton is None or report.newton.converged):
+                # the state the step started from: its kinetic and potential energy from the last
+                # G2P, its elastic energy from this step's P2G
+                trips = self.detector.energy(self._energies[0], self.solver.step_energy(), self._energies[1])
+                self._energies = (report.kinetic, report.potential)
             if report.newton is not None and not report.newton.converged:  # the state is the step's start
                 n = report.newton
                 self.unstable(report.reason, "newton", newton_iterations=n.newton, cg_iterations=n.cg,
@@ -529,7 +535,7 @@ class Run:
             self.record_updates(report)
             t1 = time.perf_counter()
             last = done()
-            if log.scalars or last or (self.detector is not None and self.detector.energy_on):
+            if log.scalars or last:
                 self.measure(self.row_extra(dt, report))
             if log.every and (self.step % log.every == 0 or last):
                 self.particles()
