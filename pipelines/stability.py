@@ -12,8 +12,11 @@ the explicit limit at CFL number 1 (c the body's P-wave speed at rest, v0
 the fastest initial particle, bounded by |u| + |omega| r_max), for
 ``steps`` steps with the blow-up detection of mpm.stability on. A point is
 stable when it completes its steps; otherwise it keeps its failure step,
-criterion and reason. The job's metrics.json holds the whole map
+criterion and reason (a point that fails with an error is kept as
+``failed``). The job's metrics.json holds the whole map
 (``stability_map``); each point's own metrics are ``points/<name>/point.json``.
+A point is reproduced by the job's config (``.hydra``) with every body's
+stiffness set to E, ``run.dt`` = the point's ``dt`` and ``run.steps``.
 
 The report (:func:`section_stability`) draws per scene one heat map per
 combination, the failure step as colour, and tabulates the largest stable
@@ -46,6 +49,8 @@ LEGEND = ("'ok': stable; otherwise the failure step and its criterion: e energy 
 def with_stiffness(material, E: float):
     """``material`` with its stiffness set: E for solids, K for fluids."""
     names = {f.name for f in dataclasses.fields(material)}
+    if "E" not in names and "K" not in names:
+        raise ValueError(f"material {material.name!r} has neither E nor K: a stability map cannot set its stiffness")
     key = "E" if "E" in names else "K"
     return dataclasses.replace(material, **{key: float(E)})
 
@@ -96,8 +101,12 @@ def run_map(spec, points: MapSpec, out_dir: Path, identity: dict | None = None) 
         for k in points.dt_cfl:
             ps = point_spec(spec, E, k, points.steps)
             pdir = out_dir / "points" / point_name(E, k)
-            m = execute(ps, pdir, sink=Sink())
-            (pdir / "metrics.json").replace(pdir / "point.json")  # not a job of the sweep
+            try:
+                m = execute(ps, pdir, sink=Sink())
+            except Exception as e:  # noqa: BLE001 - one failed point must not lose the map
+                m = {"status": "failed", "reason": f"{type(e).__name__}: {e}"}
+            if (pdir / "metrics.json").is_file():
+                (pdir / "metrics.json").replace(pdir / "point.json")  # not a job of the sweep
             rows.append({"E": E, "k": k, "dt": ps.run.dt, "status": m["status"], "steps": m.get("steps"),
                          "unstable_step": m.get("unstable_step"), "criterion": m.get("unstable_criterion"),
                          "body": m.get("unstable_body"), "reason": m.get("reason"),
