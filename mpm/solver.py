@@ -32,8 +32,8 @@ from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
 from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
-                       STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED, STATUS_WORK, TRANSFERS, make_g2p,
-                       make_p2g)
+                       STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED, STATUS_WORK, TRANSFERS,
+                       make_g2p, make_p2g)
 
 
 @dataclass
@@ -45,7 +45,8 @@ class SolverOptions:
     integrator: Explicit | Implicit = field(default_factory=Explicit)
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
     track_J: bool = False
-    """report every body's smallest det F (for inversion detection, mpm.stability)"""
+    """report every body's smallest det F and smallest singular value of F
+    (for inversion detection, mpm.stability)"""
     track_energy: bool = False
     """report the new state's kinetic and potential energy every step (mpm.stability)"""
 
@@ -72,6 +73,7 @@ class StepReport:
     newton: NewtonReport | None = None  # the implicit solve (None: explicit)
     halvings: int = 0  # times the implicit step was halved after a failed solve
     body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s]
+    min_F_stretch: np.ndarray | None = None  # per body: smallest singular value of F (options.track_J; else inf)
     boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
@@ -129,9 +131,8 @@ class Solver:
                      for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
-                             track_compression=self.options.track_J
-                             or any(b.material.stiffens for b in model.scene.bodies),
-                             track_energy=self.options.track_energy)
+                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
+                             track_energy=self.options.track_energy, track_inversion=self.options.track_J)
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -162,6 +163,7 @@ class Solver:
             self.status = wp.zeros(n_status, dtype=wp.float64)
             reset = np.zeros(n_status)
             reset[STATUS_HEADER + 2 * nb: STATUS_HEADER + 4 * nb] = np.inf  # smallest J and stretch
+            reset[STATUS_HEADER + STATUS_F_STRETCH * nb: STATUS_HEADER + (STATUS_F_STRETCH + 1) * nb] = np.inf
             reset[box: box + nb * t.dim] = np.inf
             reset[box + nb * t.dim:] = -np.inf
             self._status_reset = wp.array(reset, dtype=wp.float64)
@@ -475,6 +477,7 @@ class Solver:
             max_dJ=field_[1].copy(), min_J=field_[2].copy(), min_stretch=np.sqrt(field_[3]),
             max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
+            min_F_stretch=np.sqrt(field_[STATUS_F_STRETCH]),
             boundary_work=float(s[STATUS_WORK]),
             kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),
             potential=float(s[STATUS_POTENTIAL]) if self.options.track_energy else float("nan"))

@@ -24,9 +24,11 @@ Three criteria, checked after every step (:class:`Detector`):
   hardening material's factor), u_boundary the fastest collider or
   kinematic region, v0 the fastest initial particle and H the domain's
   largest extent (the speed a free fall through the domain adds);
-* inversion: det F <= ``min_J`` at a particle of a model that cannot invert
+* inversion: det F <= ``min_J``, or a singular value of F below
+  ``min_stretch`` (degenerate), at a particle of a model that cannot invert
   (every model but fixed corotated and snow: their energies take log J or
-  log of the singular values).
+  log of the singular values); in 3D the singular value is G2P's lower
+  bound (at least 1/sqrt(3) of the true one).
 
 The energy of a state is complete one step later (G2P sums its kinetic and
 potential energy, ``SolverOptions.track_energy``; its elastic energy comes
@@ -52,6 +54,7 @@ class Detection:
     energy_growth: float = 0.5  # energy growth beyond the boundaries' work, in units of the energy scale
     speed_factor: float = 10.0  # particle speed limit, in units of the speed scale (module docstring)
     min_J: float = 0.0  # det F at or below this is inversion (models that cannot invert)
+    min_stretch: float = 1.0e-3  # a singular value of F below this is degenerate (same models)
 
     def problems(self) -> list[tuple[str, str]]:
         out = []
@@ -63,6 +66,8 @@ class Detection:
             out.append(("speed_factor", f"{self.speed_factor}; accepted: a number > 0"))
         if not (0.0 <= self.min_J < 1.0):
             out.append(("min_J", f"{self.min_J}; accepted: 0 <= min_J < 1"))
+        if not (0.0 <= self.min_stretch < 1.0):
+            out.append(("min_stretch", f"{self.min_stretch}; accepted: 0 <= min_stretch < 1"))
         return out
 
 
@@ -94,7 +99,7 @@ class Detector:
         self.check_J = np.array([not getattr(m, "invertible", False) for m in self.materials])
         self.energy_on = not getattr(scene.solution, "has_body_force", False)
         c_min = min(m.wave_speed() for m in self.materials)
-        dx = max(scene.domain) / scene.resolution
+        dx = scene.dx
         self.floor = 0.5 * total_mass * (FLOOR_SPEED * c_min) ** 2 + total_mass * g * dx
         self.n_grids = n_grids
         self.E0: float | None = None
@@ -128,20 +133,32 @@ class Detector:
                 trips.append(Trip("inversion", name, J, self.options.min_J,
                                   f"det F = {J:.4g} <= {self.options.min_J:g} in body '{name}', whose "
                                   f"model ({self.materials[b].name}) cannot invert"))
+            s = report.min_F_stretch[b] if report.min_F_stretch is not None else math.inf
+            if self.check_J[b] and np.isfinite(s) and s < self.options.min_stretch:
+                trips.append(Trip("inversion", name, float(s), self.options.min_stretch,
+                                  f"a singular value of F = {s:.4g} < {self.options.min_stretch:g} in body "
+                                  f"'{name}' (degenerate), whose model ({self.materials[b].name}) cannot invert"))
         return self._new(trips)
 
     def initial(self, F: np.ndarray, body: np.ndarray) -> list[Trip]:
         """Inversion in the initial state (per-particle F and body index): a
         model that cannot invert must not start with det F <= min_J."""
-        J = np.linalg.det(np.asarray(F, np.float64))
+        F = np.asarray(F, np.float64)
+        J = np.linalg.det(F)
+        s = np.linalg.svd(F, compute_uv=False).min(axis=1)
         trips = []
         for b, name in enumerate(self.names):
             if self.check_J[b] and (body == b).any():
-                J_min = float(J[body == b].min())
+                J_min, s_min = float(J[body == b].min()), float(s[body == b].min())
                 if not J_min > self.options.min_J:
                     trips.append(Trip("inversion", name, J_min, self.options.min_J,
                                       f"initial det F = {J_min:.4g} <= {self.options.min_J:g} in body "
                                       f"'{name}', whose model ({self.materials[b].name}) cannot invert"))
+                elif s_min < self.options.min_stretch:
+                    trips.append(Trip("inversion", name, s_min, self.options.min_stretch,
+                                      f"initial singular value of F = {s_min:.4g} < {self.options.min_stretch:g} "
+                                      f"in body '{name}' (degenerate), whose model "
+                                      f"({self.materials[b].name}) cannot invert"))
         return self._new(trips)
 
     def energy(self, kinetic: float, elastic: float, potential: float) -> list[Trip]:

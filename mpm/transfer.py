@@ -47,10 +47,12 @@ pic: no affine term, force and F from the kernel gradient."""
 # energy of the new state (G2P with ``track_energy``): for mpm.stability
 STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL = range(6)
 STATUS_HEADER = 6
-STATUS_PER_BODY = 7  # marked count, largest dJ, smallest J, smallest stretch^2, largest |L|^2,
-#                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2
+STATUS_PER_BODY = 8  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
+#                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2,
+#                      smallest stretch^2 of F (``track_inversion``)
 STATUS_STIFFENING = 5
 STATUS_SPEED = 6
+STATUS_F_STRETCH = 7
 
 
 @functools.cache
@@ -223,7 +225,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 
 @functools.cache
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
-             lagrangian: bool, track_compression: bool, track_energy: bool = False):
+             lagrangian: bool, track_compression: bool, track_energy: bool = False,
+             track_inversion: bool = False):
     """G2P for all particles.
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
@@ -232,7 +235,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``track_compression``: a material stiffens under compression (a fluid),
     or det F is watched for inversion (mpm.stability);
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
-    potential energy -m g . x [J] (mpm.stability; no extra pass).
+    potential energy -m g . x [J] (mpm.stability; no extra pass);
+    ``track_inversion``: the smallest J and the smallest stretch of F (its
+    smallest singular value, squared; in 3D a lower bound, see
+    :func:`make_min_stretch2`) per body (mpm.stability).
 
     ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
     then per body the marked count (``count_marked``: dJ_p >= epsilon), the
@@ -336,9 +342,12 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             if dj >= epsilon:
                 wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
             wp.atomic_max(status, STATUS_HEADER + n_bodies + b, f64(dj))
-        if wp.static(track_compression):
+        if wp.static(track_compression or track_inversion):
             wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
                           f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
+        if wp.static(track_inversion):
+            wp.atomic_min(status, STATUS_HEADER + STATUS_F_STRETCH * n_bodies + b,
+                          f64(min_stretch2(Fs * F0s[p])))
         # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1
         # (for EMPM F^sn was I: L = grad_v); a singular F^sn makes it non-finite
         rate2 = wp.ddot(grad_v, grad_v)

@@ -601,7 +601,8 @@ def make_detect(node, key: str = "detect") -> mpm.Detection:
     det = mpm.Detection(action=action,
                         energy_growth=_number(f"{key}.energy_growth", d.get("energy_growth", 0.5), gt=0.0),
                         speed_factor=_number(f"{key}.speed_factor", d.get("speed_factor", 10.0), gt=0.0),
-                        min_J=_number(f"{key}.min_J", d.get("min_J", 0.0), ge=0.0, le=1.0))
+                        min_J=_number(f"{key}.min_J", d.get("min_J", 0.0), ge=0.0, le=1.0),
+                        min_stretch=_number(f"{key}.min_stretch", d.get("min_stretch", 1e-3), ge=0.0, le=1.0))
     for fname, message in det.problems():
         raise ConfigError(f"{key}.{fname}", message)
     return det

@@ -269,3 +269,36 @@ def test_linear_bound_of_the_lumped_hat_kernel_is_the_cfl_number_one():
             assert bound("linear", mls, dim=dim, cells=8) == pytest.approx(1.0, rel=1e-9)
     assert bound("quadratic", False, dim=1, cells=40) == pytest.approx(np.sqrt(3.0), rel=1e-3)
     assert bound("linear", dim=1) < bound("quadratic", dim=1) < bound("cubic", dim=1)
+
+
+def test_detector_criteria_on_synthetic_reports():
+    """mpm.stability.Detector alone: the speed limit is speed_factor (c_b +
+    u_boundary + sqrt(v0^2 + 2 |g| H)); a degenerate F (a singular value
+    below min_stretch) or det F <= min_J trips inversion only for a model
+    that cannot invert; each criterion is reported once; the energy
+    criterion compares with the scale of the earlier states."""
+    from types import SimpleNamespace
+
+    bodies = [mpm.Body(mpm.Sphere((0.3, 0.5), 0.1), mpm.NeoHookean(E=1e4), name="soft"),
+              mpm.Body(mpm.Sphere((0.7, 0.5), 0.1), mpm.FixedCorotated(E=1e4), name="fc")]
+    scene = mpm.Scene(dim=2, domain=(1.0, 2.0), resolution=16, bodies=bodies, gravity=(0.0, -10.0))
+    det = mpm.Detector(mpm.Detection(speed_factor=4.0), scene, boundary_speed=3.0, v0=1.0, n_grids=1,
+                       total_mass=2.0)
+    c = bodies[0].material.wave_speed()
+    limit = 4.0 * (c + 3.0 + np.sqrt(1.0 + 2 * 10.0 * 2.0))
+
+    def report(speed, J, stretch):
+        return SimpleNamespace(boundary_work=0.0, min_J=np.array([J, J]), stiffening=np.zeros(2),
+                               body_speed=np.array([speed, 0.0]), min_F_stretch=np.array([stretch, stretch]))
+
+    assert det.speed_limit(0, 1.0, 0.0) == pytest.approx(limit)
+    assert det.step(report(0.99 * limit, 0.5, 0.5)) == []
+    trips = det.step(report(1.01 * limit, 0.5, 5e-4))
+    assert [(t.criterion, t.body) for t in trips] == [("speed", "soft"), ("inversion", "soft")]
+    assert det.step(report(2 * limit, -1.0, 0.0)) == []  # each criterion once
+    fresh = mpm.Detector(mpm.Detection(), scene, 0.0, 0.0, 1, 2.0)
+    assert [(t.criterion, t.body) for t in fresh.step(report(0.0, -0.1, 0.5))] == [("inversion", "soft")]
+    assert fresh.energy(1.0, 1.0, 0.0) == []  # E0 = 2 J
+    assert fresh.energy(0.5, 1.5, 0.0) == []  # exchanged, not grown
+    trips = fresh.energy(2.0, 1.1, 0.0)  # grown by 1.1 J against the scale 2 J: 0.55 > 0.5
+    assert [t.criterion for t in trips] == ["energy"] and trips[0].value == pytest.approx(0.55)
