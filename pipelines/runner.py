@@ -583,8 +583,9 @@ class Run:
             self.metrics.setdefault("detect_warnings", []).append(
                 {"step": self.step, "time": self.t, "criterion": trip.criterion, "body": trip.body,
                  "message": trip.message})
+            where = {"criterion": trip.criterion, **({"body": trip.body} if trip.body else {})}
             self.sink.event(self.step, self.t, f"stability warning: {trip.message}", level="WARN",
-                            value=trip.value, limit=trip.limit)
+                            **where, value=trip.value, limit=trip.limit)
         return False
 
     def unstable(self, reason: str, criterion: str, body: str | None = None, **values) -> None:
@@ -599,7 +600,8 @@ class Run:
         self.metrics["unstable_body"] = body
         if self.spec.log.every:
             self.particles()
-        self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR", **values)
+        where = {"criterion": criterion, **({"body": body} if body else {})}
+        self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR", **where, **values)
 
     # ------------------------------------------------------------ finish
     def finish(self) -> None:

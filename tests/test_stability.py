@@ -115,12 +115,20 @@ def test_work_of_a_kinematic_region_is_not_a_blow_up(integrator):
 
 def test_inversion_of_a_model_that_cannot_invert_is_named(tmp_path):
     """Neo-Hookean (log J) at 5x the CFL step: the run stops on inversion of
-    the ball (det F <= 0) before the energy criterion; fixed corotated, which
+    the ball (det F <= 0) before the energy criterion, and the recording's
+    last event names the criterion and the body; fixed corotated, which
     inverts gracefully, is not checked for it."""
     over = BALL + ["material=neo_hookean"]
     dt = 5.0 * cfl_limit(spec_for(over))
-    m = execute(spec_for(over + [f"run.dt={dt}"]), tmp_path / "nh", sink=Sink())
+    m = execute(spec_for(over + [f"run.dt={dt}"]), tmp_path / "nh")  # with its recording
     assert m["unstable_criterion"] == "inversion" and m["unstable_body"] == "ball", m["reason"]
+    from rerun.chunk import RrdReader
+
+    events = RrdReader(str(tmp_path / "nh" / "recording.rrd")).store().stream().collect().reader(
+        index="step", contents="/events").to_pandas()
+    last = events.iloc[-1]
+    assert int(last["step"]) == m["unstable_step"]
+    assert list(last["/events:criterion"]) == ["inversion"] and list(last["/events:body"]) == ["ball"]
     fc = execute(spec_for(BALL + [f"run.dt={dt}"]), tmp_path / "fc", sink=Sink())
     assert fc["unstable_criterion"] != "inversion"
 
