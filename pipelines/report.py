@@ -950,10 +950,31 @@ class ReportCallback(Callback):
     """
 
     def on_multirun_end(self, config, **kwargs) -> None:
+        sweep = Path(config.hydra.sweep.dir)
+        report = None
         try:
-            write_report(Path(config.hydra.sweep.dir))
+            report = write_report(sweep)
         except Exception as exc:  # a failed report must not hide the sweep's results
             print(f"warning: sweep report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        outcomes = sweep_outcomes(sweep)
+        SWEEPS.append(outcomes)
+        print(f"sweep {sweep}: " + ", ".join(f"{n} {status}" for status, n in sorted(outcomes.items()))
+              + (f"; report: {report}" if report is not None else ""), file=sys.stderr)
+
+
+SWEEPS: list[dict[str, int]] = []  # per multirun of this process: jobs per status (pipelines.run's exit code)
+
+
+def sweep_outcomes(sweep_dir: Path) -> dict[str, int]:
+    """Jobs per status below ``sweep_dir`` (one per job directory, reused
+    results included)."""
+    counts: dict[str, int] = defaultdict(int)
+    for path in Path(sweep_dir).rglob("metrics.json"):
+        try:
+            counts[str(json.loads(path.read_text()).get("status") or "unknown")] += 1
+        except (OSError, ValueError, AttributeError):
+            counts["unreadable"] += 1
+    return dict(counts)
 
 
 def main(argv: list[str] | None = None) -> int:

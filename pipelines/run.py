@@ -6,7 +6,9 @@ compiled or allocated, and :func:`pipelines.runner.execute` writes
 ``recording.rrd`` and ``metrics.json`` into the Hydra run directory.
 
 Exit codes: 0 completed, 1 failed (exception), 2 bad configuration,
-3 unstable, 130 interrupted.
+3 unstable, 130 interrupted; a sweep (-m) exits with the worst of its jobs
+(invalid 2, failed 1, interrupted 130, unstable 3) and prints a line with
+the jobs per outcome and where the report is.
 """
 
 from __future__ import annotations
@@ -124,8 +126,21 @@ def main() -> None:
         _config_errors.append(message)
     if _config_errors:  # run() has printed its own
         sys.exit(EXIT_CONFIG)
+    from .report import SWEEPS
+
+    if SWEEPS:  # a multirun: the worst outcome of any job (the summary line is printed)
+        statuses = {s for outcome in SWEEPS for s in outcome}
+        for status, code in SWEEP_EXIT:
+            if status in statuses:
+                sys.exit(code)
+        return
     if _last_status and len(_last_status) == 1:
         sys.exit(EXIT_CODES.get(_last_status[0], 1))
+
+
+# a sweep's exit code: the first status present among its jobs (0: all completed)
+SWEEP_EXIT = [("invalid", EXIT_CONFIG), ("failed", 1), ("unreadable", 1), ("unknown", 1),
+              ("interrupted", EXIT_CODES["interrupted"]), ("unstable", EXIT_CODES["unstable"])]
 
 
 if __name__ == "__main__":

@@ -156,6 +156,8 @@ class Run:
         self.update_ms: list[float] = []
         self.dts: list[float] = []
         self.solver = self.state = self.drift = None
+        self.built = False  # build() completed: finish() may summarise the run
+        self._landing = False  # the last step was shortened to land on the duration
         self.fracture = None  # (overall, per body) at the last evaluation
         self.fracture_step = -1
         self._pieces = None  # (fracture per body, fragments per body) at the last count
@@ -207,6 +209,7 @@ class Run:
         self.stretch_names = per_body("min_stretch")
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
+        self.built = True
 
     def meta(self) -> RunMeta:
         scene, model = self.spec.scene, self.model
@@ -445,6 +448,9 @@ class Run:
         self._stable_dt = dt
         return dt if duration is None else min(dt, duration - self.t)
 
+    def _speed(self, report: mpm.StepReport | None) -> float:
+        return report.max_speed if report is not None else self._v0
+
     def collapsed(self) -> str | None:
         """Why the adaptive step counts as collapsed (a particle's strain rate or
         compression running away), or None: below run.dt_collapse of the first step."""
@@ -471,8 +477,15 @@ class Run:
                                          self._v0, self.model.kernel.n_grids,
                                          float(self.model.mass.numpy().astype(np.float64).sum()))
         self.metrics["status"], self.metrics["reason"] = "running", ""
-        if self.detector is not None:
-            d0 = self._pending[2]  # the initial state's energies; then each step's G2P sums them
+        d0 = self._pending[2]
+        energies = [float(d0[self.names.index(k)]) for k in ("kinetic_energy", "potential_energy")]
+        if not (np.all(np.isfinite(energies)) and np.isfinite(self._v0)):
+            self.unstable(f"the initial state's kinetic or potential energy is not finite (fastest particle "
+                          f"{self._v0:.3g} m/s in {self.spec.run.precision}): velocities or positions "
+                          f"overflow", "nonfinite")
+            progress.close()
+            return
+        if self.detector is not None:  # the initial state's energies; then each step's G2P sums them
             self._energies = (float(d0[self.names.index("kinetic_energy")]),
                               float(d0[self.names.index("potential_energy")]))
             if self.react(self.detector.initial(self.state.numpy()["F"], self.model.body.numpy())):
@@ -497,6 +510,9 @@ class Run:
             self.interrupts.check()
             dt = self.next_dt(report, duration)
             collapse = self.collapsed()
+            if not (0.0 < dt < math.inf):  # a step of 0 would never end the run (or end it at t = 0)
+                collapse = (f"the time step is {dt:.3g} s (fastest particle {self._speed(report):.3g} m/s): "
+                            "the run cannot advance")
             if collapse:
                 self.unstable(collapse, "dt_collapse")
                 break
@@ -519,6 +535,7 @@ class Run:
                 break
             self.update_ms.append(1e3 * report.update_time)
             self.dts.append(report.dt)
+            self._landing = dt < self._stable_dt  # shortened to land on the duration
             self.reference_factors.append(self._reference_factor)
             self.step += 1
             self.t += report.dt
@@ -607,7 +624,7 @@ class Run:
     def finish(self) -> None:
         """Complete the last scalar row, summarise, close the sink, write metrics.json."""
         m = self.metrics
-        if self.drift is not None and m["status"] != "failed":
+        if self.built and m["status"] != "failed":
             # the last state reached: its elastic energy by one more P2G pass
             if not self._pending:
                 self.measure({"config_updates": float(self.updates.sum())})
@@ -646,7 +663,9 @@ class Run:
         steps = self.step
         m.update(
             steps=steps, sim_time=self.t,
-            dt=(self.t / steps) if steps else None, dt_min=min(self.dts) if self.dts else None,
+            dt=(self.t / steps) if steps else None,
+            # the last step, shortened to land on the duration, is not a step the rule chose
+            dt_min=min(self.dts[:-1] if self._landing and len(self.dts) > 1 else self.dts) if self.dts else None,
             dt_max=max(self.dts) if self.dts else None,
             dt_binding=dict(self.dt_binding),
             # the stable step against what a fresh reference would allow (1: the reference costs nothing)
@@ -655,7 +674,7 @@ class Run:
             loop_time_s=sum(self.step_ms) / 1e3)
         if m["step_time_ms"] and "particles" in m:
             m["particle_steps_per_s"] = m["particles"] / (m["step_time_ms"] / 1e3)
-        if self.solver is not None:
+        if self.built:
             names = [b.name for b in self.spec.scene.bodies]
             m.update(
                 scheme=self.scheme.name, kernel=self.spec.kernel.name, transfer=self.spec.transfer,
@@ -669,7 +688,7 @@ class Run:
             m["integrator"] = self.spec.integrator.name
             if self.implicit:
                 m["implicit"] = self.implicit_summary()
-        if self.drift is not None:
+        if self.built:
             m.update(self.drift.summary())
         if self.detector is not None:
             m["detect"] = self.detector.summary()

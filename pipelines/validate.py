@@ -6,6 +6,7 @@ config key and the accepted values; nothing is compiled or allocated here.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 
 import numpy as np
@@ -144,9 +145,13 @@ def _number(key: str, value, kind=float, *, gt=None, ge=None, le=None, optional=
         raise ConfigError(key, f"{value!r} is not {'an integer' if kind is int else 'a number'}") from None
     bounds = [f"{key} > {gt}" if gt is not None else None, f"{key} >= {ge}" if ge is not None else None,
               f"{key} <= {le}" if le is not None else None]
+    accepted = ", ".join(b for b in bounds if b)
+    if not math.isfinite(v):  # inf and nan: a step, a duration or a modulus must be a number
+        raise ConfigError(key, f"{value} is not finite; accepted: a finite number"
+                               + (f", {accepted}" if accepted else ""))
     if (gt is not None and not v > gt) or (ge is not None and not v >= ge) or \
-            (le is not None and not v <= le) or v != v:
-        raise ConfigError(key, f"{value} out of range; accepted: {', '.join(b for b in bounds if b)}")
+            (le is not None and not v <= le):
+        raise ConfigError(key, f"{value} out of range; accepted: {accepted}")
     return v
 
 
@@ -626,8 +631,77 @@ def make_run(node, key: str = "run") -> RunSettings:
         precision=precision, device=device)
 
 
+MEMORY_FRACTION = 0.8  # of the machine's memory a run may plan to use
+
+
+def _machine_memory() -> int:
+    """Physical memory [bytes] of this machine (0: unknown)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def memory_estimate(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> tuple[float, float, float]:
+    """(bytes, particles, domain nodes): an upper estimate of what building
+    and stepping the scene allocates, before anything is sampled. Particles:
+    each body's bounding box filled at ``ppc`` per sampling cell; per particle
+    its state, model data and stencil cache (and the float64 samples of the
+    build); per domain node the grid fields of every kernel grid, and the
+    per-body contact fields when bodies can touch."""
+    d = scene.dim
+    s = 4 if precision == "float32" else 8
+    G, K = kernel.n_grids, kernel.support
+    cell = scene.particle_dx ** d
+    particles = 0.0
+    for b in scene.bodies:
+        lo, hi = (np.asarray(v, float) for v in b.shape.bounds())
+        particles += float(np.prod(np.maximum(hi - lo, 0.0) + scene.particle_dx)) / cell * (b.ppc or scene.ppc)
+    per_particle = s * (3 * d + 4 * d * d + 8 + G * (d + 2 * d * K)) + 4 * (2 + G) + 8 * (4 * d + 2 * d * d)
+    nodes = float(np.prod([c + 1 for c in scene.cells]))
+    contact = len(scene.bodies) if len(scene.bodies) > 1 and scene.contact == "frictionless" else 0
+    per_node = s * (1 + 2 * d) * (2 * G + contact) + 8
+    return particles * per_particle + nodes * per_node, particles, nodes
+
+
+def _check_memory(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> None:
+    need, particles, nodes = memory_estimate(scene, kernel, precision)
+    have = _machine_memory()
+    if have and need > MEMORY_FRACTION * have:
+        gib = 2.0 ** 30
+        key = "scene.ppc" if particles * 200 > nodes * 50 and scene.ppc > 64 else "scene.resolution"
+        raise ConfigError(key, f"the run needs about {need / gib:.3g} GiB ({particles:.3g} particles, "
+                               f"{nodes:.3g} grid nodes), more than {MEMORY_FRACTION:.0%} of this machine's "
+                               f"{have / gib:.3g} GiB; accepted: a smaller grid or fewer particles per cell")
+
+
+def _recording_name(value) -> str:
+    """``log.recording``: a file name inside the run directory."""
+    name = "" if value is None else str(value)
+    if not name or "/" in name or "\\" in name or not name.endswith(".rrd") or name == ".rrd":
+        raise ConfigError("log.recording", f"{value!r}; accepted: a file name ending in .rrd, without a "
+                                           "directory (it is written into the run directory)")
+    return name
+
+
+def _known_keys(cfg) -> None:
+    """A key added with ``+`` that no schema knows (``+run.stepz=5``) would
+    be ignored silently: refuse it, naming the accepted keys."""
+    from .schema import Config, LogConfig, RunConfig
+
+    sections = [("", cfg, Config), ("run.", cfg.get("run"), RunConfig), ("log.", cfg.get("log"), LogConfig)]
+    for prefix, node, schema in sections:
+        if node is None:
+            continue
+        known = {f.name for f in dataclasses.fields(schema)}
+        for key in node:
+            if key not in known and not (prefix == "" and key == "hydra"):
+                raise ConfigError(f"{prefix}{key}", f"unknown key; accepted: {', '.join(sorted(known))}")
+
+
 def resolve(cfg) -> RunSpec:
     """Validate a composed :class:`pipelines.schema.Config`."""
+    _known_keys(cfg)
     run = make_run(cfg.run)
     scheme = make_scheme(cfg.scheme)
     integrator = make_integrator(cfg.integrator) if "integrator" in cfg else Explicit()
@@ -642,6 +716,7 @@ def resolve(cfg) -> RunSpec:
         mpm.model.check_scene(scene, mpm.KERNELS[kernel_name])
     except mpm.SceneError as e:
         raise ConfigError(f"scene.{e.key}", e.message) from None
+    _check_memory(scene, mpm.KERNELS[kernel_name], run.precision)
     if scene.contact == "shared" and scheme.name != "empm":
         raise ConfigError("scene.contact", "'shared' (one grid for all bodies) needs scheme=empm; "
                                            "accepted with other schemes: frictionless, none")
@@ -655,7 +730,7 @@ def resolve(cfg) -> RunSpec:
         every=every, dJ=bool(lg["dJ"]), scalars=bool(lg["scalars"]),
         fracture_every=_number("log.fracture_every", lg["fracture_every"], int, ge=1),
         flush_every=_number("log.flush_every", lg["flush_every"], int, ge=1),
-        progress=lg["progress"], recording=str(lg["recording"]))
+        progress=lg["progress"], recording=_recording_name(lg["recording"]))
     if run.device == "cuda":
         import warp as wp
 

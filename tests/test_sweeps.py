@@ -132,13 +132,16 @@ def test_changed_parameter_list_never_mixes_results(tmp_path):
     assert steps == {"0": 2, "1": 4, "2": 3}
 
 
-def test_invalid_job_in_a_sweep_says_why_and_the_others_run(tmp_path):
+def test_invalid_job_in_a_sweep_says_why_the_others_run_and_the_sweep_fails(tmp_path):
     sweep = tmp_path / "s"
     p = run_cli(["-m", "scene=rotating_plate_2d", "scene.resolution=16", "run.steps=2", "log.every=0",
                  "run.cfl=0.5,2", f"hydra.sweep.dir={sweep}"], cwd=ROOT)  # joblib workers
     assert "error: run.cfl: 2.0 out of range" in p.stderr, p.stderr[-2000:]
     status = {j.name: json.loads((j / "metrics.json").read_text())["status"] for j in _jobs(sweep)}
     assert status == {"0": "completed", "1": "invalid"}
+    # the sweep exits with its worst job's code and says what happened and where the report is
+    assert p.returncode == 2
+    assert f"sweep {sweep}: 1 completed, 1 invalid; report: {sweep / 'report.md'}" in p.stderr
 
 
 @pytest.mark.parametrize("name", group_options("experiment"))
