@@ -55,6 +55,8 @@ def run(cfg: DictConfig) -> dict:
         return invalid
     init_warp()  # a launcher's worker process did not pass through main()
     overrides = list(hc.overrides.task)
+    for note in unused_overrides(spec, overrides):
+        print(f"note: {note}", file=sys.stderr)
     choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
     identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
                                                       provenance.code_hash(), files=spec.meshes)}
@@ -79,6 +81,18 @@ def run(cfg: DictConfig) -> dict:
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
     print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
     return metrics
+
+
+def unused_overrides(spec, overrides: list[str]) -> list[str]:
+    """Overrides that the run cannot use, said rather than ignored: the
+    material group when every body of the scene brings its own material."""
+    notes = []
+    if not spec.material_used:
+        mine = [o for o in overrides if o.lstrip("+~").split("=")[0].split(".")[0] == "material"]
+        if mine:
+            notes.append(f"{', '.join(mine)} has no effect: every body of scene {spec.scene_name} brings its own "
+                         f"material (override scene.bodies.<i>.material.<key> instead)")
+    return notes
 
 
 FINISHED = ("completed", "unstable")  # deterministic outcomes; failed and interrupted runs run again

@@ -98,6 +98,7 @@ class RunSpec:
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
     detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
     stability_map: MapSpec | None = None  # the job is a stability map (pipelines.stability)
+    material_used: bool = True  # some body takes the material group (else every body brings its own)
 
     @property
     def meshes(self) -> dict[str, str]:
@@ -738,4 +739,5 @@ def resolve(cfg) -> RunSpec:
             raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
                    kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed,
-                   integrator=integrator, detect=detect, stability_map=stability_map)
+                   integrator=integrator, detect=detect, stability_map=stability_map,
+                   material_used=any(b.get("material") is None for b in sd["bodies"]))

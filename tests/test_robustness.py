@@ -95,3 +95,13 @@ def test_a_failed_build_keeps_its_reason_in_metrics(tmp_path, monkeypatch):
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert m["status"] == "failed" and m["reason"] == "MemoryError: no room"
     assert np.isfinite(m["wall_time_s"])
+
+
+def test_material_override_on_a_scene_with_its_own_materials_is_said():
+    from pipelines.run import unused_overrides
+
+    own = spec_for(["scene=rotating_plate_2d", "material.E=5"])
+    notes = unused_overrides(own, ["scene=rotating_plate_2d", "material.E=5"])
+    assert len(notes) == 1 and "material.E=5 has no effect" in notes[0] and "rotating_plate_2d" in notes[0]
+    assert unused_overrides(spec_for(["material.E=5"]), ["material.E=5"]) == []  # the ball takes the group's
+    assert unused_overrides(own, ["scene=rotating_plate_2d"]) == []
