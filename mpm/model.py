@@ -173,6 +173,11 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
         if len(blo) != d:
             raise SceneError(f"{key}.shape", f"has {len(blo)} coordinates; accepted: {d}")
         hi = np.asarray(scene.domain) - lo
+        if np.any(hi <= lo):  # the walls leave no interior at all: their thickness is the problem
+            axis = int(np.argmax(hi <= lo))
+            raise SceneError("wall_cells", f"{scene.wall_cells} cells ({scene.wall_cells * dx:.4g} m) per face "
+                                           f"leave no interior along axis {axis} (domain {scene.domain[axis]:g} m); "
+                                           f"accepted: wall_cells < {int(np.ceil(min(scene.domain) / (2 * dx)))}")
         if np.any(blo < lo - 1e-12) or np.any(bhi > hi + 1e-12):
             box = lambda a, b: " x ".join(f"[{x:.4g}, {y:.4g}]" for x, y in zip(a, b))  # noqa: E731
             raise SceneError(

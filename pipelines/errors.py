@@ -50,6 +50,9 @@ def describe(exc: BaseException) -> str | None:
         if m:
             kind = {"Float": "a number", "Integer": "an integer", "Boolean": "true or false"}
             return f"{key}: {m.group(1)!r} is not {kind.get(m.group(2), m.group(2))}"
+        if msg.startswith("Invalid type assigned") and re.search(r"\[\d+\]$", key):
+            return (f"{key}: no such element, the index is past the end of the list; accepted: an existing "
+                    f"element's index, or the whole list")
         return f"{key}: {msg}"
     if isinstance(cause, OmegaConfBaseException):
         return _first_line(cause)

@@ -47,6 +47,7 @@ BAD_INPUTS = [
     (["scene.walls=glue"], "scene.walls[0]: 'glue' unknown; accepted: sticky, slip, open"),
     (["log.every=-1"], "log.every: -1 out of range; accepted: log.every >= 0"),
     (["material.E=["], "cannot parse the command line"),
+    (["scene.bodies.3.velocity=[1,0]"], "scene.bodies[3]: no such element, the index is past the end"),
 ]
 
 

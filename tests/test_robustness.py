@@ -31,6 +31,7 @@ REFUSED = [
     (["scene.ppc=100000"], "scene.ppc", "GiB"),
     (["seed=-1", "scene.jitter=0.5"], "seed", "seed >= 0"),
     (["detect.action=halt"], "detect.action", "accepted: stop, warn, off"),
+    (["scene.wall_cells=40"], "scene.wall_cells", "leave no interior along axis 0"),
 ]
 
 
