@@ -9,7 +9,8 @@
                   bar; 3D in perspective (--view 3d, --elev, --azim) or
                   projected (--view xy|xz|zy)
   --reproduce     re-run the recorded configuration (its command-line
-                  overrides, into a fresh directory) and compare the two
+                  overrides, into a fresh directory reproduce-* beside the
+                  recording, in its run directory) and compare the two
                   recordings: bit for bit on the CPU, else the largest
                   deviation per quantity; exit code 0 on a match, 1 otherwise
 
@@ -180,7 +181,9 @@ def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
 
 
 def reproduce(path: Path, workdir: Path | None = None) -> dict:
-    """Re-run the recorded overrides and compare the recordings."""
+    """Re-run the recorded overrides and compare the recordings; the re-run
+    lands in ``workdir`` (default: beside the recording, in its run
+    directory: ``reproduce-*``)."""
     rec = recordings.read(path)
     overrides = [o for o in rec.properties.get("config:overrides", []) if o]
     recorded_commit = (rec.properties.get("provenance:git_commit") or ["unknown"])[0]
@@ -190,7 +193,7 @@ def reproduce(path: Path, workdir: Path | None = None) -> dict:
         notes.append(f"recorded with commit {recorded_commit}, now at {now['git_commit']}")
     if (rec.properties.get("provenance:git_dirty") or [False])[0] or now["git_dirty"]:
         notes.append("uncommitted changes (then or now): a mismatch may come from them")
-    tmp = Path(tempfile.mkdtemp(prefix="reproduce-", dir=workdir))
+    tmp = Path(tempfile.mkdtemp(prefix="reproduce-", dir=workdir if workdir is not None else Path(path).parent))
     cmd = [sys.executable, "-m", "pipelines.run", *overrides, f"hydra.run.dir={tmp}"]
     run = subprocess.run(cmd, capture_output=True, text=True)
     if run.returncode not in (0, 3):

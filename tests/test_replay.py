@@ -19,6 +19,7 @@ def test_reproduce_reports_a_match_and_frames_are_written(tmp_path):
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "match: 4 particle frames" in r.stdout and "identical bit for bit" in r.stdout
+    assert len(list(run_dir.glob("reproduce-*/recording.rrd"))) == 1  # beside the recording, not in /tmp
     frames = tmp_path / "frames"
     r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(rec), "--frames", str(frames)],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
