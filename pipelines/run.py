@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from . import provenance, schema
 from .errors import EXIT_CONFIG, describe
 from .runner import EXIT_CODES, execute
-from .validate import ConfigError, resolve
+from .validate import ConfigError, check_memory, resolve
 from .warp_setup import init_warp
 
 schema.register()
@@ -43,6 +43,7 @@ def run(cfg: DictConfig) -> dict:
     out_dir = Path(hc.runtime.output_dir)
     try:
         spec = resolve(cfg)
+        check_memory(spec)
     except ConfigError as e:
         # said here too: a launcher's worker process never reaches main()
         print(f"error: {e}", file=sys.stderr)

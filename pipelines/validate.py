@@ -665,7 +665,12 @@ def memory_estimate(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> tup
     return particles * per_particle + nodes * per_node, particles, nodes
 
 
-def _check_memory(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> None:
+def check_memory(spec: "RunSpec") -> None:
+    """Refuse a run that cannot fit in this machine's memory (its estimate
+    and the limit in the message), before anything is sampled or allocated.
+    Separate from :func:`resolve`: a config too large for this machine is
+    still valid (another machine may run it)."""
+    scene, kernel, precision = spec.scene, spec.kernel, spec.run.precision
     need, particles, nodes = memory_estimate(scene, kernel, precision)
     have = _machine_memory()
     if have and need > MEMORY_FRACTION * have:
@@ -717,7 +722,6 @@ def resolve(cfg) -> RunSpec:
         mpm.model.check_scene(scene, mpm.KERNELS[kernel_name])
     except mpm.SceneError as e:
         raise ConfigError(f"scene.{e.key}", e.message) from None
-    _check_memory(scene, mpm.KERNELS[kernel_name], run.precision)
     if scene.contact == "shared" and scheme.name != "empm":
         raise ConfigError("scene.contact", "'shared' (one grid for all bodies) needs scheme=empm; "
                                            "accepted with other schemes: frictionless, none")

@@ -27,8 +27,6 @@ REFUSED = [
     (["log.recording="], "log.recording", "file name ending in .rrd"),
     (["log.recording=sub/x.rrd"], "log.recording", "without a directory"),
     (["log.recording=x.txt"], "log.recording", ".rrd"),
-    (["scene.resolution=100000"], "scene.resolution", "GiB"),
-    (["scene.ppc=100000"], "scene.ppc", "GiB"),
     (["seed=-1", "scene.jitter=0.5"], "seed", "seed >= 0"),
     (["detect.action=halt"], "detect.action", "accepted: stop, warn, off"),
     (["scene.wall_cells=40"], "scene.wall_cells", "leave no interior along axis 0"),
@@ -42,6 +40,20 @@ def test_bad_input_is_refused_in_one_line_naming_the_key(overrides, key, fragmen
     text = str(err.value)
     assert err.value.key == key and fragment in text and "\n" not in text
     assert text.split("accepted: ")[-1].strip()  # never an empty list of accepted values
+
+
+@pytest.mark.parametrize("override, key", [("scene.resolution=100000", "scene.resolution"),
+                                           ("scene.ppc=100000", "scene.ppc")])
+def test_runs_that_cannot_fit_are_refused_with_the_estimate(override, key):
+    """A valid config too large for this machine's memory (24 GiB here):
+    refused before sampling, with the estimate and the limit."""
+    from pipelines.validate import check_memory
+
+    spec = spec_for([override])
+    with pytest.raises(ConfigError) as err:
+        check_memory(spec)
+    assert err.value.key == key and "GiB" in str(err.value) and "this machine's" in str(err.value)
+    check_memory(spec_for(["scene.resolution=64"]))  # the default fits
 
 
 def test_memory_estimate_bounds_what_a_build_allocates():
