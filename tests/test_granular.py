@@ -17,7 +17,6 @@ from pipelines.validate import resolve
 
 
 @pytest.mark.parametrize("scene,aspect,scheme", [("column_collapse_2d", 2.0, "empm"),
-                                                 ("column_collapse_tall_2d", 8.0, "empm"),
                                                  ("column_collapse_tall_2d", 8.0, "aulmpm")])
 def test_column_collapse_follows_the_published_scaling(scene, aspect, scheme, tmp_path):
     cfg = compose_cfg([f"scene={scene}", f"scheme={scheme}", "log.every=0", "log.scalars=false",

@@ -36,11 +36,12 @@ def test_compact_with_the_other_transfers_and_the_lagrangian_schemes(transfer, t
             tmp_path, scheme)
 
 
-@pytest.mark.parametrize("scheme", SCHEMES)
+@pytest.mark.parametrize("scheme", ["empm", "aulmpm"])
 def test_colliding_spheres_keep_zero_momentum(scheme, tmp_path):
     """CK-MPM, Fig. 4: two spheres meet head-on; float64 relative drift of the
     total (zero) linear momentum at most 1e-5 (the paper reports 1.06e-5; this
-    solver stays at round-off, about 1e-14), and they do bounce off."""
+    solver stays at round-off, about 1e-14), and they do bounce off. (TLMPM's
+    momentum through contact: test_lagrangian, three colliding bodies.)"""
     m = run(["scene=colliding_spheres", f"scheme={scheme}", "kernel=compact", "scene.resolution=24",
              "run.duration=0.8", "run.precision=float64", "log.every=100000"], tmp_path)
     assert m["momentum_drift"] <= 1e-5
