@@ -48,7 +48,8 @@ class SolverOptions:
     """report every body's smallest det F and smallest singular value of F
     (for inversion detection, mpm.stability)"""
     track_energy: bool = False
-    """report the new state's kinetic and potential energy every step (mpm.stability)"""
+    """report the new state's kinetic and potential energy and each body's
+    fastest particle every step (mpm.stability)"""
 
 
 @dataclass
@@ -72,7 +73,7 @@ class StepReport:
     dt: float = 0.0  # [s] the step taken (an implicit step may have been halved)
     newton: NewtonReport | None = None  # the implicit solve (None: explicit)
     halvings: int = 0  # times the implicit step was halved after a failed solve
-    body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s]
+    body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s] (options.track_energy; else 0)
     min_F_stretch: np.ndarray | None = None  # per body: smallest singular value of F (options.track_J; else inf)
     boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)

@@ -232,10 +232,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
     EMPM F^sn = I at the start of every step: it is C);
-    ``track_compression``: a material stiffens under compression (a fluid),
-    or det F is watched for inversion (mpm.stability);
+    ``track_compression``: a material stiffens under compression (a fluid);
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
-    potential energy -m g . x [J] (mpm.stability; no extra pass);
+    potential energy -m g . x [J], and each body's largest |v_p|^2
+    (mpm.stability; no extra pass);
     ``track_inversion``: the smallest J and the smallest stretch of F (its
     smallest singular value, squared; in 3D a lower bound, see
     :func:`make_min_stretch2`) per body (mpm.stability).
@@ -247,7 +247,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
     step must shrink with it), the largest velocity gradient |L| (the strain
     increment dt |L| of a step must stay small), and the bounding box of the
-    new positions (min per axis, then max per axis), and the largest |v_p|^2.
+    new positions (min per axis, then max per axis).
     """
     S = t.scalar
     f64 = wp.float64
@@ -364,7 +364,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         if wp.static(track_energy):
             wp.atomic_add(status, STATUS_KINETIC, f64(0.5) * f64(mass[p]) * v2)
             wp.atomic_add(status, STATUS_POTENTIAL, -f64(mass[p]) * f64(wp.dot(gravity, xp)))
-        wp.atomic_max(status, STATUS_HEADER + STATUS_SPEED * n_bodies + b, v2)
+            wp.atomic_max(status, STATUS_HEADER + STATUS_SPEED * n_bodies + b, v2)
         if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:

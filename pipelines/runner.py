@@ -744,7 +744,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             finally:
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 sink.close()
-                _write_metrics(out_dir / "metrics.json", run.metrics)
+                write_metrics(out_dir / "metrics.json", run.metrics)
         finally:
             if old_int is not None:
                 signal.signal(signal.SIGINT, old_int)
@@ -753,10 +753,13 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     return run.metrics
 
 
-def _write_metrics(path: Path, metrics: dict) -> None:
+def write_metrics(path: Path, metrics: dict) -> None:
+    """metrics.json, atomically, non-finite numbers as null."""
     def clean(v):
         if isinstance(v, dict):
             return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
         if isinstance(v, (np.floating, np.integer)):
             v = v.item()
         if isinstance(v, float) and not math.isfinite(v):

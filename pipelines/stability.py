@@ -26,14 +26,15 @@ multiple k per combination and stiffness.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .runner import execute
+import mpm
+
+from .runner import execute, write_metrics
 from .sinks import Sink
 from .validate import MapSpec
 
@@ -70,10 +71,10 @@ def initial_speed(scene) -> float:
 
 
 def cfl_limit(scene) -> float:
-    """dx / (c + v0) [s]: the explicit step limit at CFL number 1, c the
-    fastest body's wave speed at rest."""
+    """dx / (c + v0) [s]: the explicit step limit at CFL number 1
+    (mpm.cfl_dt), c the fastest body's wave speed at rest."""
     c = max(b.material.wave_speed() for b in scene.bodies)
-    return scene.dx / (c + initial_speed(scene))
+    return mpm.cfl_dt(scene.dx, c, initial_speed(scene), 1.0)
 
 
 def point_name(E: float, k: float) -> str:
@@ -127,18 +128,8 @@ def run_map(spec, points: MapSpec, out_dir: Path, identity: dict | None = None) 
                   "points": rows, "stable": len(stable)},
         "wall_time_s": time.perf_counter() - t0, **(identity or {}),
     }
-    (out_dir / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+    write_metrics(out_dir / "metrics.json", metrics)
     return metrics
-
-
-def _clean(v):
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, list):
-        return [_clean(x) for x in v]
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
 
 
 def largest_stable(rows: list[dict], E: float) -> float | None:
@@ -260,7 +251,7 @@ EXTREME_KEY = "extreme"  # the suite's config group (conf/extreme/)
 def section_extreme(jobs: list, out: Path) -> list[str]:
     """The extreme-case suite: per case and scheme the outcome against the
     expectation written in the case's file (extreme.csv)."""
-    from .report import _absent, _fmt, _md_table, _write_csv
+    from .report import _absent, _fmt, _md_table, _num, _write_csv
 
     title = "Extreme cases"
     have = [j for j in jobs if EXTREME_KEY in j.overrides]
@@ -302,13 +293,6 @@ def section_extreme(jobs: list, out: Path) -> list[str]:
                [r + [expected.get(r[0], "")] for r in rows])
     return lines
 
-
-def _num(v) -> float | None:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return None
-    return f if math.isfinite(f) else None
 
 
 def write_stability_md(out: Path, map_lines: list[str], extreme_lines: list[str]) -> None:

@@ -603,12 +603,11 @@ def make_detect(node, key: str = "detect") -> mpm.Detection:
     if unknown:
         raise ConfigError(f"{key}.{unknown[0]}", f"unknown; accepted: "
                                                  f"{', '.join(f.name for f in dataclasses.fields(mpm.Detection))}")
-    action = _choice(f"{key}.action", d.get("action", "stop"), list(mpm.DETECTION_ACTIONS))
-    det = mpm.Detection(action=action,
-                        energy_growth=_number(f"{key}.energy_growth", d.get("energy_growth", 0.5), gt=0.0),
-                        speed_factor=_number(f"{key}.speed_factor", d.get("speed_factor", 10.0), gt=0.0),
-                        min_J=_number(f"{key}.min_J", d.get("min_J", 0.0), ge=0.0, le=1.0),
-                        min_stretch=_number(f"{key}.min_stretch", d.get("min_stretch", 1e-3), ge=0.0, le=1.0))
+    defaults = mpm.Detection()
+    numbers = {k: _number(f"{key}.{k}", d.get(k, getattr(defaults, k)))  # ranges: Detection.problems
+               for k in ("energy_growth", "speed_factor", "min_J", "min_stretch")}
+    det = mpm.Detection(action=_choice(f"{key}.action", d.get("action", defaults.action),
+                                       list(mpm.DETECTION_ACTIONS)), **numbers)
     for fname, message in det.problems():
         raise ConfigError(f"{key}.{fname}", message)
     return det
