@@ -1,9 +1,17 @@
 """Reading recordings back: particles per logged step, scalar series, events,
-recording properties."""
+recording properties, and the wall-clock timings of the companion file.
+
+A run killed without warning (SIGKILL, power loss) leaves a recording
+without its footer: :func:`read` still reads it (the chunks are all there,
+``Recording.complete`` is False) and :func:`repair` rewrites it with one.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import subprocess
+import sys
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -23,16 +31,61 @@ class Recording:
     update_steps: np.ndarray  # steps with a configuration-update event
     colliders: dict = None  # name -> (vertices, triangles) in 3D, or a list of (n, 2) polylines in 2D
     collider_shift: dict = None  # name -> (steps, translations) of a moving collider
+    timings: dict = field(default_factory=dict)  # name -> (steps, values) [ms], from the timings file
+    run: dict = field(default_factory=dict)  # "started", "host", "command" -> [value], from the timings file
+    complete: bool = True  # False: the file has no footer (the writer was killed)
+    end: tuple = (0, 0.0)  # the last step with a scalar row or particles, and its time [s]
 
     @property
     def dim(self) -> int:
         return self.positions[0].shape[1] if self.positions else 0
 
 
-def read(path: str | Path) -> Recording:
+def timings_path(recording: str | Path) -> Path:
+    """The wall-clock companion of a recording (pipelines.rerun_sink)."""
+    recording = Path(recording)
+    return recording.with_name(recording.stem + ".timings.rrd")
+
+
+def _load(path: str | Path):
+    """All chunks of an .rrd file in a store, and whether it has its footer."""
     from rerun.chunk import RrdReader
 
-    data = RrdReader(str(path)).store().stream().collect()
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"no recording at {path}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        reader = RrdReader(str(path))
+    complete = not any("no footer" in str(w.message) for w in caught)
+    return reader.stream().collect(), complete
+
+
+def is_complete(path: str | Path) -> bool:
+    """Whether the file ends with its footer (a finalised recording)."""
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        RrdReader(str(path))
+    return not any("no footer" in str(w.message) for w in caught)
+
+
+def repair(path: str | Path) -> Path | None:
+    """Rewrite a recording without footer (a killed run) with one, in place,
+    with Rerun's own ``rerun rrd migrate``; the original is kept as
+    ``<name>.backup.rrd``, which is returned (None: nothing to repair)."""
+    path = Path(path)
+    if is_complete(path):
+        return None
+    run = subprocess.run([sys.executable, "-m", "rerun", "rrd", "migrate", str(path)],
+                         capture_output=True, text=True)
+    if run.returncode != 0 or not is_complete(path):
+        raise RuntimeError(f"rerun rrd migrate could not repair {path}: {run.stderr.strip()[-500:]}")
+    return path.with_name(path.stem + ".backup.rrd")
+
+
+def read(path: str | Path) -> Recording:
+    data, complete = _load(path)
     parts = data.reader(index="step", contents="/particles").to_pandas()
     pos_col = next((c for c in parts.columns if c.endswith(":positions")), None)
     steps, times, positions, dJs, fields = [], [], [], [], []
@@ -56,13 +109,8 @@ def read(path: str | Path) -> Recording:
     if col is not None and len(static) and static[col].iloc[0] is not None:
         colors = np.asarray(static[col].iloc[0], dtype=np.uint32)
     body = np.unique(colors, return_inverse=True)[1] if colors is not None else None
-    scalars_df = data.reader(index="step", contents="/scalars/**").to_pandas()
-    scalars = {}
-    for c in scalars_df.columns:
-        if c.startswith("/scalars/"):
-            name = c[len("/scalars/"):].split(":")[0]
-            s = scalars_df[["step", c]].dropna()
-            scalars[name] = (s["step"].to_numpy(), np.array([v[0] for v in s[c]], dtype=np.float64))
+    scalars = _series(data, "/scalars")
+    end = _end(data, steps, times)
     props_df = data.reader(index=None, contents="/__properties/**").to_pandas()
     props = {}
     for c in props_df.columns:
@@ -74,7 +122,41 @@ def read(path: str | Path) -> Recording:
                     if u is not None]
     colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
-                     props, np.asarray(update_steps, dtype=np.int64), colliders, shifts)
+                     props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,
+                     *_timings(timings_path(path)), complete, end)
+
+
+def _end(data, steps: list, times: list) -> tuple[int, float]:
+    """The last step reached and its simulated time [s]."""
+    df = data.reader(index="step", contents="/scalars/**").to_pandas()
+    end = (int(steps[-1]), float(times[-1])) if steps else (0, 0.0)
+    if len(df) and int(df["step"].max()) > end[0]:
+        row = df.loc[df["step"].idxmax()]
+        end = (int(row["step"]), row["sim_time"].total_seconds())
+    return end
+
+
+def _series(data, root: str) -> dict:
+    """``root/<name>`` Scalars series -> {name: (steps, values)}."""
+    df = data.reader(index="step", contents=f"{root}/**").to_pandas()
+    out = {}
+    for c in df.columns:
+        if c.startswith(f"{root}/"):
+            name = c[len(root) + 1:].split(":")[0]
+            s = df[["step", c]].dropna()
+            out[name] = (s["step"].to_numpy(), np.array([v[0] for v in s[c]], dtype=np.float64))
+    return out
+
+
+def _timings(path: Path) -> tuple[dict, dict]:
+    """The timings file's series and run properties (empty when it is missing)."""
+    if not path.is_file():
+        return {}, {}
+    data, _ = _load(path)
+    props = data.reader(index=None, contents="/__properties/**").to_pandas()
+    run = {c[len("property:run:"):]: list(props[c].iloc[0]) for c in props.columns
+           if c.startswith("property:run:") and props[c].iloc[0] is not None}
+    return _series(data, "/timings"), run
 
 
 def _colliders(data) -> tuple[dict, dict]:
@@ -107,12 +189,9 @@ def _colliders(data) -> tuple[dict, dict]:
     return geo, shifts
 
 
-TIMING_SCALARS = {"step_time_ms"}  # wall-clock figures, never reproducible
-
-
 def compare(a: Recording, b: Recording) -> dict:
-    """Bit-for-bit comparison of particles, dJ and physics scalars (wall-clock
-    timings aside); returns {"match": bool, "largest": {...}, "checked": {...}}."""
+    """Bit-for-bit comparison of particles, dJ and physics scalars (the
+    wall-clock timings live in another file); returns {"match": bool, "largest": {...}, "checked": {...}}."""
     largest: dict[str, float] = {}
     mismatch = []
     if not np.array_equal(a.steps, b.steps):
@@ -127,8 +206,6 @@ def compare(a: Recording, b: Recording) -> dict:
         if da is not None and db is not None and da.shape == db.shape:
             largest["dJ"] = max(largest.get("dJ", 0.0), float(np.max(np.abs(da - db))))
     for name, (sa, va) in a.scalars.items():
-        if name in TIMING_SCALARS:
-            continue
         if name not in b.scalars or not np.array_equal(sa, b.scalars[name][0]):
             mismatch.append(f"scalar {name} missing or on other steps")
             continue

@@ -1,4 +1,4 @@
-"""Replay a recording: ``python -m pipelines.replay <recording.rrd>``.
+"""Replay a recording: ``python -m pipelines.replay <recording.rrd | run dir>``.
 
   (no option)     open it in the Rerun viewer (needs a display)
   --web           serve it to a browser with Rerun's web viewer
@@ -13,6 +13,11 @@
                   recording, in its run directory) and compare the two
                   recordings: bit for bit on the CPU, else the largest
                   deviation per quantity; exit code 0 on a match, 1 otherwise
+  --repair        a run killed without warning (SIGKILL, power loss) leaves
+                  its recording without footer: every option above still
+                  reads it; --repair rewrites it (and its timings file) with
+                  one (``rerun rrd migrate``, the originals kept as
+                  *.backup.rrd) and marks the run's metrics.json ``killed``
 
 The recording carries how it was made (recording properties: overrides,
 resolved config, git commit, packages); --reproduce warns when the code has
@@ -22,6 +27,7 @@ changed since.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -31,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import provenance, recordings
+from . import provenance, recordings, runner
 
 
 def rerun_executable() -> str:
@@ -204,6 +210,28 @@ def reproduce(path: Path, workdir: Path | None = None) -> dict:
     return result
 
 
+def repair(path: Path) -> list[str]:
+    """Repair the recording and its timings file; a metrics.json still
+    ``running`` (or missing) becomes ``killed`` at the last recorded step.
+    Returns what was done, a line each."""
+    done = []
+    for f in (path, recordings.timings_path(path)):
+        if f.is_file():
+            backup = recordings.repair(f)
+            done.append(f"{f}: repaired (original: {backup})" if backup else f"{f}: complete, left as it is")
+    metrics = path.parent / "metrics.json"
+    m = json.loads(metrics.read_text()) if metrics.is_file() else {"status": "running"}
+    if m.get("status") == "running":
+        rec = recordings.read(path)
+        steps, t = rec.end
+        m.update(status="killed", steps=steps, sim_time=t,
+                 reason=f"the process ended without warning (SIGKILL, power loss) after step {steps} "
+                        f"(t = {t:.6g} s), the last one in the recording")
+        runner.write_metrics(metrics, m)
+        done.append(f"{metrics}: status killed after step {steps}")
+    return done
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path)
@@ -217,10 +245,21 @@ def main(argv=None) -> int:
     p.add_argument("--elev", type=float, default=20.0, help="3d view: camera elevation [deg]")
     p.add_argument("--azim", type=float, default=-60.0, help="3d view: camera azimuth [deg]")
     p.add_argument("--reproduce", action="store_true", help="re-run and compare")
+    p.add_argument("--repair", action="store_true", help="add the footer a killed run could not write")
     args = p.parse_args(argv)
+    if args.recording.is_dir():
+        args.recording = args.recording / "recording.rrd"
     if not args.recording.is_file():
         print(f"error: recording: {args.recording}: no such file", file=sys.stderr)
         return 2
+    if args.repair:
+        for line in repair(args.recording):
+            print(line)
+        return 0
+    if not recordings.is_complete(args.recording):
+        print(f"note: {args.recording} has no footer: its run was killed before closing it; it is read "
+              f"all the same. To repair it: python -m pipelines.replay {args.recording} --repair",
+              file=sys.stderr)
     if args.reproduce:
         r = reproduce(args.recording)
         for n in r.get("notes", []):

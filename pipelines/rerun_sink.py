@@ -1,4 +1,11 @@
-"""The Rerun sink: one ``.rrd`` recording per run.
+"""The Rerun sink: two ``.rrd`` files per run, one recording.
+
+``recording.rrd`` holds the physics and how to reproduce it: two identical
+runs give recordings that ``rerun rrd compare --unordered`` finds equal (rows
+are sent as chunks of their own, so chunking does not depend on timing).
+``recording.timings.rrd`` (:func:`timings_path`) holds the wall-clock side:
+step and update times, start time, host and command line. Both carry the same
+recording id, so the viewer merges them when opened together.
 
 Layout of the recording (timelines ``step`` and ``sim_time``):
 
@@ -12,6 +19,9 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
                       batches with ``send_columns``
   /events             TextLog lines with machine-readable values beside them
   /__properties/...   resolved config, overrides, provenance
+and of the timings file:
+  /timings/<name>     step_time_ms every step, update_ms on update steps
+  /__properties/run   started, host, command
 """
 
 from __future__ import annotations
@@ -34,16 +44,32 @@ PALETTE = np.array([
 ], dtype=np.uint8)
 
 
+def timings_path(recording: str | Path) -> Path:
+    """The wall-clock companion of a recording: ``x.rrd`` -> ``x.timings.rrd``."""
+    recording = Path(recording)
+    return recording.with_name(recording.stem + ".timings.rrd")
+
+
+def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
+    # one chunk per logged row: the file's chunks then depend on the data only
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
+                             batcher_config=rr.ChunkBatcherConfig(flush_num_rows=1))
+    rec.save(str(path))
+    rec.__enter__()
+    return rec
+
+
 class RerunSink(Sink):
     def __init__(self, path: Path, flush_every: int = 500):
         self.path = Path(path)
         self.flush_every = flush_every
-        self.rec = rr.RecordingStream(APP_ID, recording_id=str(uuid.uuid4()))
-        self.rec.save(str(self.path))
-        self.rec.__enter__()
+        recording_id = str(uuid.uuid4())
+        self.rec = _stream(recording_id, self.path)
+        self.clock = _stream(recording_id, timings_path(self.path))
         self._open = True
         self._rows = 0
         self._buffer: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
+        self._timings: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._points = None
         self._moving = []
 
@@ -53,6 +79,9 @@ class RerunSink(Sink):
         rec.send_recording_name(meta.name)
         for name, values in meta.properties.items():
             rec.send_property(name, rr.AnyValues(**values))
+        self.clock.send_recording_name(meta.name)
+        for name, values in meta.run_properties.items():
+            self.clock.send_property(name, rr.AnyValues(**values))
         self._points = rr.Points2D if meta.dim == 2 else rr.Points3D
         colors = PALETTE[np.asarray(meta.particle_body) % len(PALETTE)]
         rec.log("particles", self._points.from_fields(colors=colors, radii=meta.particle_radius),
@@ -92,8 +121,8 @@ class RerunSink(Sink):
 
     def _blueprint(self, meta: RunMeta):
         view = rrb.Spatial2DView if meta.dim == 2 else rrb.Spatial3DView
-        series = [rrb.TimeSeriesView(name=name, origin="/scalars",
-                                     contents=[f"/scalars/{s}" for s in names])
+        series = [rrb.TimeSeriesView(name=name, origin="/",
+                                     contents=[s if s.startswith("/") else f"/scalars/{s}" for s in names])
                   for name, names in meta.scalar_groups.items()]
         return rrb.Blueprint(
             rrb.Horizontal(
@@ -140,15 +169,23 @@ class RerunSink(Sink):
             parts.append(rr.AnyValues(**values))
         self.rec.log("events", *parts)
 
+    def timings(self, step, t, values):
+        for name, value in values.items():
+            steps, times, vals = self._timings[name]
+            steps.append(step)
+            times.append(t)
+            vals.append(value)
+
     def flush(self):
-        for name, (steps, times, vals) in self._buffer.items():
-            if steps:
-                self.rec.send_columns(
-                    f"scalars/{name}",
-                    indexes=[rr.TimeColumn("step", sequence=steps),
-                             rr.TimeColumn("sim_time", duration=times)],
-                    columns=rr.Scalars.columns(scalars=np.asarray(vals, dtype=np.float64)))
-        self._buffer.clear()
+        for rec, root, buffer in ((self.rec, "scalars", self._buffer), (self.clock, "timings", self._timings)):
+            for name, (steps, times, vals) in buffer.items():
+                if steps:
+                    rec.send_columns(
+                        f"{root}/{name}",
+                        indexes=[rr.TimeColumn("step", sequence=steps),
+                                 rr.TimeColumn("sim_time", duration=times)],
+                        columns=rr.Scalars.columns(scalars=np.asarray(vals, dtype=np.float64)))
+            buffer.clear()
         self._rows = 0
 
     def close(self):
@@ -158,4 +195,7 @@ class RerunSink(Sink):
         try:
             self.flush()
         finally:
-            self.rec.__exit__(None, None, None)  # flushes and finalises the file
+            try:  # leaving the streams (last entered first) flushes and finalises the files
+                self.clock.__exit__(None, None, None)
+            finally:
+                self.rec.__exit__(None, None, None)

@@ -154,7 +154,7 @@ def main() -> None:
 
 
 # a sweep's exit code: the first status present among its jobs (0: all completed)
-SWEEP_EXIT = [("invalid", EXIT_CONFIG), ("failed", 1), ("unreadable", 1), ("unknown", 1),
+SWEEP_EXIT = [("invalid", EXIT_CONFIG), ("failed", 1), ("unreadable", 1), ("unknown", 1), ("killed", 1), ("running", 1),
               ("interrupted", EXIT_CODES["interrupted"]), ("unstable", EXIT_CODES["unstable"])]
 
 

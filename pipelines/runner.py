@@ -34,14 +34,16 @@ IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
 
 
 def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
-    """Time-series views of the recording's blueprint."""
+    """Time-series views of the recording's blueprint: scalar names, or entity
+    paths (the wall-clock timings, in the timings file)."""
     momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
                 ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
                  "angular_momentum_y", "angular_momentum_z"])
     groups = {
         "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
         "momentum": momentum,
-        "step": ["dt", "dt_fresh", "max_speed", "step_time_ms"],
+        "step": ["dt", "dt_fresh", "max_speed"],
+        "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
         "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
     }
     if error:
@@ -128,14 +130,20 @@ def _median(xs: list[float]) -> float | None:
     return statistics.median(xs) if xs else None
 
 
+RUN_PROPERTIES = ("command", "host", "started")  # differ between identical runs
+
+
 def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
                          choices: dict | None = None) -> dict:
     """How to reproduce the run: resolved config, overrides, group choices,
-    git commit and dirty flag, package versions, device, precision, seed."""
+    git commit and dirty flag, package versions, device, precision, seed; and
+    (``run``: the timings file's) when, where and with which command it ran."""
     prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
     packages = prov.pop("packages")
+    when = {k: prov.pop(k) for k in RUN_PROPERTIES}
     nonempty = lambda v: v or [""]  # noqa: E731 - Rerun needs a non-empty batch
     return {
+        "run": when,
         "config": {"yaml": config_yaml, "overrides": nonempty(list(overrides)),
                    "choices": nonempty([f"{k}={v}" for k, v in sorted((choices or {}).items())])},
         "provenance": {k: nonempty(v) if isinstance(v, list) else v for k, v in prov.items()},
@@ -220,7 +228,8 @@ class Run:
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
-            properties=self.properties, colliders=list(scene.colliders),
+            properties={k: v for k, v in self.properties.items() if k != "run"},
+            run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
                                         + (self.stretch_names if self.scheme.name != "empm" else []),
                                         self.solution is not None or self.spec.run.reference is not None,
@@ -398,12 +407,11 @@ class Run:
             self.sink.event(
                 self.step, self.t,
                 f"configuration update of {name}: {100 * frac:.1f}% of its particles have "
-                f"dJ >= {self.scheme.epsilon:g} ({1e3 * report.update_time:.3f} ms)",
-                body=name, marked_fraction=float(frac), update_ms=1e3 * report.update_time,
-                update_step=self.step, update_time=self.t)
+                f"dJ >= {self.scheme.epsilon:g}",
+                body=name, marked_fraction=float(frac), update_step=self.step, update_time=self.t)
 
     def row_extra(self, dt: float, report: mpm.StepReport) -> dict:
-        extra = {"dt": dt, "dt_fresh": self._fresh_dt, "max_speed": report.max_speed, "step_time_ms": self.step_ms[-1],
+        extra = {"dt": dt, "dt_fresh": self._fresh_dt, "max_speed": report.max_speed,
                  "config_updates": float(self.updates.sum())}
         if self.scheme.tracks_marks():
             for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
@@ -550,6 +558,8 @@ class Run:
                               nonfinite=report.nonfinite, outside=report.outside)
                 break
             self.record_updates(report)
+            self.sink.timings(self.step, self.t, {"step_time_ms": self.step_ms[-1], **(
+                {"update_ms": self.update_ms[-1]} if report.updated else {})})
             t1 = time.perf_counter()
             last = done()
             if log.scalars or last:
@@ -709,6 +719,9 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
     run = Run(spec, out_dir, properties, sink)
     run.metrics.update(identity or {})
+    # what a run killed without warning leaves (python -m pipelines.replay <dir> --repair marks it killed)
+    write_metrics(out_dir / "metrics.json", {**run.metrics, "status": "running",
+                                             "reason": "started, not finished"})
     previous_term = previous_int = None
     try:
         previous_term = signal.signal(signal.SIGTERM, run.interrupts.handler)

@@ -3,8 +3,9 @@ never does.
 
 A sink receives: static run metadata once (:meth:`Sink.start`), particles
 (positions, the per-particle dJ field and, with plastic materials, their named
-per-particle fields) on logged steps, a row of scalars every step, and events
-(text plus machine-readable values).
+per-particle fields) on logged steps, a row of scalars every step, events
+(text plus machine-readable values) and, apart from all these, wall-clock
+timings: the physics of two identical runs is identical, their timings are not.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ class RunMeta:
     body_names: list[str]
     particle_body: np.ndarray  # body index per particle
     particle_radius: float  # [m]
-    properties: dict = field(default_factory=dict)  # name -> {key: value}
+    properties: dict = field(default_factory=dict)  # name -> {key: value}: how to reproduce the run
+    run_properties: dict = field(default_factory=dict)  # name -> {key: value}: when, where, which command
     scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
     colliders: list = field(default_factory=list)  # mpm.colliders.Collider (drawn by the sink)
 
@@ -46,6 +48,9 @@ class Sink:
 
     def event(self, step: int, t: float, text: str, level: str = "INFO", **values) -> None:
         pass
+
+    def timings(self, step: int, t: float, values: dict[str, float]) -> None:
+        """Wall-clock figures of a step [ms]: never part of the physics."""
 
     def flush(self) -> None:
         pass

@@ -1,7 +1,10 @@
 """pipelines.replay: reproduce a recording bit for bit, render frames."""
 
+import json
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 
@@ -66,3 +69,40 @@ def test_frames_of_a_3d_scene_with_colliders(tmp_path):
                         str(frames), "--color", "nope"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [
         "error: --color nope: not in this recording; accepted: body, dJ"]
+
+
+def test_a_killed_run_is_read_and_repaired(tmp_path):
+    """SIGKILL leaves no footer and no chance to finish: metrics.json still
+    says running, the recording is read all the same (frames render, with a
+    note), and --repair gives it a footer and marks the run killed."""
+    run_dir = tmp_path / "run"
+    cmd = [sys.executable, "-m", "pipelines.run", "scene.resolution=16", "run.steps=1000000",
+           "log.every=5", "log.flush_every=20", "log.progress=false", f"hydra.run.dir={run_dir}"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    rec = run_dir / "recording.rrd"
+    try:
+        deadline = time.monotonic() + 300
+        while not (rec.is_file() and rec.stat().st_size > 300_000):  # some frames and scalar rows
+            assert proc.poll() is None, proc.stderr.read().decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert json.loads((run_dir / "metrics.json").read_text())["status"] == "running"
+    assert not recordings.is_complete(rec)
+    killed = recordings.read(rec)
+    assert not killed.complete and len(killed.steps) >= 2 and killed.end[0] >= killed.steps[-1]
+    r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir), "--frames",
+                        str(tmp_path / "frames"), "--every", "1000"], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0 and "has no footer" in r.stderr and "--repair" in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir), "--repair"], cwd=ROOT,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    repaired = recordings.read(rec)
+    assert repaired.complete and recordings.compare(killed, repaired)["match"]
+    assert (run_dir / "recording.backup.rrd").is_file()
+    v = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(rec)], capture_output=True, text=True)
+    assert v.returncode == 0, v.stderr
+    m = json.loads((run_dir / "metrics.json").read_text())
+    assert m["status"] == "killed" and m["steps"] == repaired.end[0] >= 5
