@@ -29,9 +29,10 @@ from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
 from .layout import GridLayout
 from .model import Model, State
+from .scene import WALL_TYPES
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
-from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE,
+from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_REMOVED,
                        STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED, STATUS_WORK, TRANSFERS,
                        make_g2p, make_p2g)
 
@@ -78,6 +79,7 @@ class StepReport:
     boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
+    removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
 
     @property
     def reason(self) -> str | None:
@@ -119,6 +121,11 @@ class Solver:
         margin = k.margin * model.dx
         self._inside_lo = t.vec(*([margin] * t.dim))
         self._inside_hi = t.vec(*[L - margin for L in model.domain])
+        open_code = WALL_TYPES.index("open")
+        self._open_lo = t.vec(*[float(c == open_code) for c in model.wall_codes[0]])
+        self._open_hi = t.vec(*[float(c == open_code) for c in model.wall_codes[1]])
+        self.removal = open_code in model.wall_codes[0] + model.wall_codes[1]  # open faces remove particles
+        self.removed = np.zeros(nb, np.int64)  # per body: particles removed at open faces so far
         eps = getattr(scheme, "epsilon", None)
         self._epsilon = S(eps if eps is not None and np.isfinite(eps) else 0.0)
 
@@ -133,7 +140,8 @@ class Solver:
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies),
-                             track_energy=self.options.track_energy, track_inversion=self.options.track_J)
+                             track_energy=self.options.track_energy, track_inversion=self.options.track_J,
+                             removal=self.removal)
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -263,16 +271,28 @@ class Solver:
             self._interpolate(state, self.model.types.scalar(dt))
             report = self.check()
         report.dt, report.newton, report.halvings = dt, newton, attempt
+        if report.removed is not None:
+            self._count_removed(report)
         if report.reason is None:
             t0 = time.perf_counter()
-            report.updated = [b for b in range(self.n_bodies)
-                              if self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
+            report.updated = [b for b in range(self.n_bodies) if self.body_counts[b] > 0
+                              and self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
                                                      float(report.max_dJ[b]),
                                                      float(report.min_stretch[b]))]
             if report.updated:
                 self.update_configuration(state, report.updated, report.box_lo, report.box_hi)
             report.update_time = time.perf_counter() - t0
         return report
+
+    def _count_removed(self, report: StepReport) -> None:
+        """Per body, the particles G2P removed at open faces (mass 0): the
+        counts the criterion divides by shrink with them."""
+        mass = self.model.mass.numpy()
+        alive = np.array([int(np.count_nonzero(mass[start:start + count]))
+                          for start, count in self.model.body_ranges])
+        report.removed = self.body_counts - alive
+        self.removed += report.removed
+        self.body_counts = alive
 
     def step(self, state: State, dt: float) -> NewtonReport | None:
         """Advance the grid of ``state`` by ``dt`` [s] in the current reference
@@ -382,7 +402,8 @@ class Solver:
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
             state.stencils,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
-            state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status, m.mass, self._gravity])
+            state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status, m.mass, self._gravity,
+            m.volume, self._open_lo, self._open_hi])
 
     # -------------------------------------------------- configuration update
     def update_configuration(self, state: State, bodies: list[int], lo: np.ndarray,
@@ -480,6 +501,7 @@ class Solver:
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
             min_F_stretch=np.sqrt(field_[STATUS_F_STRETCH]),
             boundary_work=float(s[STATUS_WORK]),
+            removed=np.zeros(nb, np.int64) if s[STATUS_REMOVED] > 0 else None,
             kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),
             potential=float(s[STATUS_POTENTIAL]) if self.options.track_energy else float("nan"))
 

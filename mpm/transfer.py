@@ -44,9 +44,11 @@ pic: no affine term, force and F from the kernel gradient."""
 # layout of the per-step status buffer (float64): see Solver.check
 # header: the largest |v|^2, non-finite and outside counts, the work the boundary
 # conditions did on the grid (mpm.grid, mpm.implicit), the kinetic and potential
-# energy of the new state (G2P with ``track_energy``): for mpm.stability
-STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL = range(6)
-STATUS_HEADER = 6
+# energy of the new state (G2P with ``track_energy``): for mpm.stability; the
+# particles removed at open walls in this step (G2P with ``removal``)
+(STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL,
+ STATUS_REMOVED) = range(7)
+STATUS_HEADER = 7
 STATUS_PER_BODY = 8  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
 #                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2,
 #                      smallest stretch^2 of F (``track_inversion``)
@@ -226,8 +228,15 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 @functools.cache
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
-             track_inversion: bool = False):
+             track_inversion: bool = False, removal: bool = False):
     """G2P for all particles.
+
+    ``removal`` (a domain with open faces): a particle that crosses the
+    interior's bound on an open face (``open_lo``/``open_hi`` 1 per axis) is
+    removed: its mass and volume become 0 (so no transfer sees it again), it
+    stays where it crossed, clamped to the interior, at rest, and G2P skips
+    it from then on; ``status[STATUS_REMOVED]`` counts the removals. A
+    particle crossing a closed face still counts as outside (unstable).
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
@@ -289,12 +298,23 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         F0s: wp.array(dtype=t.mat),
         dJ: wp.array(dtype=S),
         status: wp.array(dtype=f64),
-        # with track_energy:
+        # with track_energy or removal:
         mass: wp.array(dtype=S),
         gravity: t.vec,
+        # with removal:
+        volume: wp.array(dtype=S),
+        open_lo: t.vec,
+        open_hi: t.vec,
     ):
         p = wp.tid()
         b = body[p]
+        if wp.static(removal):
+            if mass[p] == S(0.0):  # removed: parked inside, still in its body's reference box
+                box0 = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
+                for d in range(wp.static(dim)):
+                    wp.atomic_min(status, box0 + d, f64(x[p][d]))
+                    wp.atomic_max(status, box0 + n_bodies * dim + d, f64(x[p][d]))
+                return
         vp = vec()
         B = mat()
         grad_v = mat()
@@ -331,6 +351,25 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         xp = x[p] + dt * vp
         Fsn_old = Fsn[p]
         Fs = Fsn_old + dt * grad_v
+        if wp.static(removal):
+            gone = False
+            for d in range(wp.static(dim)):
+                if (xp[d] < inside_lo[d] and open_lo[d] > S(0.0)) or (xp[d] > inside_hi[d] and open_hi[d] > S(0.0)):
+                    gone = True
+            if gone and wp.isfinite(xp):
+                for d in range(wp.static(dim)):
+                    xp[d] = wp.clamp(xp[d], inside_lo[d], inside_hi[d])
+                x[p] = xp
+                v[p] = vec()
+                C[p] = mat()
+                mass[p] = S(0.0)
+                volume[p] = S(0.0)
+                wp.atomic_add(status, STATUS_REMOVED, f64(1.0))
+                box1 = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
+                for d in range(wp.static(dim)):
+                    wp.atomic_min(status, box1 + d, f64(xp[d]))
+                    wp.atomic_max(status, box1 + n_bodies * dim + d, f64(xp[d]))
+                return
         x[p] = xp
         v[p] = vp
         C[p] = Cp

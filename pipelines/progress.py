@@ -11,11 +11,16 @@ class Progress:
     def __init__(self, steps: int | None, duration: float | None, enabled: bool | None = None,
                  delay: float = 2.0, every: float = 0.25):
         self.steps, self.duration = steps, duration
-        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.enabled = self.shown(enabled)
         self.start = time.perf_counter()
         self.delay, self.every = delay, every
         self._last = 0.0
         self._shown = False
+
+    @staticmethod
+    def shown(enabled: bool | None) -> bool:
+        """log.progress: null means on a terminal."""
+        return sys.stderr.isatty() if enabled is None else bool(enabled)
 
     def update(self, step: int, t: float, ms_per_step: float) -> None:
         if not self.enabled:

@@ -24,8 +24,8 @@ class Recording:
     positions: list[np.ndarray]  # per logged step, (n, dim)
     dJ: list[np.ndarray | None]  # per logged step
     fields: list[dict[str, np.ndarray]]  # per logged step: the other per-particle components
-    body: np.ndarray | None  # body colour index per particle (from the static colours)
-    colors: np.ndarray | None  # static RGBA colours per particle
+    body: np.ndarray | None  # body index per particle (static)
+    colors: np.ndarray | None  # RGBA per particle, packed 0xRRGGBBAA: the body colours
     scalars: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (steps, values)
     properties: dict[str, list]  # "config:overrides" -> [values], "provenance:git_commit" -> [value]
     update_steps: np.ndarray  # steps with a configuration-update event
@@ -33,6 +33,7 @@ class Recording:
     collider_shift: dict = None  # name -> (steps, translations) of a moving collider
     timings: dict = field(default_factory=dict)  # name -> (steps, values) [ms], from the timings file
     run: dict = field(default_factory=dict)  # "started", "host", "command" -> [value], from the timings file
+    index: list = field(default_factory=list)  # per logged step: the particles' numbers (None: all of them)
     complete: bool = True  # False: the file has no footer (the writer was killed)
     end: tuple = (0, 0.0)  # the last step with a scalar row or particles, and its time [s]
 
@@ -88,9 +89,9 @@ def read(path: str | Path) -> Recording:
     data, complete = _load(path)
     parts = data.reader(index="step", contents="/particles").to_pandas()
     pos_col = next((c for c in parts.columns if c.endswith(":positions")), None)
-    steps, times, positions, dJs, fields = [], [], [], [], []
+    steps, times, positions, dJs, fields, index = [], [], [], [], [], []
     other = [c for c in parts.columns if c.startswith("/particles:")
-             and c.split(":", 1)[1] not in ("dJ", "positions", "colors", "radii")
+             and c.split(":", 1)[1] not in ("dJ", "positions", "colors", "radii", "body_index")
              and not c.split(":", 1)[1].startswith("Points")]
     if pos_col is not None:
         for _, row in parts.iterrows():
@@ -98,17 +99,27 @@ def read(path: str | Path) -> Recording:
                 continue
             steps.append(int(row["step"]))
             times.append(row["sim_time"].total_seconds())
-            positions.append(np.stack(row[pos_col]).astype(np.float64))
+            pos = row[pos_col]
+            positions.append(np.stack(pos).astype(np.float64) if len(pos) else
+                             np.zeros((0, 3 if "Points3D" in pos_col else 2)))
             d = row.get("/particles:dJ")
             dJs.append(None if d is None else np.asarray(d, dtype=np.float64))
             fields.append({c.split(":", 1)[1]: np.asarray(row[c], dtype=np.float64) for c in other
                            if row[c] is not None})
+            index.append(None if fields[-1].get("index") is None else fields[-1].pop("index").astype(np.int64))
     static = data.reader(index=None, contents="/particles").to_pandas()
-    colors = None
-    col = next((c for c in static.columns if c.endswith(":colors")), None)
-    if col is not None and len(static) and static[col].iloc[0] is not None:
-        colors = np.asarray(static[col].iloc[0], dtype=np.uint32)
-    body = np.unique(colors, return_inverse=True)[1] if colors is not None else None
+    body = colors = None
+    if "/particles:body_index" in static.columns and len(static) and static["/particles:body_index"].iloc[0] is not None:
+        from .rerun_sink import PALETTE
+
+        body = np.asarray(static["/particles:body_index"].iloc[0], dtype=np.int64)
+        rgb = PALETTE[body % len(PALETTE)].astype(np.uint32)
+        colors = (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | 255
+    else:  # recordings before per-frame colours: static body colours
+        col = next((c for c in static.columns if c.endswith(":colors")), None)
+        if col is not None and len(static) and static[col].iloc[0] is not None:
+            colors = np.asarray(static[col].iloc[0], dtype=np.uint32)
+            body = np.unique(colors, return_inverse=True)[1]
     scalars = _series(data, "/scalars")
     end = _end(data, steps, times)
     props_df = data.reader(index=None, contents="/__properties/**").to_pandas()
@@ -123,7 +134,7 @@ def read(path: str | Path) -> Recording:
     colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,
-                     *_timings(timings_path(path)), complete, end)
+                     *_timings(timings_path(path)), index, complete, end)
 
 
 def _end(data, steps: list, times: list) -> tuple[int, float]:

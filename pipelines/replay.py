@@ -71,6 +71,8 @@ def _colours(rec: recordings.Recording, k: int, color: str):
         if rec.colors is None:
             return None, None
         c = rec.colors  # RGBA packed as 0xRRGGBBAA
+        if rec.index and rec.index[k] is not None:  # some particles were removed at open walls
+            c = c[rec.index[k]]
         return np.stack([(c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255], axis=1) / 255.0, None
     values = rec.dJ[k] if color == "dJ" else rec.fields[k].get(color)
     if values is None:

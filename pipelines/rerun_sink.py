@@ -9,11 +9,16 @@ recording id, so the viewer merges them when opened together.
 
 Layout of the recording (timelines ``step`` and ``sim_time``):
 
-  /particles          Points2D/3D positions per logged step, with the
+  /particles          Points2D/3D positions per logged frame, with the
                       component ``dJ`` (per-particle |det F^sn - 1|) and,
                       with plastic materials, their fields (``J_P``,
                       ``plastic_strain``, ...: mpm.materials.Plastic.fields);
-                      colours by body and radii are logged once (static)
+                      colours by ``meta.color`` (a field on a colour map from
+                      0 to the largest value so far, or the body); once
+                      particles were removed at open walls, ``index`` (their
+                      numbers) with the ones left; radii and ``body_index`` (body
+                      per particle) are static
+  /legend             what the colours mean (a text updated with the range)
   /domain             the domain box and the inner wall faces (static)
   /scalars/<name>     one Scalars series per physics/timing scalar, sent in
                       batches with ``send_columns``
@@ -38,6 +43,8 @@ from . import surfaces
 from .sinks import RunMeta, Sink
 
 APP_ID = "aulmpm"
+VIRIDIS = np.array([(68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)], float)
+GREY = (150, 150, 150)  # a particle without a value (the field of another body's material)
 PALETTE = np.array([
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
@@ -72,6 +79,9 @@ class RerunSink(Sink):
         self._timings: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._points = None
         self._moving = []
+        self._color = "body"
+        self._range = 0.0  # the colour map's upper end: the largest value logged so far
+        self._body = None
 
     # ---------------------------------------------------------------- static
     def start(self, meta: RunMeta) -> None:
@@ -83,9 +93,12 @@ class RerunSink(Sink):
         for name, values in meta.run_properties.items():
             self.clock.send_property(name, rr.AnyValues(**values))
         self._points = rr.Points2D if meta.dim == 2 else rr.Points3D
-        colors = PALETTE[np.asarray(meta.particle_body) % len(PALETTE)]
-        rec.log("particles", self._points.from_fields(colors=colors, radii=meta.particle_radius),
-                static=True)
+        self._body = np.asarray(meta.particle_body)
+        self._color, self._names = meta.color, meta.body_names
+        rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
+                rr.AnyValues(body_index=self._body.astype(np.int32)), static=True)
+        if self._color == "body":
+            self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
         rec.send_blueprint(self._blueprint(meta))
@@ -119,6 +132,33 @@ class RerunSink(Sink):
                                               colors=[(200, 200, 200), (120, 120, 120)],
                                               labels=["domain", "walls"]), static=True)
 
+    def _colors(self, values: np.ndarray | None, index: np.ndarray | None) -> np.ndarray:
+        """RGB per particle: the body palette, or ``values`` on the colour map
+        from 0 to the largest value so far (grey where not finite)."""
+        if self._color == "body" or values is None:
+            body = self._body if index is None else self._body[index]
+            return PALETTE[body % len(PALETTE)]
+        v = np.asarray(values, np.float64)
+        finite = np.isfinite(v)
+        if finite.any() and float(np.max(v[finite])) > self._range:
+            self._range = float(np.max(v[finite]))
+            self._legend()
+        u = np.clip(np.where(finite, v, 0.0) / (self._range or 1.0), 0.0, 1.0)
+        stops = np.linspace(0.0, 1.0, len(VIRIDIS))
+        rgb = np.stack([np.interp(u, stops, VIRIDIS[:, c]) for c in range(3)], axis=1).astype(np.uint8)
+        rgb[~finite] = GREY
+        return rgb
+
+    def _legend(self) -> None:
+        if self._color == "body":
+            text = "Particle colour: the body (" + ", ".join(
+                f"{n}: rgb{tuple(int(c) for c in PALETTE[i % len(PALETTE)])}" for i, n in enumerate(self._names)) + ")."
+        else:
+            text = (f"Particle colour: **{self._color}** on the viridis map, from 0 (dark purple) to "
+                    f"**{self._range:.3g}** (yellow), the largest value logged so far; grey: no value "
+                    "(another material).")
+        self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
     def _blueprint(self, meta: RunMeta):
         view = rrb.Spatial2DView if meta.dim == 2 else rrb.Spatial3DView
         series = [rrb.TimeSeriesView(name=name, origin="/",
@@ -127,14 +167,16 @@ class RerunSink(Sink):
         return rrb.Blueprint(
             rrb.Horizontal(
                 view(name="particles", origin="/", contents=["/particles", "/domain", "/colliders/**"]),
-                rrb.Vertical(*series, rrb.TextLogView(name="events", origin="/events")),
+                rrb.Vertical(rrb.TextDocumentView(name="colour", origin="/legend"), *series,
+                             rrb.TextLogView(name="events", origin="/events"),
+                             row_shares=[1] + [2] * len(series) + [2]),
                 column_shares=[3, 2],
             ),
             collapse_panels=False,
         )
 
     # ---------------------------------------------------------------- per step
-    def particles(self, step, t, x, dJ, fields=None):
+    def particles(self, step, t, x, dJ, fields=None, index=None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
         for path, c in self._moving:
@@ -146,10 +188,13 @@ class RerunSink(Sink):
         values = dict(fields or {})
         if dJ is not None:
             values["dJ"] = dJ
+        colors = self._colors(values.get(self._color), index)
+        if index is not None:
+            values["index"] = index.astype(np.int32)
+        parts = [self._points.from_fields(positions=x, colors=colors)]
         if values:
-            self.rec.log("particles", self._points.from_fields(positions=x), rr.AnyValues(**values))
-        else:
-            self.rec.log("particles", self._points.from_fields(positions=x))
+            parts.append(rr.AnyValues(**values))
+        self.rec.log("particles", *parts)
 
     def scalars(self, step, t, values):
         for name, value in values.items():

@@ -12,6 +12,8 @@ import json
 import math
 import signal
 import statistics
+import sys
+import threading
 import time
 from pathlib import Path
 
@@ -187,7 +189,7 @@ class Run:
     def build(self) -> None:
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
-        self.record_dJ = log.every > 0 and log.dJ
+        self.record_dJ = log.particles and log.dJ
         detect = spec.detect.action != "off"
         track_J = detect and any(not b.material.invertible for b in spec.scene.bodies)
         self.solver = mpm.Solver(self.model, spec.scheme,
@@ -201,10 +203,19 @@ class Run:
         self.scheme = self.solver.scheme  # defaults resolved
         self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes,
                             scene=spec.scene_name, resolution=spec.scene.resolution, dx=self.model.dx,
-                            precision=run.precision)
-        self.metrics["compile_time_s"] = self.solver.load()
+                            precision=run.precision, device=run.device)
+        # a first run compiles its kernels (Warp caches them): say so when it takes a while
+        notice = threading.Timer(1.0, lambda: print("compiling kernels (first run only; Warp caches them) ...",
+                                                    file=sys.stderr, flush=True))
+        if Progress.shown(log.progress):
+            notice.start()
+        try:
+            self.metrics["compile_time_s"] = self.solver.load()
+        finally:
+            notice.cancel()
         self.solver.prepare(self.state)
         self.X0 = self.solver.X0  # initial positions [m], float64
+        self.mass0 = self.model.mass.numpy().astype(np.float64)  # [kg] (removed particles' mass becomes 0)
         self.solution = spec.scene.solution
         self.error_max = {"displacement": 0.0, "velocity": 0.0}
         self.names = self.solver.diagnostic_names()
@@ -228,6 +239,7 @@ class Run:
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
+            color=self.spec.log.color,
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
@@ -258,7 +270,64 @@ class Run:
         # overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
-        self.sink.particles(self.step, self.t, x, dJ, self.plastic_fields())
+        fields = self.plastic_fields()
+        index = None
+        if self.solver.removed.any():  # the particles left inside, by number
+            index = np.flatnonzero(self.model.mass.numpy() > 0)
+            x, dJ = x[index], (dJ[index] if dJ is not None else None)
+            fields = {k: v[index] for k, v in fields.items()}
+        self.sink.particles(self.step, self.t, x, dJ, fields, index)
+
+    def frame_due(self, last: bool) -> bool:
+        """Whether this step's particles are logged: every ``log.every`` steps,
+        or (log.every null) at the first step at or past each multiple of
+        1 / log.fps in simulated time; the last step always."""
+        every = self.spec.log.every
+        if every is not None:
+            return every > 0 and (self.step % every == 0 or last)
+        if self.t >= self._next_frame * (1.0 - 1e-9) or last:
+            self._next_frame = (math.floor(self.t * self.spec.log.fps * (1.0 + 1e-9)) + 1) / self.spec.log.fps
+            return True
+        return False
+
+    def recording_mb(self, dt: float) -> tuple[float, int, int]:
+        """Estimated size of the recording [MB], its particle frames and steps,
+        from the first step ``dt`` [s] (an adaptive step may shrink later)."""
+        log, (steps_end, duration) = self.spec.log, self.spec.end
+        steps = steps_end if steps_end is not None else math.ceil(duration / dt)
+        t_end = duration if duration is not None else steps * dt
+        if not log.particles:
+            frames = 0
+        elif log.every is not None:
+            frames = steps // log.every + 2
+        else:
+            frames = min(steps, math.ceil(t_end * log.fps)) + 2
+        n = self.model.n_particles
+        per_particle = 4 * self.model.dim + 3 + 4 * (log.dJ + len(self.plastic_fields()))
+        scalars = 24 * (len(self.names) + 12) if log.scalars else 0  # value, step and time per scalar
+        return (frames * n * per_particle + (steps + 1) * scalars) / 1e6, frames, steps
+
+    def warn_size(self, dt: float) -> None:
+        """Say so before a run whose recording would pass log.size_warning_mb."""
+        mb, frames, steps = self.recording_mb(dt)
+        limit = self.spec.log.size_warning_mb
+        if mb > limit:
+            text = (f"the recording will be about {mb:,.0f} MB ({frames} particle frames of "
+                    f"{self.model.n_particles} particles, scalars for about {steps} steps), over "
+                    f"log.size_warning_mb={limit:g}: lower log.fps or raise log.every (log.every=0: no particles)")
+            print(f"warning: {text}", file=sys.stderr, flush=True)
+            self.sink.event(0, 0.0, text, level="WARN", estimated_mb=mb)
+        self.metrics["recording_estimate_mb"] = mb
+
+    def record_removed(self, report: mpm.StepReport) -> None:
+        """Particles that left through open walls: an event per body, counted."""
+        for b, n in enumerate(report.removed):
+            if n:
+                name = self.spec.scene.bodies[b].name
+                total = int(self.solver.removed[b])
+                self.sink.event(self.step, self.t, f"{n} particles of {name} left through an open wall and were "
+                                                   f"removed ({total} so far)",
+                                body=name, removed=int(n), removed_total=total)
 
     def plastic_fields(self) -> dict[str, np.ndarray]:
         """Named per-particle fields of the plastic bodies (mpm.materials.Plastic.fields)
@@ -415,12 +484,14 @@ class Run:
                  "config_updates": float(self.updates.sum())}
         if self.scheme.tracks_marks():
             for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
-                extra[name] = float(m / n)
+                extra[name] = float(m / max(n, 1))
         if self.scheme.name != "empm":  # the narrowest reference cell (1 in EMPM)
             for name, s in zip(self.stretch_names, report.min_stretch):
                 extra[name] = float(s)
         if self.solution is not None:
             extra.update(self.errors())
+        if self.solver.removal:
+            extra["removed"] = float(self.solver.removed.sum())
         if report.newton is not None:
             n = report.newton
             extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg),
@@ -474,8 +545,9 @@ class Run:
         log = self.spec.log
         steps_end, duration = self.spec.end
         self.measure({"config_updates": 0.0, **(self.errors() if self.solution is not None else {})})
-        if log.every:
+        if log.particles:
             self.particles()
+            self._next_frame = 1.0 / log.fps
         self.log_fracture()
         self.announce_scheme()
         progress = Progress(steps_end, duration, log.progress)
@@ -517,6 +589,8 @@ class Run:
         while not done():
             self.interrupts.check()
             dt = self.next_dt(report, duration)
+            if self.step == 0 and 0.0 < dt < math.inf:
+                self.warn_size(dt)
             collapse = self.collapsed()
             if not (0.0 < dt < math.inf):  # a step of 0 would never end the run (or end it at t = 0)
                 collapse = (f"the time step is {dt:.3g} s (fastest particle {self._speed(report):.3g} m/s): "
@@ -557,6 +631,8 @@ class Run:
                 self.unstable(report.reason, "nonfinite" if report.nonfinite else "outside",
                               nonfinite=report.nonfinite, outside=report.outside)
                 break
+            if report.removed is not None:
+                self.record_removed(report)
             self.record_updates(report)
             self.sink.timings(self.step, self.t, {"step_time_ms": self.step_ms[-1], **(
                 {"update_ms": self.update_ms[-1]} if report.updated else {})})
@@ -564,7 +640,7 @@ class Run:
             last = done()
             if log.scalars or last:
                 self.measure(self.row_extra(dt, report))
-            if log.every and (self.step % log.every == 0 or last):
+            if log.particles and self.frame_due(last):
                 self.particles()
                 self.log_ms.append(1e3 * (time.perf_counter() - t1))
             if self.step % log.fracture_every == 0:
@@ -625,7 +701,7 @@ class Run:
         self.metrics["unstable_time"] = self.t
         self.metrics["unstable_criterion"] = criterion
         self.metrics["unstable_body"] = body
-        if self.spec.log.every:
+        if self.spec.log.particles:
             self.particles()
         where = {"criterion": criterion, **({"body": body} if body else {})}
         self.sink.event(self.step, self.t, f"unstable: {self.metrics['reason']}", level="ERROR", **where, **values)
@@ -639,7 +715,7 @@ class Run:
             if not self._pending:
                 self.measure({"config_updates": float(self.updates.sum())})
             self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
-            if m["status"] == "interrupted" and self.spec.log.every:
+            if m["status"] == "interrupted" and self.spec.log.particles:
                 self.particles()
             if self.fracture is None or self.fracture_step != self.step:
                 self.log_fracture()
@@ -700,6 +776,14 @@ class Run:
                 m["implicit"] = self.implicit_summary()
         if self.built:
             m.update(self.drift.summary())
+            if self.solver.removal:  # particles that left through open walls take their mass along
+                removed = self.model.mass.numpy() == 0
+                lost = float(self.mass0[removed].sum())
+                m["removed"] = {"total": int(removed.sum()), **{b.name: int(c) for b, c in
+                                                                zip(self.spec.scene.bodies, self.solver.removed)},
+                                "mass": lost}
+                if self.drift.first is not None and self.drift.first[0]:
+                    m["mass_drift"] = abs(self.drift.last[0] + lost - self.drift.first[0]) / self.drift.first[0]
         if self.detector is not None:
             m["detect"] = self.detector.summary()
 

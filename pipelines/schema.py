@@ -22,7 +22,7 @@ from mpm.scene import CONTACT_TYPES as CONTACTS
 from mpm.schemes import SCHEMES
 
 PRECISIONS = ("float32", "float64")
-DEVICES = ("cpu", "cuda")
+DEVICES = ("auto", "cpu", "cuda")
 SHAPES = ("box", "sphere", "cylinder", "bowl", "mesh", "compound")
 __all__ = ["BOUNDARIES", "COLLIDERS", "CONTACTS", "DEVICES", "PRECISIONS", "SHAPES", "register"]
 
@@ -143,7 +143,6 @@ class SceneConfig:
     ppc: int = 4  # particles per cell
     jitter: float = 0.0  # random displacement of lattice samples [fraction of spacing]
     lattice_offset: Optional[List[float]] = None  # shift of the sampling lattice [cells]; ppc 1 + 0.5: on nodes
-    log_every: int = 1  # particle logging cadence when log.every is null
     contact: str = "frictionless"  # between bodies: frictionless | none | shared (one grid, EMPM)
     contact_fill: float = 0.5  # node volume fraction the bodies must fill for contact
     bodies: List[BodyConfig] = field(default_factory=list)
@@ -166,7 +165,7 @@ class RunConfig:
     dt_max: float = 1.0e-3  # largest adaptive step [s]
     dt_collapse: float = 1.0e-4  # unstable when the adaptive step falls below this fraction of the first
     precision: str = "float32"  # float32 | float64
-    device: str = "cpu"  # cpu | cuda
+    device: str = "auto"  # auto (cuda when Warp finds a GPU, else cpu) | cpu | cuda
     force: bool = False  # in a sweep: run even if a job with the same config hash finished
     reference: Optional[str] = None  # a run directory (or its final_state.npz) to measure the error against
 
@@ -175,7 +174,10 @@ class RunConfig:
 class LogConfig:
     """What goes into the recording."""
 
-    every: Optional[int] = None  # particles every N steps; 0: none; null: the scene's
+    every: Optional[int] = None  # particles every N steps; 0: none; null: log.fps frames per simulated second
+    fps: float = 60.0  # particle frames per simulated second (when log.every is null)
+    color: str = "auto"  # particle colour: auto (plastic_strain with plastic bodies, else dJ) | dJ | plastic_strain | body
+    size_warning_mb: float = 1000.0  # warn before a run whose recording would be larger [MB]
     dJ: bool = True  # the per-particle dJ field with the particles
     fracture_every: int = 20  # steps between evaluations of the fracture measure (and at the end)
     scalars: bool = True  # physics scalars every step

@@ -31,6 +31,7 @@ class RunMeta:
     run_properties: dict = field(default_factory=dict)  # name -> {key: value}: when, where, which command
     scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
     colliders: list = field(default_factory=list)  # mpm.colliders.Collider (drawn by the sink)
+    color: str = "body"  # what colours the particles: body, dJ or a per-particle field
 
 
 class Sink:
@@ -40,8 +41,8 @@ class Sink:
         pass
 
     def particles(self, step: int, t: float, x: np.ndarray, dJ: np.ndarray | None,
-                  fields: dict[str, np.ndarray] | None = None) -> None:
-        pass
+                  fields: dict[str, np.ndarray] | None = None, index: np.ndarray | None = None) -> None:
+        """Particles of a logged frame; ``index``: their numbers, when some were removed."""
 
     def scalars(self, step: int, t: float, values: dict[str, float]) -> None:
         pass

@@ -50,13 +50,21 @@ class RunSettings:
 
 @dataclass
 class LogSettings:
-    every: int  # 0: no particles
+    every: int | None  # particles every N steps; 0: none; None: log.fps frames per simulated second
+    fps: float  # frames per simulated second [1/s]
+    color: str  # body, dJ or plastic_strain
+    size_warning_mb: float
     dJ: bool
     fracture_every: int
     scalars: bool
     flush_every: int
     progress: bool | None
     recording: str
+
+    @property
+    def particles(self) -> bool:
+        """Whether particle frames are logged at all."""
+        return self.every != 0
 
 
 @dataclass
@@ -680,6 +688,19 @@ def check_memory(spec: "RunSpec") -> None:
                                f"{have / gib:.3g} GiB; accepted: a smaller grid or fewer particles per cell")
 
 
+def _color(value, scene, dJ: bool) -> str:
+    """``log.color``: what colours the particles; ``auto`` resolved."""
+    plastic = any(b.material.plastic for b in scene.bodies)
+    accepted = ["auto", "body"] + (["dJ"] if dJ else []) + (["plastic_strain"] if plastic else [])
+    if value not in accepted:
+        why = ("" if value not in ("dJ", "plastic_strain") else
+               " (log.dJ is false)" if value == "dJ" else " (no plastic body in this scene)")
+        raise ConfigError("log.color", f"{value!r}{why}; accepted: {', '.join(accepted)}")
+    if value == "auto":
+        return "plastic_strain" if plastic else "dJ" if dJ else "body"
+    return value
+
+
 def _recording_name(value) -> str:
     """``log.recording``: a file name inside the run directory."""
     name = "" if value is None else str(value)
@@ -727,19 +748,23 @@ def resolve(cfg) -> RunSpec:
     if run.steps is None and run.duration is None:
         run.duration = _number("scene.duration", sd["duration"], gt=0.0)
     lg = _plain(cfg.log)
-    every = _number("log.every", lg["every"], int, ge=0, optional=True)
-    if every is None:
-        every = _number("scene.log_every", sd["log_every"], int, ge=0)
     log = LogSettings(
-        every=every, dJ=bool(lg["dJ"]), scalars=bool(lg["scalars"]),
+        every=_number("log.every", lg["every"], int, ge=0, optional=True),
+        fps=_number("log.fps", lg["fps"], gt=0.0), color=_color(lg["color"], scene, bool(lg["dJ"])),
+        size_warning_mb=_number("log.size_warning_mb", lg["size_warning_mb"], gt=0.0),
+        dJ=bool(lg["dJ"]), scalars=bool(lg["scalars"]),
         fracture_every=_number("log.fracture_every", lg["fracture_every"], int, ge=1),
         flush_every=_number("log.flush_every", lg["flush_every"], int, ge=1),
         progress=lg["progress"], recording=_recording_name(lg["recording"]))
-    if run.device == "cuda":
+    if run.device in ("auto", "cuda"):
         import warp as wp
 
-        if not wp.is_cuda_available():
-            raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: cpu")
+        if wp.is_cuda_available():
+            run.device = "cuda"
+        elif run.device == "cuda":
+            raise ConfigError("run.device", "cuda: no CUDA device on this machine; accepted: auto, cpu")
+        else:
+            run.device = "cpu"
     return RunSpec(scene=scene, scene_name=str(sd.get("name")), scheme=scheme,
                    kernel=mpm.KERNELS[kernel_name], transfer=transfer, run=run, log=log, seed=seed,
                    integrator=integrator, detect=detect, stability_map=stability_map,

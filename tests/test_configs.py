@@ -63,7 +63,7 @@ def test_material_group_applies_unless_the_scene_assigns():
 
 def test_run_length_and_logging_defaults():
     spec = spec_for(["scene=cube_drop_3d"])
-    assert spec.end == (None, 1.0) and spec.log.every == 4
+    assert spec.end == (None, 1.0) and spec.log.every is None and spec.log.fps == 60  # frames in simulated time
     spec = spec_for(["scene=elastic_ball_2d", "run.steps=7", "log.every=0"])
     assert spec.end == (7, None) and spec.log.every == 0
 

@@ -89,3 +89,26 @@ def test_rerun_compare_finds_two_identical_runs_equal(tmp_path):
     assert same.returncode == 0, same.stderr[-2000:]
     assert compare("a", "c").returncode != 0
     assert compare("a", "b", "recording.timings.rrd").returncode != 0  # step times differ
+
+
+def test_particles_are_logged_at_a_frame_rate_in_simulated_time(tmp_path):
+    """log.every null: a frame at the first step at or past each multiple of
+    1 / log.fps, and the last step; colours by dJ with a legend."""
+    fps, duration = 100.0, 0.05
+    cfg = compose_cfg(["scene.resolution=24", f"run.duration={duration}", f"log.fps={fps}"])
+    spec = resolve(cfg)
+    assert spec.log.every is None and spec.log.color == "dJ"
+    m = execute(spec, tmp_path, OmegaConf.to_yaml(cfg), [])
+    assert m["status"] == "completed" and m["steps"] > 20
+    rec = recordings.read(tmp_path / "recording.rrd")
+    steps, times = rec.scalars["dt"][0], np.cumsum(rec.scalars["dt"][1])  # t after steps 1, 2, ...
+    t_of = dict(zip(steps.tolist(), times.tolist()))
+    t_of[0] = 0.0
+    frames = rec.steps.tolist()
+    assert frames[0] == 0 and frames[-1] == m["steps"]
+    k = np.floor(np.array([t_of[s] for s in frames]) * fps * (1 + 1e-9))
+    assert np.all(np.diff(k[:-1]) == 1)  # one frame per 1/fps interval
+    for s in frames[1:-1]:  # each is the first step past its multiple
+        assert np.floor(t_of[s - 1] * fps * (1 + 1e-9)) < np.floor(t_of[s] * fps * (1 + 1e-9))
+    assert len(frames) in (round(duration * fps) + 1, round(duration * fps) + 2)  # the last may land on one
+    assert m["recording_estimate_mb"] > 0

@@ -30,6 +30,13 @@ REFUSED = [
     (["seed=-1", "scene.jitter=0.5"], "seed", "seed >= 0"),
     (["detect.action=halt"], "detect.action", "accepted: stop, warn, off"),
     (["scene.wall_cells=40"], "scene.wall_cells", "leave no interior along axis 0"),
+    (["log.fps=0"], "log.fps", "log.fps > 0"),
+    (["log.fps=inf"], "log.fps", "not finite"),
+    (["log.color=rainbow"], "log.color", "accepted: auto, body, dJ"),
+    (["log.color=plastic_strain"], "log.color", "no plastic body"),
+    (["log.color=dJ", "log.dJ=false"], "log.color", "log.dJ is false"),
+    (["log.size_warning_mb=-1"], "log.size_warning_mb", "> 0"),
+    (["run.device=tpu"], "run.device", "accepted: auto, cpu, cuda"),
 ]
 
 
@@ -118,3 +125,17 @@ def test_material_override_on_a_scene_with_its_own_materials_is_said():
     assert len(notes) == 1 and "material.E=5 has no effect" in notes[0] and "rotating_plate_2d" in notes[0]
     assert unused_overrides(spec_for(["material.E=5"]), ["material.E=5"]) == []  # the ball takes the group's
     assert unused_overrides(own, ["scene=rotating_plate_2d"]) == []
+
+
+def test_a_large_recording_is_announced_before_the_run(tmp_path, capsys):
+    m = execute(spec_for(["scene.resolution=24", "run.steps=3", "log.size_warning_mb=0.01"]), tmp_path, sink=Sink())
+    err = capsys.readouterr().err
+    assert m["status"] == "completed" and m["recording_estimate_mb"] > 0.01
+    assert "warning: the recording will be about" in err and "log.size_warning_mb=0.01" in err
+
+
+def test_device_auto_is_the_machine_s_device():
+    import warp as wp
+
+    spec = spec_for([])
+    assert spec.run.device == ("cuda" if wp.is_cuda_available() else "cpu")
