@@ -37,7 +37,7 @@ BAD_INPUTS = [
     (["scene.bodies.0.material={model: fluid, Kk: 3}"],
      "scene.bodies[0].material.Kk: not a parameter of fluid; accepted: model, rho, K, gamma, viscosity"),
     (["run.precision=float16"], "run.precision: 'float16' unknown; accepted: float32, float64"),
-    (["run.device=tpu"], "run.device: 'tpu' unknown; accepted: cpu, cuda"),
+    (["run.device=tpu"], "run.device: 'tpu' unknown; accepted: auto, cpu, cuda"),
     (["run.steps=0"], "run.steps: 0 out of range; accepted: run.steps >= 1"),
     (["run.steps=5", "run.duration=1"], "run.steps: set run.steps or run.duration, not both"),
     (["run.dt=-1"], "run.dt: -1.0 out of range; accepted: run.dt > 0.0"),
