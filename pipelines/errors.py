@@ -12,6 +12,7 @@ from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, OmegaConfBas
 from .validate import ConfigError
 
 EXIT_CONFIG = 2
+EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}  # of a run, by status
 
 
 def _first_line(text: str) -> str:
@@ -50,6 +51,9 @@ def describe(exc: BaseException) -> str | None:
         if m:
             kind = {"Float": "a number", "Integer": "an integer", "Boolean": "true or false"}
             return f"{key}: {m.group(1)!r} is not {kind.get(m.group(2), m.group(2))}"
+        m = re.match(r"Value '(.*)' is not a valid bool", msg)
+        if m:
+            return f"{key}: {m.group(1)!r} is not true or false; accepted: true, false"
         if msg.startswith("Invalid type assigned") and re.search(r"\[\d+\]$", key):
             return (f"{key}: no such element, the index is past the end of the list; accepted: an existing "
                     f"element's index, or the whole list")

@@ -25,8 +25,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from . import provenance, schema
-from .errors import EXIT_CONFIG, describe
-from .runner import EXIT_CODES, execute
+from .errors import EXIT_CODES, EXIT_CONFIG, describe
 from .validate import ConfigError, check_memory, resolve
 from .warp_setup import init_warp
 
@@ -75,6 +74,8 @@ def run(cfg: DictConfig) -> dict:
 
         metrics = run_map(spec, spec.stability_map, out_dir, identity)
     else:
+        from .runner import execute  # with Rerun: imported only for a run that goes ahead
+
         metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
                           identity=identity)
     _last_status.append(metrics["status"])

@@ -29,8 +29,6 @@ from .rerun_sink import RerunSink
 from .sinks import RunMeta, Sink
 from .validate import RunSpec
 
-EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}
-
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
 

@@ -582,7 +582,7 @@ def make_scene(node, default_material: Material, key: str = "scene",
         lattice_offset=None if d.get("lattice_offset") is None else
         _vector(f"{key}.lattice_offset", d["lattice_offset"], dim),
         contact=_choice(f"{key}.contact", d["contact"], CONTACTS),
-        contact_fill=_number(f"{key}.contact_fill", d["contact_fill"], gt=0.0),
+        contact_fill=_number(f"{key}.contact_fill", d["contact_fill"], gt=0.0, le=1.0),
         regions=[make_region(r, f"{key}.regions[{i}]", dim, [b.name for b in bodies])
                  for i, r in enumerate(d.get("regions") or [])],
         particle_resolution=_number(f"{key}.particle_resolution", d.get("particle_resolution"), int,
@@ -713,11 +713,22 @@ def _recording_name(value) -> str:
 def _known_keys(cfg) -> None:
     """A key added with ``+`` that no schema knows (``+run.stepz=5``) would
     be ignored silently: refuse it, naming the accepted keys."""
-    from .schema import Config, LogConfig, RunConfig
+    from .schema import (BodyConfig, ColliderConfig, Config, KernelConfig, LogConfig, RegionConfig, RunConfig,
+                         SceneConfig, ShapeConfig)
 
-    sections = [("", cfg, Config), ("run.", cfg.get("run"), RunConfig), ("log.", cfg.get("log"), LogConfig)]
+    sections = [("", cfg, Config), ("run.", cfg.get("run"), RunConfig), ("log.", cfg.get("log"), LogConfig),
+                ("kernel.", cfg.get("kernel"), KernelConfig), ("scene.", cfg.get("scene"), SceneConfig)]
+    scene = cfg.get("scene")
+    if isinstance(scene, DictConfig):  # list elements of the scene: bodies, regions, colliders, their shapes
+        for name, schema in (("bodies", BodyConfig), ("regions", RegionConfig), ("colliders", ColliderConfig)):
+            for i, item in enumerate(scene.get(name) or []):
+                if isinstance(item, DictConfig):
+                    sections.append((f"scene.{name}[{i}].", item, schema))
+                    for shape in ("shape", "select"):
+                        if isinstance(item.get(shape), DictConfig) and shape in schema.__dataclass_fields__:
+                            sections.append((f"scene.{name}[{i}].{shape}.", item.get(shape), ShapeConfig))
     for prefix, node, schema in sections:
-        if node is None:
+        if not isinstance(node, DictConfig):
             continue
         known = {f.name for f in dataclasses.fields(schema)}
         for key in node:
