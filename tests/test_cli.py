@@ -48,6 +48,61 @@ BAD_INPUTS = [
     (["log.every=-1"], "log.every: -1 out of range; accepted: log.every >= 0"),
     (["material.E=["], "cannot parse the command line"),
     (["scene.bodies.3.velocity=[1,0]"], "scene.bodies[3]: no such element, the index is past the end"),
+    # values that passed validation and then hung (run forever, or "complete" at t = 0)
+    (["run.duration=inf"], "run.duration: inf is not finite; accepted: a finite number"),
+    (["run.duration=nan"], "run.duration: nan is not finite"),
+    (["run.duration=-1"], "run.duration: -1.0 out of range; accepted: run.duration > 0.0"),
+    (["run.dt=1e-400"], "run.dt: 0.0 out of range; accepted: run.dt > 0.0"),
+    # values that ended in a traceback
+    (["run.dt=inf"], "run.dt: inf is not finite"),
+    (["run.dt=nan"], "run.dt: nan is not finite"),
+    (["seed=-1", "scene.jitter=0.5"], "seed: -1 out of range; accepted: seed >= 0"),
+    (["seed=abc"], "seed: 'abc' is not an integer"),
+    (["log.recording="], "log.recording: ''; accepted: a file name ending in .rrd"),
+    (["log.recording=missing/x.rrd"], "log.recording: 'missing/x.rrd'; accepted: a file name ending in .rrd, "
+                                      "without a directory"),
+    (["scene.resolution=100000"], "scene.resolution: the run needs about"),
+    (["scene.ppc=100000"], "scene.ppc: the run needs about"),
+    (["run.steps=1e30"], "run.steps: '1e+30' is not an integer"),
+    (["run.reference=/nonexistent/final_state.npz"], "run.reference: '/nonexistent/final_state.npz': no "
+                                                     "final_state.npz there"),
+    # input that was silently ignored
+    (["+run.stepz=5"], "run.stepz: unknown key; accepted: cfl, device, dt,"),
+    (["+log.evry=3"], "log.evry: unknown key; accepted: color, dJ, every,"),
+    (["+foo=1"], "foo: unknown key; accepted: detect, expected, integrator,"),
+    (["+scene.bodies.0.colour=red"], "scene.bodies[0].colour: unknown key; accepted: angular_velocity,"),
+    (["+scene.bodies.0.shape.radiuss=1"], "scene.bodies[0].shape.radiuss: unknown key; accepted: axis,"),
+    (["+kernel.support=5"], "kernel.support: unknown key; accepted: name, transfer"),
+    (["scene.contact_fill=2"], "scene.contact_fill: 2.0 out of range; accepted: scene.contact_fill > 0.0, "
+                               "scene.contact_fill <= 1.0"),
+    # messages that said too little or blamed the wrong key
+    (["material.E=nan"], "material.E: nan is not finite; accepted: a finite number"),
+    (["material.nu=nan"], "material.nu: nan is not finite"),
+    (["scene.wall_cells=40"], "scene.wall_cells: 40 cells (0.625 m) per face leave no interior along axis 0"),
+    (["scene=rotating_plate_2d", "scene.regions.0.body=7"], "scene.regions[0]: no such element"),
+    (["log.progress=maybe"], "log.progress: 'maybe' is not true or false; accepted: true, false"),
+    # ranges, sizes, names and shapes of every group
+    (["run.cfl=0"], "run.cfl: 0.0 out of range; accepted: run.cfl > 0.0, run.cfl <= 1.0"),
+    (["run.dt_collapse=2"], "run.dt_collapse: 2.0 out of range"),
+    (["scene.resolution=2.5"], "scene.resolution: '2.5' is not an integer"),
+    (["scene.domain=[0,1]"], "scene.domain[0]: 0.0 out of range; accepted: scene.domain[0] > 0.0"),
+    (["scene.gravity=[0]"], "scene.gravity: [0.0]; accepted: a list of 2 numbers"),
+    (["scene.lattice_offset=[0.5]"], "scene.lattice_offset: [0.5]; accepted: a list of 2 numbers"),
+    (["scene.contact=glue"], "scene.contact: 'glue' unknown; accepted: frictionless, none, shared"),
+    (["scene.size=huge"], "scene.size: 'huge' unknown for scene elastic_ball_2d; accepted: default, paper"),
+    (["scene.bodies.0.velocity=[nan,0]"], "scene.bodies[0].velocity[0]: nan is not finite"),
+    (["scene.bodies.0.shape.type=cone"], "scene.bodies[0].shape.type: 'cone' unknown; accepted: box, sphere,"),
+    (["scene.bodies.0.deformation=[[1,0],[0,0]]"], "scene.bodies[0].deformation: ((1.0, 0.0), (0.0, 0.0)); "
+                                                   "accepted: 2 rows of 2 finite numbers, det F != 0"),
+    (["scene.bodies=[]"], "scene.bodies: empty; accepted: at least one body"),
+    (["integrator=implicit", "integrator.newton_max=0"], "integrator.newton_max: 0 out of range"),
+    (["scheme=aulmpm", "scheme.criterion=foo"], "scheme.criterion: 'foo' unknown; accepted: paper, distortion"),
+    (["detect.speed_factor=0"], "detect.speed_factor: 0.0; accepted: a number > 0"),
+    (["scene=viscous_cup", "scene.colliders.0.boundary=glue"],
+     "scene.colliders[0].boundary: 'glue' unknown; accepted: sticky, slip, separate"),
+    (["log.fps=0"], "log.fps: 0.0 out of range; accepted: log.fps > 0.0"),
+    (["log.color=rainbow"], "log.color: 'rainbow'; accepted: auto, body, dJ"),
+    (["log.color=plastic_strain"], "log.color: 'plastic_strain' (no plastic body in this scene)"),
 ]
 
 
@@ -60,6 +115,42 @@ def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
     assert lines == [lines[0]] and lines[0].startswith(f"error: {message}"), p.stderr
     assert "Traceback" not in p.stderr
     assert not out.exists()  # nothing was run, nothing left behind
+
+
+# documented outcomes of inputs that are not errors: (args, exit code, a stderr
+# fragment, a check of metrics.json)
+BEHAVIOURS = [
+    # an initial velocity that overflows float32: unstable at step 0, not a hang
+    (["scene.bodies.0.velocity=[1e30,0]"], 3, "kinetic or potential energy is not finite",
+     lambda m: m["status"] == "unstable" and m["unstable_step"] == 0 and m["unstable_criterion"] == "nonfinite"),
+    # an override the scene cannot use is said, and the run goes ahead
+    (["scene=rotating_plate_2d", "material.E=5", "run.steps=2"], 0,
+     "note: material.E=5 has no effect: every body of scene rotating_plate_2d brings its own material",
+     lambda m: m["status"] == "completed"),
+    # an open wall removes the particles that leave through it
+    (["scene.walls=[slip,open,slip,slip]", "scene.gravity=[0,0]", "scene.bodies.0.velocity=[8,0]",
+      "run.duration=0.05"], 0, "completed", lambda m: m["status"] == "completed" and m["removed"]["total"] > 0),
+    # epsilon = inf: A-ULMPM never updates (it is TLMPM)
+    (["scheme=aulmpm", "scheme.epsilon=inf", "run.steps=3"], 0, "completed",
+     lambda m: m["config_updates"]["total"] == 0),
+    # a recording larger than log.size_warning_mb is announced before the run
+    (["run.steps=2", "log.size_warning_mb=0.01"], 0, "warning: the recording will be about",
+     lambda m: m["recording_estimate_mb"] > 0.01),
+]
+
+
+@pytest.mark.parametrize("args,code,fragment,check", BEHAVIOURS, ids=[" ".join(a)[:60] for a, *_ in BEHAVIOURS])
+def test_documented_behaviour(args, code, fragment, check, tmp_path):
+    p = run_cli(["scene.resolution=24", "log.progress=false"] + args + [f"hydra.run.dir={tmp_path}"], cwd=ROOT,
+                timeout=300)
+    assert p.returncode == code, p.stderr
+    assert fragment in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert check(json.loads((tmp_path / "metrics.json").read_text()))
+    verify(tmp_path / "recording.rrd")
+
+
+def test_the_cli_table_covers_sixty_inputs():
+    assert len(BAD_INPUTS) + len(BEHAVIOURS) >= 60
 
 
 def verify(path: Path) -> None:
