@@ -74,7 +74,11 @@ def run(cfg: DictConfig) -> dict:
 
         metrics = run_map(spec, spec.stability_map, out_dir, identity)
     else:
+        from .progress import Progress
         from .runner import execute  # with Rerun: imported only for a run that goes ahead
+
+        if hc.mode != RunMode.MULTIRUN and Progress.shown(cfg.log.progress):
+            print(f"run directory: {out_dir}", file=sys.stderr, flush=True)
 
         metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
                           identity=identity)
@@ -134,6 +138,14 @@ def main() -> None:
         _main()
     except KeyboardInterrupt:
         sys.exit(EXIT_CODES["interrupted"])
+    except OSError as e:
+        if _last_status or not e.filename:  # a run started: its own failure, with its traceback
+            raise
+        # Hydra could not create the run (or sweep) directory
+        key = "hydra.sweep.dir" if any(a in ("-m", "--multirun") for a in sys.argv[1:]) else "hydra.run.dir"
+        message = f"{key}: cannot create {e.filename}: {e.strerror}; accepted: a writable directory"
+        print(f"error: {message}", file=sys.stderr)
+        _config_errors.append(message)
     except Exception as e:  # noqa: BLE001 - classified below
         message = describe(e)
         if message is None:
