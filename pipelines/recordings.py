@@ -8,8 +8,10 @@ without its footer: :func:`read` still reads it (the chunks are all there,
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
+import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,7 +60,19 @@ def _load(path: str | Path):
         warnings.simplefilter("always")
         reader = RrdReader(str(path))
     complete = not any("no footer" in str(w.message) for w in caught)
-    return reader.stream().collect(), complete
+    try:
+        return reader.stream().collect(), complete
+    except RuntimeError:
+        if complete:
+            raise
+    # killed in the middle of writing a message: read a repaired copy (the original is left as it is)
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / "recording.rrd"
+        shutil.copyfile(path, copy)
+        repair(copy)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return RrdReader(str(copy)).stream().collect(), False
 
 
 def is_complete(path: str | Path) -> bool:

@@ -214,7 +214,7 @@ def reproduce(path: Path, workdir: Path | None = None) -> dict:
 
 def repair(path: Path) -> list[str]:
     """Repair the recording and its timings file; a metrics.json still
-    ``running`` (or missing) becomes ``killed`` at the last recorded step.
+    ``running`` becomes ``killed`` at the last recorded step.
     Returns what was done, a line each."""
     done = []
     for f in (path, recordings.timings_path(path)):
@@ -222,8 +222,8 @@ def repair(path: Path) -> list[str]:
             backup = recordings.repair(f)
             done.append(f"{f}: repaired (original: {backup})" if backup else f"{f}: complete, left as it is")
     metrics = path.parent / "metrics.json"
-    m = json.loads(metrics.read_text()) if metrics.is_file() else {"status": "running"}
-    if m.get("status") == "running":
+    m = json.loads(metrics.read_text()) if metrics.is_file() else {}
+    if m.get("status") == "running":  # its process is gone (or this is run while it still runs: don't)
         rec = recordings.read(path)
         steps, t = rec.end
         m.update(status="killed", steps=steps, sim_time=t,
@@ -254,11 +254,17 @@ def main(argv=None) -> int:
     if not args.recording.is_file():
         print(f"error: recording: {args.recording}: no such file", file=sys.stderr)
         return 2
+    try:
+        complete = recordings.is_complete(args.recording)
+    except (RuntimeError, OSError, ValueError) as e:
+        print(f"error: recording: {args.recording}: not a readable Rerun recording "
+              f"({str(e).splitlines()[0] if str(e) else type(e).__name__})", file=sys.stderr)
+        return 2
     if args.repair:
         for line in repair(args.recording):
             print(line)
         return 0
-    if not recordings.is_complete(args.recording):
+    if not complete:
         print(f"note: {args.recording} has no footer: its run was killed before closing it; it is read "
               f"all the same. To repair it: python -m pipelines.replay {args.recording} --repair",
               file=sys.stderr)

@@ -93,6 +93,12 @@ def test_a_killed_run_is_read_and_repaired(tmp_path):
     assert not recordings.is_complete(rec)
     killed = recordings.read(rec)
     assert not killed.complete and len(killed.steps) >= 2 and killed.end[0] >= killed.steps[-1]
+    # power lost in the middle of writing a message: the messages before it are read
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(rec.read_bytes()[:-777])
+    partial = recordings.read(cut)
+    assert not partial.complete and 1 <= len(partial.steps) <= len(killed.steps)
+    assert np.array_equal(partial.positions[0], killed.positions[0])
     r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir), "--frames",
                         str(tmp_path / "frames"), "--every", "1000"], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0 and "has no footer" in r.stderr and "--repair" in r.stderr, r.stderr
@@ -106,3 +112,12 @@ def test_a_killed_run_is_read_and_repaired(tmp_path):
     assert v.returncode == 0, v.stderr
     m = json.loads((run_dir / "metrics.json").read_text())
     assert m["status"] == "killed" and m["steps"] == repaired.end[0] >= 5
+
+
+def test_a_file_that_is_no_recording_is_one_line(tmp_path):
+    bad = tmp_path / "recording.rrd"
+    bad.write_text("not a recording")
+    r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(tmp_path), "--frames", str(tmp_path / "f")],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == [r.stderr.strip()] and "not a readable Rerun recording" in r.stderr
