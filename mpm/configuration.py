@@ -29,9 +29,12 @@ MOMENT_REGULARISATION = 1.0e-6
 
 
 @functools.cache
-def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradients: bool):
+def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradients: bool,
+                fused: bool = False):
     """``project``: the material's projection factory or None; ``gradients``:
-    cache the weight derivatives too (APIC and PIC transfers)."""
+    cache the weight derivatives too (APIC and PIC transfers); ``fused``: the
+    transfers locate the stencils themselves (mpm.stencil.fuse): only K_p is
+    cached."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
@@ -75,15 +78,16 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         F0s[p] = F
         Fsn[p] = wp.identity(n=dim, dtype=S)
         D = t.mat()
-        for g in range(G):
+        for g in range(wp.static(0 if fused and not per_particle_K else G)):
             box = b * G + g
             flat, fx, W, dW = locate(Xp, S(1.0) / dx, grid_offsets[g], lo[box], shape[box], offset[box])
-            k = p * G + g
-            cache.base[k] = flat
-            cache.fx[k] = fx
-            cache.W[k] = W
-            if wp.static(gradients):
-                cache.dW[k] = dW
+            if wp.static(not fused):
+                k = p * G + g
+                cache.base[k] = flat
+                cache.fx[k] = fx
+                cache.W[k] = W
+                if wp.static(gradients):
+                    cache.dW[k] = dW
             if wp.static(per_particle_K):
                 m1 = t.vec()
                 m2 = t.vec()

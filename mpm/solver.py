@@ -28,6 +28,7 @@ from .grid import make_boundary, make_boundary_data, make_constraints, make_grid
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
 from .layout import GridLayout
+from .stencil import fuse
 from .model import Model, State
 from .scene import WALL_TYPES
 from .schemes import AULMPM, EMPM, scene_kind
@@ -51,6 +52,10 @@ class SolverOptions:
     track_energy: bool = False
     """report the new state's kinetic and potential energy and each body's
     fastest particle every step (mpm.stability)"""
+    fuse: bool = True
+    """the explicit Eulerian scheme locates stencils in P2G and G2P instead
+    of caching them at its every-step update (False: the cached path, for
+    comparisons; the results are the same bit for bit)"""
 
 
 @dataclass
@@ -134,14 +139,17 @@ class Solver:
         solution = model.scene.solution
         self.forcing = solution if getattr(solution, "has_body_force", False) else None
         self.implicit = isinstance(self.options.integrator, Implicit)
+        # the Eulerian scheme (explicit) locates the stencils in the transfers: its reference moves every step
+        self.fused = self.options.fuse and isinstance(scheme, EMPM) and not self.implicit
         self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
-                               lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit), g)
+                               lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
+                               fused=self.fused), g)
                      for g in model.groups]
         self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies),
                              track_energy=self.options.track_energy, track_inversion=self.options.track_J,
-                             removal=self.removal)
+                             removal=self.removal, fused=self.fused)
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -162,7 +170,7 @@ class Solver:
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
         self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform,
-                                       gradients=transfer != "mls" or k.gradient_affine)
+                                       gradients=transfer != "mls" or k.gradient_affine, fused=self.fused)
                         for b in range(nb)}
 
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=shared)
@@ -230,6 +238,38 @@ class Solver:
         ks += [self._constraints] + self._solve.kernels() if self.implicit else []
         return ks + list(self._update.values())
 
+    def plan(self) -> list[tuple[str, list[str]]]:
+        """The stages of one step, in order, and the kernels each launches
+        (what this scene compiles; an absent stage is work the scene does
+        not need)."""
+        def names(*ks):  # make_p2g.p2g for the kernel p2g that make_p2g specialises
+            return [k.key.replace("__locals__", ".").lstrip("_") for k in ks if k is not None]
+
+        sch = self.scheme
+        stages = [("clear the grid", [])]
+        if self.forcing is not None:
+            stages.append(("body force of the closed-form solution (host)", []))
+        stages.append((f"P2G ({len(self._p2g)} material group(s); stencils "
+                       f"{'located on the fly' if self.fused else 'from the cache'})",
+                       names(*[k for k, _ in self._p2g])))
+        stages.append(("grid update: velocities, gravity, walls" + (", regions" if self.regions else "")
+                       + (", colliders" if self.collider_kinds else ""), names(self._grid_update)))
+        if self.implicit:
+            stages.append(("implicit solve: Newton, CG", names(self._constraints, *self._solve.kernels())))
+        if self.contact:
+            stages.append(("contact between bodies", names(*self._contact)))
+        if self._boundary is not None:
+            stages.append(("boundary after contact", names(self._boundary)))
+        g2p = "G2P" + (", removal at open walls" if self.removal else "") + (
+            ", energy and speed for the detection" if self.options.track_energy else "")
+        stages.append((g2p, names(self._g2p)))
+        update = {"empm": "every step", "tlmpm": "never (initial reference)"}.get(
+            sch.name, f"when the criterion fires (epsilon {getattr(sch, 'epsilon', 0):g})")
+        stages.append((f"configuration update: {update}", sorted(set(names(*self._update.values())))))
+        stages.append(("diagnostics, fracture measure" + (", particles inside colliders" if self._inside else "")
+                       + " (at logging cadence)", names(self._measure, self._fracture, self._inside)))
+        return stages
+
     def load(self) -> float:
         """Compile (or load from the cache) every kernel this run uses; seconds taken."""
         t0 = time.perf_counter()
@@ -245,6 +285,9 @@ class Solver:
         mass = self.model.mass.numpy().astype(np.float64)
         self._center = mass @ self.X0 / mass.sum()  # the angular momentum scale's centre
         self._prepare_fracture(x)
+        if self.fused:
+            m = self.model
+            fuse(state.stencils, m.types, m.kernel, state.X, self.layout.lo_d, self.layout.offset_d, m.dx)
         for b, (start, count) in enumerate(self.model.body_ranges):
             xb = x[start:start + count]
             self.layout.fit(b, xb.min(axis=0), xb.max(axis=0))

@@ -85,8 +85,13 @@ def make_stencil_cache(t: Types, kernel: Kernel):
     """The stencil cache (mpm.model.State.stencils): per particle p and kernel
     grid g (entry ``p * G + g``) what :func:`make_locate` gives at the last
     configuration update, and per particle the MLS/APIC moment inverse K_p
-    (one unused entry when the kernel's moment is a constant)."""
+    (one unused entry when the kernel's moment is a constant). A *fused*
+    cache (:func:`fuse`) keeps no stencils: it points at the reference
+    positions and the layout, and the transfers locate each stencil again
+    (the Eulerian scheme updates every step: writing the stencils and
+    reading them back costs more memory traffic than computing them)."""
     Wm = weight_matrix_type(t, kernel)
+    Gv = wp.types.vector(kernel.n_grids, t.scalar)
 
     @wp.struct
     class StencilCache:
@@ -95,6 +100,12 @@ def make_stencil_cache(t: Types, kernel: Kernel):
         W: wp.array(dtype=Wm)  # per-axis kernel weights
         dW: wp.array(dtype=Wm)  # and their derivatives (gradient-based transfers)
         K: wp.array(dtype=t.mat)  # K_p [1/m^2]
+        # fused: where the stencils are located from
+        X: wp.array(dtype=t.vec)  # reference positions [m]
+        lo: wp.array(dtype=t.ivec)  # layout: first node of box b * G + g
+        offset: wp.array(dtype=wp.int32)  # layout: its offset in the flat grid arrays
+        grid_offsets: Gv  # the kernel grids' offsets [cells]
+        inv_dx: t.scalar  # [1/m]
 
     return StencilCache
 
@@ -108,26 +119,49 @@ def stencil_cache(t: Types, kernel: Kernel, n: int):
     cache.W = wp.zeros(n * G, dtype=Wm)
     cache.dW = wp.zeros(n * G, dtype=Wm)
     cache.K = wp.zeros(n if kernel.moment is None else 1, dtype=t.mat)
+    cache.X = wp.zeros(1, dtype=t.vec)
+    cache.lo = wp.zeros(1, dtype=t.ivec)
+    cache.offset = wp.zeros(1, dtype=wp.int32)
+    return cache
+
+
+def fuse(cache, t: Types, kernel: Kernel, X: wp.array, lo: wp.array, offset: wp.array, dx: float):
+    """Make ``cache`` a fused one (see :func:`make_stencil_cache`): the
+    per-grid stencil arrays are released, K_p stays cached."""
+    cache.base = wp.zeros(1, dtype=wp.int32)
+    cache.fx = wp.zeros(1, dtype=t.vec)
+    cache.W = wp.zeros(1, dtype=weight_matrix_type(t, kernel))
+    cache.dW = wp.zeros(1, dtype=weight_matrix_type(t, kernel))
+    cache.X, cache.lo, cache.offset = X, lo, offset
+    cache.grid_offsets = wp.types.vector(kernel.n_grids, t.scalar)(*kernel.grids)
+    cache.inv_dx = t.scalar(1.0 / dx)
     return cache
 
 
 @functools.cache
-def make_cached(t: Types, kernel: Kernel, with_gradients: bool):
+def make_cached(t: Types, kernel: Kernel, with_gradients: bool, fused: bool = False):
     """``cached(p, g, body, shape, cache) -> (strides, flat, fx, W, dW)``:
     particle p's stencil on kernel grid g, as the last configuration update
-    left it (dW zero unless ``with_gradients``)."""
+    left it (dW zero unless ``with_gradients``); ``fused``: located again
+    from the reference position (the same arithmetic as the update's)."""
     G = kernel.n_grids
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
     Cache = make_stencil_cache(t, kernel)
+    locate = make_locate(t, kernel, with_gradients)
 
     @wp.func
     def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec), cache: Cache):
+        box = body * G + g
+        if wp.static(fused):
+            flat, fx, W, dW = locate(cache.X[p], cache.inv_dx, cache.grid_offsets[g], cache.lo[box],
+                                     shape[box], cache.offset[box])
+            return strides(shape[box]), flat, fx, W, dW
         k = p * G + g
         dW = Wm()
         if wp.static(with_gradients):
             dW = cache.dW[k]
-        return strides(shape[body * G + g]), cache.base[k], cache.fx[k], cache.W[k], dW
+        return strides(shape[box]), cache.base[k], cache.fx[k], cache.W[k], dW
 
     return cached
 

@@ -80,16 +80,18 @@ def make_min_stretch2(t: Types):
 
 
 def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-             with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True):
+             with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
+             fused: bool = False):
     """P2G for the particles of one material model: see :func:`_make_p2g`
-    (``lagrangian`` matters to plastic models only: one kernel otherwise)."""
+    (``lagrangian`` matters to plastic models only: one kernel otherwise;
+    ``fused``: stencils located from the reference positions, mpm.stencil.fuse)."""
     return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian or not material.plastic, with_stress)
+                     lagrangian or not material.plastic, with_stress, fused)
 
 
 @functools.cache
 def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-              with_body_force: bool, lagrangian: bool, with_stress: bool = True):
+              with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
@@ -114,7 +116,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
-    cached = make_cached(t, kernel, not mls)
+    cached = make_cached(t, kernel, not mls, fused)
     plastic = material.plastic
     plastic_update = stiffening = stress_energy = None
     if plastic:
@@ -228,7 +230,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 @functools.cache
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
-             track_inversion: bool = False, removal: bool = False):
+             track_inversion: bool = False, removal: bool = False, fused: bool = False):
     """G2P for all particles.
 
     ``removal`` (a domain with open faces): a particle that crosses the
@@ -237,6 +239,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     stays where it crossed, clamped to the interior, at rest, and G2P skips
     it from then on; ``status[STATUS_REMOVED]`` counts the removals. A
     particle crossing a closed face still counts as outside (unstable).
+    ``fused``: stencils located from the reference positions (mpm.stencil.fuse).
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
@@ -270,7 +273,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
     affine_from_gradient = affine and kernel.gradient_affine
-    cached = make_cached(t, kernel, not mls)
+    cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
 
     @wp.kernel(module="unique")

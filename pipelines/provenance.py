@@ -81,7 +81,7 @@ def code_hash(root: Path = REPO) -> str:
 
 # keys that do not change a run's result: they are left out of its hash
 # (scale only feeds interpolations, whose resolved values are hashed)
-UNHASHED = {"run": ("force",), "log": ("progress",), "scale": None}
+UNHASHED = {"run": ("force", "plan"), "log": ("progress",), "scale": None}
 
 
 def config_hash(config: dict, code: str, files: dict | None = None) -> str:

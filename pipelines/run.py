@@ -54,6 +54,12 @@ def run(cfg: DictConfig) -> dict:
             _remove_if_empty(out_dir)
         return invalid
     init_warp()  # a launcher's worker process did not pass through main()
+    if cfg.run.plan:
+        from .runner import plan
+
+        print(plan(spec))
+        _remove_if_empty(out_dir)
+        return {"status": "plan", "reason": ""}
     overrides = list(hc.overrides.task)
     for note in unused_overrides(spec, overrides):
         print(f"note: {note}", file=sys.stderr)

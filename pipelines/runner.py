@@ -151,6 +151,36 @@ def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
     }
 
 
+def solver_options(spec: RunSpec) -> mpm.SolverOptions:
+    """What the solver compiles for this run: dJ only when it is logged, the
+    detection's measurements only when it is on."""
+    detect = spec.detect.action != "off"
+    return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer,
+                             integrator=spec.integrator, track_energy=detect,
+                             track_J=detect and any(not b.material.invertible for b in spec.scene.bodies))
+
+
+def plan(spec: RunSpec) -> str:
+    """``run.plan=true``: the stages of a step and the kernels they launch,
+    the run's size, and what it logs; nothing is compiled or run."""
+    model, _ = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
+    solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+    log = spec.log
+    frames = ("none" if not log.particles else f"every {log.every} steps" if log.every is not None
+              else f"{log.fps:g} per simulated second")
+    lines = [f"{spec.scene_name}: {model.n_particles} particles, {len(spec.scene.bodies)} body(ies), "
+             f"{model.dim}D, {spec.run.precision} on {spec.run.device}; {solver.scheme.name}, "
+             f"{spec.kernel.name} kernel ({spec.transfer}), {spec.integrator.name} integrator",
+             "step:"]
+    for i, (stage, kernels) in enumerate(solver.plan(), 1):
+        lines.append(f"  {i}. {stage}" + (f": {', '.join(kernels)}" if kernels else ""))
+    lines.append(f"logging: particle frames {frames}" + (" with dJ" if solver.options.record_dJ else "")
+                 + (", scalars every step" if log.scalars else ", no scalars")
+                 + f", fracture every {log.fracture_every} steps; detection {spec.detect.action}")
+    lines.append(f"kernels compiled: {len(solver.kernels())}")
+    return "\n".join(lines)
+
+
 class Run:
     """One run: the solver, the sink and the bookkeeping between them."""
 
@@ -188,12 +218,7 @@ class Run:
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
         self.record_dJ = log.particles and log.dJ
-        detect = spec.detect.action != "off"
-        track_J = detect and any(not b.material.invertible for b in spec.scene.bodies)
-        self.solver = mpm.Solver(self.model, spec.scheme,
-                                 mpm.SolverOptions(record_dJ=self.record_dJ, transfer=spec.transfer,
-                                                   integrator=spec.integrator, track_J=track_J,
-                                                   track_energy=detect))
+        self.solver = mpm.Solver(self.model, spec.scheme, solver_options(spec))
         self.implicit = self.solver.implicit
         self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
         self.halvings = 0  # implicit steps retried with half the step

@@ -167,6 +167,7 @@ class RunConfig:
     precision: str = "float32"  # float32 | float64
     device: str = "auto"  # auto (cuda when Warp finds a GPU, else cpu) | cpu | cuda
     force: bool = False  # in a sweep: run even if a job with the same config hash finished
+    plan: bool = False  # print the stages and kernels of a step and exit (nothing compiled or run)
     reference: Optional[str] = None  # a run directory (or its final_state.npz) to measure the error against
 
 
