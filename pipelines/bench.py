@@ -34,6 +34,10 @@ Everything runs through the same code path as ``pipelines.run``
    (the paper's Table 2: 0.0165 / 0.0148 s = 1.11), Newton and CG
    iterations per step.
 
+7. fused: EMPM with the stencils located in P2G and G2P against cached at
+   its every-step update (``run.fuse``), on the 2D ball and the 3D sphere,
+   quadratic MLS, compact MLS and PIC.
+
 Each timed configuration runs five times and the fastest median counts
 (the machine's noise only ever adds time). ``--cold`` compiles into an empty
 kernel cache to time a first compile.
@@ -232,6 +236,34 @@ def bench_integrators(workdir: Path) -> list[dict]:
     return rows
 
 
+FUSED_CASES = {"ball_2d quadratic mls": CASES["ball_2d"],
+               "sphere_3d quadratic mls": KERNEL_CASE,
+               "sphere_3d compact mls": KERNEL_CASE + ["kernel=compact"],
+               "sphere_3d compact pic": KERNEL_CASE + ["kernel=compact", "kernel.transfer=pic"]}
+FUSED_ROUNDS = 3
+
+
+def bench_fused(workdir: Path, steps: int) -> list[dict]:
+    """EMPM with stencils located in P2G and G2P (fused) against cached at
+    every update, interleaved rounds, fastest median of each."""
+    common = ["scheme=empm", "log.every=0", "log.scalars=false", "log.progress=false", "detect.action=off"]
+    best: dict = {}
+    for name, over in FUSED_CASES.items():
+        for fuse in ("true", "false"):
+            execute(spec_for(over + common + ["run.steps=3", f"run.fuse={fuse}"]), workdir / "f_warm")
+    for k in range(FUSED_ROUNDS):
+        for name, over in FUSED_CASES.items():
+            for fuse in ("true", "false"):
+                m = execute(spec_for(over + common + [f"run.steps={steps}", f"run.fuse={fuse}"]),
+                            workdir / f"f_{k}")
+                key = (name, fuse)
+                if key not in best or m["step_time_ms"] < best[key]["step_time_ms"]:
+                    best[key] = m
+    return [{"case": name, "particles": best[(name, "true")]["particles"],
+             "fused_ms": best[(name, "true")]["step_time_ms"], "cached_ms": best[(name, "false")]["step_time_ms"]}
+            for name in FUSED_CASES]
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
@@ -247,6 +279,8 @@ def main(argv=None) -> None:
                    help="skip the material table")
     p.add_argument("--no-integrators", dest="integrators", action="store_false",
                    help="skip the integrator table")
+    p.add_argument("--no-fused", dest="fused", action="store_false",
+                   help="skip the fused-against-cached EMPM table")
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
@@ -268,6 +302,7 @@ def main(argv=None) -> None:
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
         materials = bench_materials(Path(tmp), 40) if args.materials else []
         integrators = bench_integrators(Path(tmp)) if args.integrators else []
+        fused = bench_fused(Path(tmp), 40) if args.fused else []
     print("speed (EMPM, float32, CPU)")
     print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
           f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
@@ -321,10 +356,17 @@ def main(argv=None) -> None:
             print(f"{r['integrator']:<14} {r['step_ms']:>14.3f} {r['mean_ms']:>12.3f} "
                   f"{r['vs_explicit']:>10.2f}x {newton:>11} {cg:>8}")
         print("the A-ULMPM paper (Table 2): implicit 0.0165 s / explicit 0.0148 s per step = 1.11x")
+    if fused:
+        print(f"\nEMPM stencils: located in the transfers (fused) against cached at every update, step only "
+              f"(fastest of {FUSED_ROUNDS} interleaved rounds)")
+        print(f"{'case':<26} {'particles':>9} {'fused ms':>9} {'cached ms':>10} {'speed-up':>9}")
+        for r in fused:
+            print(f"{r['case']:<26} {r['particles']:>9,} {r['fused_ms']:>9.3f} {r['cached_ms']:>10.3f} "
+                  f"{r['cached_ms'] / r['fused_ms']:>8.2f}x")
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,
-                                         "integrators": integrators}, indent=2) + "\n")
+                                         "integrators": integrators, "fused": fused}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -144,16 +144,12 @@ def main() -> None:
         _main()
     except KeyboardInterrupt:
         sys.exit(EXIT_CODES["interrupted"])
-    except OSError as e:
-        if _last_status or not e.filename:  # a run started: its own failure, with its traceback
-            raise
-        # Hydra could not create the run (or sweep) directory
-        key = "hydra.sweep.dir" if any(a in ("-m", "--multirun") for a in sys.argv[1:]) else "hydra.run.dir"
-        message = f"{key}: cannot create {e.filename}: {e.strerror}; accepted: a writable directory"
-        print(f"error: {message}", file=sys.stderr)
-        _config_errors.append(message)
     except Exception as e:  # noqa: BLE001 - classified below
         message = describe(e)
+        if message is None and isinstance(e, OSError) and e.filename and not _last_status:
+            # Hydra could not create the run (or sweep) directory; a run that started fails with its traceback
+            key = "hydra.sweep.dir" if any(a in ("-m", "--multirun") for a in sys.argv[1:]) else "hydra.run.dir"
+            message = f"{key}: cannot create {e.filename}: {e.strerror}; accepted: a writable directory"
         if message is None:
             raise
         print(f"error: {message}", file=sys.stderr)

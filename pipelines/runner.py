@@ -156,7 +156,7 @@ def solver_options(spec: RunSpec) -> mpm.SolverOptions:
     detection's measurements only when it is on."""
     detect = spec.detect.action != "off"
     return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer,
-                             integrator=spec.integrator, track_energy=detect,
+                             integrator=spec.integrator, track_energy=detect, fuse=spec.run.fuse,
                              track_J=detect and any(not b.material.invertible for b in spec.scene.bodies))
 
 
