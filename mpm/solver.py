@@ -52,10 +52,11 @@ class SolverOptions:
     track_energy: bool = False
     """report the new state's kinetic and potential energy and each body's
     fastest particle every step (mpm.stability)"""
-    fuse: bool = True
+    fuse: bool = False
     """the explicit Eulerian scheme locates stencils in P2G and G2P instead
-    of caching them at its every-step update (False: the cached path, for
-    comparisons; the results are the same bit for bit)"""
+    of caching them at its every-step update (the same results bit for bit).
+    Off by default: on the CPU it does not pay (the compact kernel's sines
+    are evaluated twice more per step; pipelines.bench measures it)"""
 
 
 @dataclass

@@ -235,7 +235,7 @@ def test_a_signal_landing_in_a_finaliser_is_not_lost():
 
 
 def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
-    one = run_cli(["run.plan=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
+    one = run_cli(["run.plan=true", "run.fuse=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
     assert one.returncode == 0, one.stderr
     assert "P2G (1 material group(s); stencils located on the fly)" in one.stdout
     assert "contact" not in one.stdout and "removal" not in one.stdout and "implicit" not in one.stdout
