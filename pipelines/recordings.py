@@ -123,10 +123,11 @@ def read(path: str | Path) -> Recording:
             index.append(None if fields[-1].get("index") is None else fields[-1].pop("index").astype(np.int64))
     static = data.reader(index=None, contents="/particles").to_pandas()
     body = colors = None
-    if "/particles:body_index" in static.columns and len(static) and static["/particles:body_index"].iloc[0] is not None:
+    body_col = "/particles:body_index"
+    if body_col in static.columns and len(static) and static[body_col].iloc[0] is not None:
         from .rerun_sink import PALETTE
 
-        body = np.asarray(static["/particles:body_index"].iloc[0], dtype=np.int64)
+        body = np.asarray(static[body_col].iloc[0], dtype=np.int64)
         rgb = PALETTE[body % len(PALETTE)].astype(np.uint32)
         colors = (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | 255
     else:  # recordings before per-frame colours: static body colours

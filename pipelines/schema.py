@@ -178,7 +178,8 @@ class LogConfig:
 
     every: Optional[int] = None  # particles every N steps; 0: none; null: log.fps frames per simulated second
     fps: float = 60.0  # particle frames per simulated second (when log.every is null)
-    color: str = "auto"  # particle colour: auto (plastic_strain with plastic bodies, else dJ) | dJ | plastic_strain | body
+    # particle colour: auto (plastic_strain with a plastic body, else dJ) | dJ | plastic_strain | body
+    color: str = "auto"
     size_warning_mb: float = 1000.0  # warn before a run whose recording would be larger [MB]
     dJ: bool = True  # the per-particle dJ field with the particles
     fracture_every: int = 20  # steps between evaluations of the fracture measure (and at the end)
