@@ -132,6 +132,7 @@ class Solver:
         self._open_hi = t.vec(*[float(c == open_code) for c in model.wall_codes[1]])
         self.removal = open_code in model.wall_codes[0] + model.wall_codes[1]  # open faces remove particles
         self.removed = np.zeros(nb, np.int64)  # per body: particles removed at open faces so far
+        self.kept: np.ndarray | None = None  # the particles not removed, by number (None: all of them)
         eps = getattr(scheme, "epsilon", None)
         self._epsilon = S(eps if eps is not None and np.isfinite(eps) else 0.0)
 
@@ -337,6 +338,7 @@ class Solver:
         report.removed = self.body_counts - alive
         self.removed += report.removed
         self.body_counts = alive
+        self.kept = np.flatnonzero(mass > 0)
 
     def step(self, state: State, dt: float) -> NewtonReport | None:
         """Advance the grid of ``state`` by ``dt`` [s] in the current reference

@@ -276,6 +276,14 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
 
+    @wp.func
+    def grow_box(status: wp.array(dtype=f64), b: int, n_bodies: int, xp: t.vec):
+        """Body b's bounding box of the new positions (the next reference grids) takes in xp."""
+        box = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
+        for d in range(wp.static(dim)):
+            wp.atomic_min(status, box + d, f64(xp[d]))
+            wp.atomic_max(status, box + n_bodies * dim + d, f64(xp[d]))
+
     @wp.kernel(module="unique")
     def g2p(
         # Model:
@@ -313,10 +321,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         b = body[p]
         if wp.static(removal):
             if mass[p] == S(0.0):  # removed: parked inside, still in its body's reference box
-                box0 = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
-                for d in range(wp.static(dim)):
-                    wp.atomic_min(status, box0 + d, f64(x[p][d]))
-                    wp.atomic_max(status, box0 + n_bodies * dim + d, f64(x[p][d]))
+                grow_box(status, b, n_bodies, x[p])
                 return
         vp = vec()
         B = mat()
@@ -368,10 +373,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 mass[p] = S(0.0)
                 volume[p] = S(0.0)
                 wp.atomic_add(status, STATUS_REMOVED, f64(1.0))
-                box1 = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
-                for d in range(wp.static(dim)):
-                    wp.atomic_min(status, box1 + d, f64(xp[d]))
-                    wp.atomic_max(status, box1 + n_bodies * dim + d, f64(xp[d]))
+                grow_box(status, b, n_bodies, xp)
                 return
         x[p] = xp
         v[p] = vp
@@ -411,12 +413,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
         else:
             outside = False
-            box = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
             for d in range(wp.static(dim)):
                 if xp[d] < inside_lo[d] or xp[d] > inside_hi[d]:
                     outside = True
-                wp.atomic_min(status, box + d, f64(xp[d]))
-                wp.atomic_max(status, box + n_bodies * dim + d, f64(xp[d]))
+            grow_box(status, b, n_bodies, xp)
             if outside:
                 wp.atomic_add(status, STATUS_OUTSIDE, f64(1.0))
 

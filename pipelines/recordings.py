@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .sinks import timings_path
+
 
 @dataclass
 class Recording:
@@ -44,10 +46,15 @@ class Recording:
         return self.positions[0].shape[1] if self.positions else 0
 
 
-def timings_path(recording: str | Path) -> Path:
-    """The wall-clock companion of a recording (pipelines.rerun_sink)."""
-    recording = Path(recording)
-    return recording.with_name(recording.stem + ".timings.rrd")
+def _open(path: str | Path):
+    """An RrdReader on ``path`` and whether the file has its footer (Rerun
+    warns, and scans the whole file, when it has none)."""
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        reader = RrdReader(str(path))
+    return reader, not any("no footer" in str(w.message) for w in caught)
 
 
 def _load(path: str | Path):
@@ -56,10 +63,7 @@ def _load(path: str | Path):
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"no recording at {path}")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        reader = RrdReader(str(path))
-    complete = not any("no footer" in str(w.message) for w in caught)
+    reader, complete = _open(path)
     try:
         return reader.stream().collect(), complete
     except RuntimeError:
@@ -77,12 +81,7 @@ def _load(path: str | Path):
 
 def is_complete(path: str | Path) -> bool:
     """Whether the file ends with its footer (a finalised recording)."""
-    from rerun.chunk import RrdReader
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        RrdReader(str(path))
-    return not any("no footer" in str(w.message) for w in caught)
+    return _open(path)[1]
 
 
 def repair(path: str | Path) -> Path | None:
@@ -135,8 +134,9 @@ def read(path: str | Path) -> Recording:
         if col is not None and len(static) and static[col].iloc[0] is not None:
             colors = np.asarray(static[col].iloc[0], dtype=np.uint32)
             body = np.unique(colors, return_inverse=True)[1]
-    scalars = _series(data, "/scalars")
-    end = _end(data, steps, times)
+    scalars_df = data.reader(index="step", contents="/scalars/**").to_pandas()
+    scalars = _series(scalars_df, "/scalars")
+    end = _end(scalars_df, steps, times)
     props_df = data.reader(index=None, contents="/__properties/**").to_pandas()
     props = {}
     for c in props_df.columns:
@@ -152,9 +152,9 @@ def read(path: str | Path) -> Recording:
                      *_timings(timings_path(path)), index, complete, end)
 
 
-def _end(data, steps: list, times: list) -> tuple[int, float]:
-    """The last step reached and its simulated time [s]."""
-    df = data.reader(index="step", contents="/scalars/**").to_pandas()
+def _end(df, steps: list, times: list) -> tuple[int, float]:
+    """The last step reached and its simulated time [s]: the last particle
+    frame's, or the scalar rows' (``df``) if they go further."""
     end = (int(steps[-1]), float(times[-1])) if steps else (0, 0.0)
     if len(df) and int(df["step"].max()) > end[0]:
         row = df.loc[df["step"].idxmax()]
@@ -162,9 +162,8 @@ def _end(data, steps: list, times: list) -> tuple[int, float]:
     return end
 
 
-def _series(data, root: str) -> dict:
-    """``root/<name>`` Scalars series -> {name: (steps, values)}."""
-    df = data.reader(index="step", contents=f"{root}/**").to_pandas()
+def _series(df, root: str) -> dict:
+    """``root/<name>`` Scalars series of a step-indexed frame -> {name: (steps, values)}."""
     out = {}
     for c in df.columns:
         if c.startswith(f"{root}/"):
@@ -182,7 +181,7 @@ def _timings(path: Path) -> tuple[dict, dict]:
     props = data.reader(index=None, contents="/__properties/**").to_pandas()
     run = {c[len("property:run:"):]: list(props[c].iloc[0]) for c in props.columns
            if c.startswith("property:run:") and props[c].iloc[0] is not None}
-    return _series(data, "/timings"), run
+    return _series(data.reader(index="step", contents="/timings/**").to_pandas(), "/timings"), run
 
 
 def _colliders(data) -> tuple[dict, dict]:

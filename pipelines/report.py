@@ -53,7 +53,6 @@ LABEL_KEYS = ("scheme", "kernel", "transfer")
 COVERED_KEYS = {"scheme", "scheme.name", "kernel", "kernel.name", "kernel.transfer", "scene",
                 "scene.name", "integrator", "integrator.name"}
 RESOLUTION_KEYS = {"scene.resolution", "scene.particle_resolution"}
-UNSTABLE = ("unstable", "failed", "interrupted", "invalid", "killed", "running")
 
 
 # ----------------------------------------------------------------- small helpers

@@ -3,7 +3,7 @@
 ``recording.rrd`` holds the physics and how to reproduce it: two identical
 runs give recordings that ``rerun rrd compare --unordered`` finds equal (rows
 are sent as chunks of their own, so chunking does not depend on timing).
-``recording.timings.rrd`` (:func:`timings_path`) holds the wall-clock side:
+``recording.timings.rrd`` (:func:`pipelines.sinks.timings_path`) holds the wall-clock side:
 step and update times, start time, host and command line. Both carry the same
 recording id, so the viewer merges them when opened together.
 
@@ -40,7 +40,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from . import surfaces
-from .sinks import RunMeta, Sink
+from .sinks import RunMeta, Sink, timings_path
 
 APP_ID = "aulmpm"
 VIRIDIS = np.array([(68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)], float)
@@ -49,12 +49,6 @@ PALETTE = np.array([
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
 ], dtype=np.uint8)
-
-
-def timings_path(recording: str | Path) -> Path:
-    """The wall-clock companion of a recording: ``x.rrd`` -> ``x.timings.rrd``."""
-    recording = Path(recording)
-    return recording.with_name(recording.stem + ".timings.rrd")
 
 
 def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
@@ -140,8 +134,9 @@ class RerunSink(Sink):
             return PALETTE[body % len(PALETTE)]
         v = np.asarray(values, np.float64)
         finite = np.isfinite(v)
-        if finite.any() and float(np.max(v[finite])) > self._range:
-            self._range = float(np.max(v[finite]))
+        largest = float(np.max(v[finite])) if finite.any() else 0.0
+        if largest > self._range:
+            self._range = largest
             self._legend()
         u = np.clip(np.where(finite, v, 0.0) / (self._range or 1.0), 0.0, 1.0)
         stops = np.linspace(0.0, 1.0, len(VIRIDIS))
@@ -196,12 +191,16 @@ class RerunSink(Sink):
             parts.append(rr.AnyValues(**values))
         self.rec.log("particles", *parts)
 
-    def scalars(self, step, t, values):
+    @staticmethod
+    def _append(buffer: dict, step: int, t: float, values: dict) -> None:
         for name, value in values.items():
-            steps, times, vals = self._buffer[name]
+            steps, times, vals = buffer[name]
             steps.append(step)
             times.append(t)
             vals.append(value)
+
+    def scalars(self, step, t, values):
+        self._append(self._buffer, step, t, values)
         self._rows += 1
         if self._rows >= self.flush_every:
             self.flush()
@@ -215,11 +214,7 @@ class RerunSink(Sink):
         self.rec.log("events", *parts)
 
     def timings(self, step, t, values):
-        for name, value in values.items():
-            steps, times, vals = self._timings[name]
-            steps.append(step)
-            times.append(t)
-            vals.append(value)
+        self._append(self._timings, step, t, values)
 
     def flush(self):
         for rec, root, buffer in ((self.rec, "scalars", self._buffer), (self.clock, "timings", self._timings)):

@@ -294,9 +294,8 @@ class Run:
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
         fields = self.plastic_fields()
-        index = None
-        if self.solver.removed.any():  # the particles left inside, by number
-            index = np.flatnonzero(self.model.mass.numpy() > 0)
+        index = self.solver.kept  # the particles left inside, once some were removed at open walls
+        if index is not None:
             x, dJ = x[index], (dJ[index] if dJ is not None else None)
             fields = {k: v[index] for k, v in fields.items()}
         self.sink.particles(self.step, self.t, x, dJ, fields, index)
@@ -800,9 +799,9 @@ class Run:
         if self.built:
             m.update(self.drift.summary())
             if self.solver.removal:  # particles that left through open walls take their mass along
-                removed = self.model.mass.numpy() == 0
-                lost = float(self.mass0[removed].sum())
-                m["removed"] = {"total": int(removed.sum()), **{b.name: int(c) for b, c in
+                kept = self.solver.kept if self.solver.kept is not None else slice(None)
+                lost = float(self.mass0.sum() - self.mass0[kept].sum())
+                m["removed"] = {"total": int(self.solver.removed.sum()), **{b.name: int(c) for b, c in
                                                                 zip(self.spec.scene.bodies, self.solver.removed)},
                                 "mass": lost}
                 if self.drift.first is not None and self.drift.first[0]:

@@ -12,7 +12,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from pathlib import Path
+
 import numpy as np
+
+
+def timings_path(recording: str | Path) -> Path:
+    """The wall-clock companion of a recording: ``x.rrd`` -> ``x.timings.rrd``."""
+    recording = Path(recording)
+    return recording.with_name(recording.stem + ".timings.rrd")
 
 
 @dataclass
