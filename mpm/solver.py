@@ -28,6 +28,7 @@ from .grid import make_boundary, make_boundary_data, make_constraints, make_grid
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
 from .layout import GridLayout
+from .memory import array_bytes
 from .stencil import fuse
 from .model import Model, State
 from .scene import WALL_TYPES
@@ -626,6 +627,11 @@ class Solver:
 
     def diagnostic_names(self) -> list[str]:
         return diagnostic_names(self.model.dim)
+
+    def memory_bytes(self, state: State) -> int:
+        """Bytes of the Warp arrays of the model, ``state`` and the solver
+        (grids at their current capacity, caches, scratch; mpm.memory)."""
+        return array_bytes(self.model, state, self)
 
 
 def state_dtype(model: Model):

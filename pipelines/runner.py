@@ -126,6 +126,16 @@ class Drift:
         }
 
 
+def peak_rss_mb() -> float | None:
+    """The process's peak resident memory [MB] so far (None where the OS does not say)."""
+    try:
+        import resource
+    except ImportError:  # not a Unix
+        return None
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / 1e6 if sys.platform == "darwin" else kb / 1e3  # macOS counts bytes
+
+
 def _median(xs: list[float]) -> float | None:
     return statistics.median(xs) if xs else None
 
@@ -790,7 +800,9 @@ class Run:
                 config_updates={"total": int(self.updates.sum()),
                                 **{n: int(c) for n, c in zip(names, self.updates)}},
                 updates_per_1e4_steps=1e4 * self.update_steps / steps if steps else None,
-                update_time_ms=float(np.mean(self.update_ms)) if self.update_ms else None)
+                update_time_ms=float(np.mean(self.update_ms)) if self.update_ms else None,
+                memory_mb=self.solver.memory_bytes(self.state) / 1e6,
+                peak_rss_mb=peak_rss_mb())
             if self.scheme.name == "aulmpm":
                 m.update(epsilon=self.scheme.epsilon, eta=self.scheme.eta, affine=self.scheme.affine)
             m["integrator"] = self.spec.integrator.name

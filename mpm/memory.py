@@ -1,0 +1,45 @@
+"""Device memory held by a run: the bytes of every Warp array reachable from
+the model, the state and the solver (particles, grids, caches, scratch).
+
+This counts allocations, not the allocator's overhead or Warp's kernel
+modules; an array and views of it are counted once (a view counts as the
+array it was taken from).
+"""
+
+import warp as wp
+
+try:  # the class of @wp.struct instances (its place moved between Warp versions)
+    from warp._src.codegen import StructInstance
+except ImportError:  # pragma: no cover
+    from warp.codegen import StructInstance
+
+
+def _children(obj):
+    if isinstance(obj, (list, tuple, set)):
+        return list(obj)
+    if isinstance(obj, dict):
+        return list(obj.values())
+    if isinstance(obj, (StructInstance, wp.Mesh)) or type(obj).__module__.split(".")[0] == "mpm":
+        return list(vars(obj).values()) if hasattr(obj, "__dict__") else []
+    return []
+
+
+def array_bytes(*roots) -> int:
+    """Bytes of the distinct Warp arrays reachable from ``roots`` through
+    attributes of mpm objects, Warp structs and meshes, lists, tuples and dicts."""
+    seen, pointers, total = set(), set(), 0
+    stack = list(roots)
+    while stack:
+        obj = stack.pop()
+        if obj is None or id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, wp.array):
+            while isinstance(getattr(obj, "_ref", None), wp.array):  # a view: the array it views
+                obj = obj._ref
+            if obj.ptr and obj.ptr not in pointers:
+                pointers.add(obj.ptr)
+                total += obj.capacity
+            continue
+        stack.extend(_children(obj))
+    return total
