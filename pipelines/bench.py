@@ -37,6 +37,13 @@ Everything runs through the same code path as ``pipelines.run``
 7. fused: EMPM with the stencils located in P2G and G2P against cached at
    its every-step update (``run.fuse``), on the 2D ball and the 3D sphere,
    quadratic MLS, compact MLS and PIC.
+8. stages: the 2D ball with one optional stage added at a time, and the
+   launches per step; profile: where a step's time goes, per kernel and
+   host work, on the 2D ball and the 3D sphere (pipelines.bench_scale).
+
+``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
+and ``--scaling`` the growth of cost and memory from about 10K to 1M
+particles (pipelines.bench_scale; minutes each); ``--only`` picks tables.
 
 Each timed configuration runs five times and the fastest median counts
 (the machine's noise only ever adds time). ``--cold`` compiles into an empty
@@ -53,7 +60,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from . import schema
+from . import bench_scale, schema
 from .runner import execute
 from .validate import resolve
 from .warp_setup import init_warp
@@ -264,6 +271,10 @@ def bench_fused(workdir: Path, steps: int) -> list[dict]:
             for name in FUSED_CASES]
 
 
+TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "stages", "profile",
+          "paper", "scaling")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
@@ -281,10 +292,24 @@ def main(argv=None) -> None:
                    help="skip the integrator table")
     p.add_argument("--no-fused", dest="fused", action="store_false",
                    help="skip the fused-against-cached EMPM table")
+    p.add_argument("--no-stages", dest="stages", action="store_false",
+                   help="skip the optional-stage table")
+    p.add_argument("--no-profile", dest="profile", action="store_false",
+                   help="skip the per-kernel profile of a step")
+    p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
+    p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
+    p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
             p.error(f"unknown case {c!r}; accepted: {', '.join(CASES)}")
+    if args.only is not None:
+        chosen = [t for t in args.only.split(",") if t]
+        for t in chosen:
+            if t not in TABLES:
+                p.error(f"--only: unknown table {t!r}; accepted: {', '.join(TABLES)}")
+        for t in TABLES:
+            setattr(args, t, t in chosen)
     schema.register()
     with tempfile.TemporaryDirectory(prefix="mpm-bench-") as tmp:
         if args.cold:
@@ -294,18 +319,25 @@ def main(argv=None) -> None:
         init_warp()
         import warp as wp
 
-        print(f"warp {wp.__version__}, device cpu, float32; median over the timed steps",
+        device = spec_for(CASES["ball_2d"]).run.device  # run.device=auto: CUDA where Warp finds a GPU
+        print(f"warp {wp.__version__}, device {device}, float32; median over the timed steps",
               file=sys.stderr)
-        rows = [bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
+        rows = ([bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
+                if getattr(args, "speed", True) else [])
         schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
         materials = bench_materials(Path(tmp), 40) if args.materials else []
         integrators = bench_integrators(Path(tmp)) if args.integrators else []
         fused = bench_fused(Path(tmp), 40) if args.fused else []
-    print("speed (EMPM, float32, CPU)")
-    print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
-          f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
+        stages = bench_scale.bench_stages(spec_for, Path(tmp)) if args.stages else []
+        profile = bench_scale.profile(spec_for) if args.profile else []
+        paper = bench_scale.bench_paper(spec_for, Path(tmp)) if args.paper else []
+        scaling = bench_scale.bench_scaling(spec_for, Path(tmp)) if args.scaling else []
+    if rows:
+        print(f"speed (EMPM, float32, {device})")
+        print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
+              f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
     for r in rows:
         print(f"{r['case']:<9} {r['particles']:>9,} {r['grid_nodes']:>8,} {r['compile_time_s']:>9.2f} "
               f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} "
@@ -363,10 +395,19 @@ def main(argv=None) -> None:
         for r in fused:
             print(f"{r['case']:<26} {r['particles']:>9,} {r['fused_ms']:>9.3f} {r['cached_ms']:>10.3f} "
                   f"{r['cached_ms'] / r['fused_ms']:>8.2f}x")
+    if stages:
+        bench_scale.print_stages(stages)
+    if profile:
+        bench_scale.print_profile(profile)
+    if paper:
+        bench_scale.print_paper(paper)
+    if scaling:
+        bench_scale.print_scaling(scaling)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,
-                                         "integrators": integrators, "fused": fused}, indent=2) + "\n")
+                                         "integrators": integrators, "fused": fused, "stages": stages, "profile": profile,
+                                         "paper": paper, "scaling": scaling}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
