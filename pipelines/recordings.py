@@ -124,11 +124,10 @@ def read(path: str | Path) -> Recording:
     body = colors = None
     body_col = "/particles:body_index"
     if body_col in static.columns and len(static) and static[body_col].iloc[0] is not None:
-        from .rerun_sink import PALETTE
+        from .rerun_sink import PALETTE_PACKED
 
         body = np.asarray(static[body_col].iloc[0], dtype=np.int64)
-        rgb = PALETTE[body % len(PALETTE)].astype(np.uint32)
-        colors = (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | 255
+        colors = PALETTE_PACKED[body % len(PALETTE_PACKED)]
     else:  # recordings before per-frame colours: static body colours
         col = next((c for c in static.columns if c.endswith(":colors")), None)
         if col is not None and len(static) and static[col].iloc[0] is not None:

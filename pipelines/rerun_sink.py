@@ -51,6 +51,30 @@ PALETTE = np.array([
 ], dtype=np.uint8)
 
 
+def packed(rgb) -> np.ndarray:
+    """RGB rows (uint8) as Rerun's packed 0xRRGGBBAA colours, opaque."""
+    rgb = np.asarray(rgb, np.uint32).reshape(-1, 3)
+    return (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | np.uint32(255)
+
+
+# the colour map in 256 steps (a particle's colour is one lookup), the palette and grey, packed
+COLOR_LEVELS = 256
+VIRIDIS_LUT = packed(np.stack([np.interp(np.linspace(0.0, 1.0, COLOR_LEVELS), np.linspace(0.0, 1.0, len(VIRIDIS)),
+                                         VIRIDIS[:, c]) for c in range(3)], axis=1).round())
+PALETTE_PACKED = packed(PALETTE)
+GREY_PACKED = packed(GREY)[0]
+
+
+def colormap(values: np.ndarray, top: float) -> np.ndarray:
+    """Packed viridis colours of ``values`` from 0 to ``top`` (clamped; grey
+    where not finite)."""
+    finite = np.isfinite(values)
+    level = np.where(finite, values, 0.0) * ((COLOR_LEVELS - 1) / (top or 1.0))
+    rgb = VIRIDIS_LUT[np.clip(level, 0.0, COLOR_LEVELS - 1).astype(np.intp)]
+    rgb[~finite] = GREY_PACKED
+    return rgb
+
+
 def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
     # one chunk per logged row: the file's chunks then depend on the data only
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
@@ -127,22 +151,17 @@ class RerunSink(Sink):
                                               labels=["domain", "walls"]), static=True)
 
     def _colors(self, values: np.ndarray | None, index: np.ndarray | None) -> np.ndarray:
-        """RGB per particle: the body palette, or ``values`` on the colour map
-        from 0 to the largest value so far (grey where not finite)."""
+        """Packed colour per particle: the body palette, or ``values`` on the
+        colour map (256 levels) from 0 to the largest value so far (grey where
+        not finite)."""
         if self._color == "body" or values is None:
             body = self._body if index is None else self._body[index]
-            return PALETTE[body % len(PALETTE)]
-        v = np.asarray(values, np.float64)
-        finite = np.isfinite(v)
-        largest = float(np.max(v[finite])) if finite.any() else 0.0
+            return PALETTE_PACKED[body % len(PALETTE)]
+        largest = float(np.max(values, where=np.isfinite(values), initial=0.0))
         if largest > self._range:
             self._range = largest
             self._legend()
-        u = np.clip(np.where(finite, v, 0.0) / (self._range or 1.0), 0.0, 1.0)
-        stops = np.linspace(0.0, 1.0, len(VIRIDIS))
-        rgb = np.stack([np.interp(u, stops, VIRIDIS[:, c]) for c in range(3)], axis=1).astype(np.uint8)
-        rgb[~finite] = GREY
-        return rgb
+        return colormap(values, self._range)
 
     def _legend(self) -> None:
         if self._color == "body":

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from omegaconf import OmegaConf
 
@@ -25,6 +26,7 @@ def run_twice(tmp_path, overrides):
     return out
 
 
+@pytest.mark.bitwise
 def test_two_runs_are_bit_identical_and_complete(tmp_path):
     steps = 12
     overrides = ["scene=rotating_plate_2d", f"run.steps={steps}", "log.every=3"]
@@ -69,6 +71,7 @@ def test_two_runs_are_bit_identical_and_complete(tmp_path):
     assert "scene:" in props["config:yaml"][0]
 
 
+@pytest.mark.bitwise
 def test_rerun_compare_finds_two_identical_runs_equal(tmp_path):
     """The standard tool agrees: identical physics gives identical recordings
     (the wall-clock timings differ, in their own files); another Young's
@@ -112,3 +115,20 @@ def test_particles_are_logged_at_a_frame_rate_in_simulated_time(tmp_path):
         assert np.floor(t_of[s - 1] * fps * (1 + 1e-9)) < np.floor(t_of[s] * fps * (1 + 1e-9))
     assert len(frames) in (round(duration * fps) + 1, round(duration * fps) + 2)  # the last may land on one
     assert m["recording_estimate_mb"] > 0
+
+
+def test_the_colour_map_spans_viridis_from_zero_to_the_top():
+    """0 and below -> viridis' first colour, top and above -> its last; a
+    value u in between -> the map interpolated at floor(255 u) / 255 (256
+    levels), rounded; NaN -> grey."""
+    from pipelines.rerun_sink import GREY, VIRIDIS, colormap, packed
+
+    values = np.array([-1.0, 0.0, 0.5, 1.0, 2.0, np.nan], np.float32)
+    c = colormap(values, 1.0)
+    assert c.dtype == np.uint32
+    assert c[0] == c[1] == packed(VIRIDIS[0])[0] and c[3] == c[4] == packed(VIRIDIS[-1])[0]
+    assert c[5] == packed(GREY)[0]
+    rgb = np.array([(c[2] >> s) & 255 for s in (24, 16, 8)], float)
+    u = np.floor(0.5 * 255) / 255
+    expected = [np.interp(u, np.linspace(0.0, 1.0, len(VIRIDIS)), VIRIDIS[:, k]) for k in range(3)]
+    assert np.all(np.abs(rgb - expected) <= 0.5 + 1e-9), (rgb, expected)
