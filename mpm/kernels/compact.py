@@ -29,32 +29,40 @@ SERIES_BELOW = 0.05  # g(s) by its series below this (x = 2 pi s < 0.32: 5 terms
 
 
 @functools.cache
-def _g(t: Types):
-    """g(s) = s - sin(2 pi s) / (2 pi), accurate for s down to 0."""
+def _g_series(t: Types):
+    """g(s) = s - sin(2 pi s) / (2 pi) by its series, for s < SERIES_BELOW."""
     S = t.scalar
     two_pi = 2.0 * math.pi
     c3, c5, c7, c9, c11 = (two_pi**2 / 6.0, -(two_pi**4) / 120.0, two_pi**6 / 5040.0,
                            -(two_pi**8) / 362880.0, two_pi**10 / 39916800.0)
 
     @wp.func
-    def g(s: S):
-        if s < S(SERIES_BELOW):
-            s2 = s * s
-            return s * s2 * (S(c3) + s2 * (S(c5) + s2 * (S(c7) + s2 * (S(c9) + s2 * S(c11)))))
-        return s - wp.sin(S(two_pi) * s) / S(two_pi)
+    def g_series(s: S):
+        s2 = s * s
+        return s * s2 * (S(c3) + s2 * (S(c5) + s2 * (S(c7) + s2 * (S(c9) + s2 * S(c11)))))
 
-    return g
+    return g_series
 
 
 @functools.cache
 def _weights(t: Types):
+    """(g(1 - u), g(u)) with one sine: sin(2 pi (1 - u)) = -sin(2 pi u)."""
     S = t.scalar
     W = wp.types.vector(2, S)
-    g = _g(t)
+    g_series = _g_series(t)
+    two_pi = 2.0 * math.pi
 
     @wp.func
     def weights(u: S):
-        return W(g(S(1.0) - u), g(u))
+        r = wp.sin(S(two_pi) * u) / S(two_pi)
+        a = S(1.0) - u
+        wa = a + r
+        wb = u - r
+        if a < S(SERIES_BELOW):
+            wa = g_series(a)
+        if u < S(SERIES_BELOW):
+            wb = g_series(u)
+        return W(wa, wb)
 
     return weights
 
