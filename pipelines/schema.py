@@ -165,7 +165,8 @@ class RunConfig:
     dt_max: float = 1.0e-3  # largest adaptive step [s]
     dt_collapse: float = 1.0e-4  # unstable when the adaptive step falls below this fraction of the first
     precision: str = "float32"  # float32 | float64
-    device: str = "auto"  # auto (cuda when Warp finds a GPU, else cpu) | cpu | cuda
+    # auto (cuda when Warp finds a GPU, else cpu) | cpu | cuda; the environment's MPM_DEVICE, if set
+    device: str = "${oc.env:MPM_DEVICE,auto}"
     force: bool = False  # in a sweep: run even if a job with the same config hash finished
     plan: bool = False  # print the stages and kernels of a step and exit (nothing compiled or run)
     fuse: bool = False  # explicit EMPM locates stencils in P2G/G2P instead of caching them (same results)

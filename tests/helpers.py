@@ -3,6 +3,7 @@ command line."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ from pipelines.validate import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
+DEVICE = os.environ.get("MPM_TEST_DEVICE", "cpu")  # set by conftest (pytest --device, default cpu)
 schema.register()
 
 

@@ -7,6 +7,7 @@ import pytest
 import warp as wp
 
 import mpm
+from helpers import DEVICE
 from mpm.colliders import Collider, kinds_of, make_sdf, pack
 from mpm.materials import FixedCorotated, Fluid
 from mpm.meshes import MeshShape
@@ -40,12 +41,12 @@ def evaluate(collider: Collider, q: np.ndarray):
     meshes = {}
     if collider.kind == "mesh":
         from mpm.colliders import build_meshes
-        meshes = build_meshes([collider], "cpu")
-    data = pack([collider], t, meshes, "cpu")
-    qa = wp.array(q, dtype=t.vec, device="cpu")
-    phi = wp.zeros(len(q), dtype=t.scalar, device="cpu")
-    n = wp.zeros(len(q), dtype=t.vec, device="cpu")
-    wp.launch(_sdf_kernel(t, (collider.kind,)), len(q), inputs=[data, qa, phi, n], device="cpu")
+        meshes = build_meshes([collider], DEVICE)
+    data = pack([collider], t, meshes, DEVICE)
+    qa = wp.array(q, dtype=t.vec, device=DEVICE)
+    phi = wp.zeros(len(q), dtype=t.scalar, device=DEVICE)
+    n = wp.zeros(len(q), dtype=t.vec, device=DEVICE)
+    wp.launch(_sdf_kernel(t, (collider.kind,)), len(q), inputs=[data, qa, phi, n], device=DEVICE)
     return phi.numpy(), n.numpy()
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import mpm
+from helpers import DEVICE
 
 EPS = {"float32": np.finfo(np.float32).eps, "float64": np.finfo(np.float64).eps}
 
@@ -147,7 +148,7 @@ def test_angular_momentum_is_measured_about_the_centre_of_mass(dim):
                                        angular_velocity=w)],
                       gravity=(0.0,) * dim, walls=("open",) * (2 * dim), ppc=4)
     # the compact kernel: its per-particle moment makes EMPM drift (RESULTS.md), so the drift is not round-off
-    model, state = mpm.build(scene, mpm.KERNELS["compact"], "float64", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["compact"], "float64", DEVICE)
     solver = mpm.Solver(model)
     solver.prepare(state)
     names = solver.diagnostic_names()

@@ -10,7 +10,7 @@ import pytest
 import warp as wp
 
 import mpm
-from helpers import compose_cfg, spec_for
+from helpers import DEVICE, compose_cfg, spec_for
 from mpm.integrators import Implicit
 from pipelines.runner import execute
 from pipelines.validate import resolve
@@ -38,7 +38,7 @@ def stretch(state, rate, center):
 
 
 def make(scene, scheme, integrator, precision="float64", kernel="quadratic", transfer="mls"):
-    model, state = mpm.build(scene, mpm.KERNELS[kernel], precision, "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS[kernel], precision, DEVICE)
     solver = mpm.Solver(model, scheme, mpm.SolverOptions(transfer=transfer, integrator=integrator))
     solver.prepare(state)
     return solver, state
@@ -172,6 +172,7 @@ def test_stiff_ball_bounces_at_fifty_times_the_explicit_step(scheme):
     assert solver.fracture(state).max() < 0.01
 
 
+@pytest.mark.bitwise
 def test_aulmpm_limits_under_the_implicit_integrator():
     """epsilon = 0 (affine kept) is EMPM and epsilon = inf is TLMPM bit for
     bit with the implicit integrator too (the same operations)."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import compose_cfg, spec_for
+from helpers import DEVICE, compose_cfg, spec_for
 from pipelines import recordings
 from pipelines.runner import execute
 from pipelines.validate import resolve
@@ -49,7 +49,7 @@ def test_spinning_plate_keeps_angular_momentum_within_a_few_percent(scheme, affi
     if scheme == "aulmpm":
         over += [f"scheme.affine={affine}", "scheme.epsilon=0.1", "scheme.eta=0.1"]
     spec = spec_for(over)
-    model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu")
+    model, state = mpm.build(spec.scene, spec.kernel, "float64", DEVICE)
     solver = mpm.Solver(model, spec.scheme)
     solver.prepare(state)
     names = solver.diagnostic_names()
@@ -76,7 +76,7 @@ def test_linear_momentum_conserved_by_every_scheme(scheme):
     from test_conservation import colliding_scene
 
     scene = colliding_scene(2)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
     sch = {"empm": mpm.EMPM(), "tlmpm": mpm.TLMPM(), "aulmpm": mpm.AULMPM(epsilon=0.01, eta=0.05)}[scheme]
     solver = mpm.Solver(model, sch)
     solver.prepare(state)
@@ -149,7 +149,7 @@ def test_kinematic_regions_anchor_rotate_and_release():
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=64, bodies=[bar, disc],
                       gravity=(0.0, -9.81), walls=("slip",) * 4, regions=[anchor, spin], ppc=4)
     for scheme in (mpm.EMPM(), mpm.TLMPM()):
-        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
         solver = mpm.Solver(model, scheme)
         solver.prepare(state)
         x0 = state.x.numpy().copy()
@@ -189,7 +189,7 @@ def test_colliding_discs_neither_interpenetrate_nor_stick(scheme):
     b = mpm.Body(mpm.Sphere((0.65, 0.5), 0.1), mpm.NeoHookean(E=2e4, nu=0.3), velocity=(-1.0, 0.0))
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[a, b], gravity=(0.0, 0.0),
                       walls=("slip",) * 4, ppc=4)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
     solver = mpm.Solver(model, scheme)
     solver.prepare(state)
     body = model.body.numpy()
@@ -230,7 +230,7 @@ def test_water_drop_on_an_elastic_block(scheme):
     drop = mpm.Body(mpm.Sphere((0.5, 0.5), 0.08), mpm.Fluid(K=1e5, gamma=7.0), velocity=(0.0, -2.0))
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[block, drop],
                       gravity=(0.0, -9.81), walls=("slip",) * 4, ppc=4)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", DEVICE)
     solver = mpm.Solver(model, scheme)
     solver.prepare(state)
     body = model.body.numpy()

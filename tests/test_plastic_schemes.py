@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import spec_for
+from helpers import DEVICE, spec_for
 from mpm.material_point import MaterialPoint, velocity_path
 from reference_mpm import plastic_step
 from test_reference import assert_no_contact
@@ -101,7 +101,7 @@ def test_same_deformation_history_gives_same_stress_in_every_scheme(name):
     for scheme in (mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM(epsilon=0.02, eta=0.5)):
         scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, bodies=[mpm.Body(box, material)],
                           gravity=(0.0, 0.0), walls=("open",) * 4, ppc=4, regions=[region])
-        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
         solver = mpm.Solver(model, scheme)
         solver.prepare(state)
         updates = sum(len(solver.advance(state, dt).updated) for _ in range(steps))
@@ -126,7 +126,7 @@ def shear_wave_viscosity(overrides, dt_factor=1.0):
     ends: v ~ exp(-eta / rho k^2 t) gives eta [Pa s]; ``dt_factor`` times the
     explicit stable step, with the overrides' integrator."""
     spec = spec_for(["scene=shear_wave_2d"] + overrides)
-    model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu")
+    model, state = mpm.build(spec.scene, spec.kernel, "float64", DEVICE)
     solver = mpm.Solver(model, spec.scheme, mpm.SolverOptions(integrator=spec.integrator))
     solver.prepare(state)
     sol = spec.scene.solution
@@ -174,7 +174,7 @@ def test_every_material_runs_with_every_scheme_and_kernel(material, kernel):
     mat = mpm.MATERIALS[material]()
     scene = impact_scene(mat, 2)
     for scheme in (mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()):
-        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", "cpu")
+        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
         solver = mpm.Solver(model, scheme)
         solver.prepare(state)
         mass0 = solver.measure(state, elastic=False)[0]

@@ -7,11 +7,13 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from helpers import ROOT, run_cli
 from pipelines import recordings
 
 
+@pytest.mark.bitwise
 def test_reproduce_reports_a_match_and_frames_are_written(tmp_path):
     run_dir = tmp_path / "run"
     p = run_cli(["scene=rotating_plate_2d", "run.steps=30", "log.every=10", f"hydra.run.dir={run_dir}"],

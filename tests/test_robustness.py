@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers import compose_cfg, spec_for
+from helpers import DEVICE, compose_cfg, spec_for
 from pipelines.runner import execute
 from pipelines.sinks import Sink
 from pipelines.validate import ConfigError, memory_estimate, resolve
@@ -70,7 +70,7 @@ def test_memory_estimate_bounds_what_a_build_allocates():
 
     spec = spec_for(["scene.resolution=32"])
     need, particles, nodes = memory_estimate(spec.scene, spec.kernel, "float32")
-    model, state = mpm.build(spec.scene, spec.kernel, "float32", "cpu")
+    model, state = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
     arrays = [state.x, state.v, state.C, state.F0s, state.Fsn, state.X, state.dJ, model.mass, model.volume]
     allocated = sum(a.capacity for a in arrays)
     assert particles >= model.n_particles and nodes == 33 * 33
@@ -134,8 +134,16 @@ def test_a_large_recording_is_announced_before_the_run(tmp_path, capsys):
     assert "warning: the recording will be about" in err and "log.size_warning_mb=0.01" in err
 
 
-def test_device_auto_is_the_machine_s_device():
+def test_device_auto_is_the_machine_s_device(monkeypatch):
     import warp as wp
 
-    spec = spec_for([])
+    spec = spec_for(["run.device=auto"])
     assert spec.run.device == ("cuda" if wp.is_cuda_available() else "cpu")
+    # run.device's default is the environment's MPM_DEVICE, else auto
+    monkeypatch.setenv("MPM_DEVICE", "cpu")
+    assert spec_for([]).run.device == "cpu"
+    monkeypatch.delenv("MPM_DEVICE")
+    assert spec_for([]).run.device == spec.run.device
+    monkeypatch.setenv("MPM_DEVICE", "tpu")
+    with pytest.raises(ConfigError, match="run.device.*accepted: auto, cpu, cuda"):
+        spec_for([])

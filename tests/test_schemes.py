@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import mpm
+from helpers import DEVICE
 from reference_mpm import lagrangian_step, update_configuration
 from test_reference import assert_no_contact, particle_inputs, tiny_scene
 
@@ -66,7 +67,7 @@ def test_schemes_match_numpy_reference(scheme, dim, device):
 
 
 def run(scene, scheme, steps, dt, precision="float64"):
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, DEVICE)
     solver = mpm.Solver(model, scheme)
     solver.prepare(state)
     reports = [solver.advance(state, dt) for _ in range(steps)]
@@ -78,6 +79,7 @@ CRITERIA = {"paper": {"criterion": "paper"},
             "distortion": {"criterion": "distortion", "dJ_max": 1e-6, "stretch_min": 0.99999}}
 
 
+@pytest.mark.bitwise
 @pytest.mark.parametrize("criterion", list(CRITERIA))
 @pytest.mark.parametrize("dim", [2, 3])
 def test_aulmpm_limits_are_empm_and_tlmpm(dim, criterion):
@@ -131,6 +133,7 @@ def test_aulmpm_defaults_follow_the_materials():
     assert mpm.AULMPM(epsilon=0.2).resolved("fluid").epsilon == 0.2
 
 
+@pytest.mark.bitwise
 @pytest.mark.parametrize("dim,kernel,transfer", [(2, "quadratic", "mls"), (2, "compact", "pic")])
 def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer):
     """EMPM with the stencils located in P2G and G2P (SolverOptions.fuse) is
@@ -139,7 +142,7 @@ def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer):
     steps = 12 if dim == 2 else 4
     out = []
     for fuse in (False, True):
-        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float32", "cpu")
+        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float32", DEVICE)
         solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(transfer=transfer, fuse=fuse))
         assert solver.fused == fuse
         solver.prepare(state)

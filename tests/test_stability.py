@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import compose_cfg, group_options, spec_for
+from helpers import DEVICE, compose_cfg, group_options, spec_for
 from mpm.integrators import Implicit
 from pipelines.runner import execute
 from pipelines.sinks import Sink
@@ -18,14 +18,14 @@ BALL = ["scene.resolution=24", "log.every=0"]  # the default elastic ball (slip 
 
 def cfl_limit(spec) -> float:
     """The explicit step limit dx / c [s] (CFL number 1) of the scene at rest."""
-    model, _ = mpm.build(spec.scene, spec.kernel, "float32", "cpu")
+    model, _ = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
     return model.dx / spec.scene.bodies[0].material.wave_speed()
 
 
 def nonfinite_step(spec, dt: float, steps: int = 40) -> int:
     """The first step after which a value is non-finite, stepping on through
     particles leaving the domain (no detection: the plain solver)."""
-    model, state = mpm.build(spec.scene, spec.kernel, "float32", "cpu")
+    model, state = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
     solver = mpm.Solver(model, spec.scheme)
     solver.prepare(state)
     for k in range(1, steps + 1):
@@ -79,7 +79,7 @@ def pulled_bar(integrator):
     bar = mpm.Body(mpm.Box((0.5, 0.6), (0.03, 0.25)), mpm.NeoHookean(E=2e4, nu=0.3))
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, bodies=[bar], gravity=(0.0, 0.0),
                       walls=("slip",) * 4, regions=[top, bottom], ppc=4)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
     solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(integrator=integrator, track_J=True))
     solver.prepare(state)
     return scene, model, solver, state
@@ -248,7 +248,7 @@ def test_initial_deformation_and_lattice_offset(tmp_path):
     stopped before its first step by the inversion criterion."""
     over = ["+extreme=inverted_start", "run.steps=40"]
     spec = spec_for(over)
-    model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu")
+    model, state = mpm.build(spec.scene, spec.kernel, "float64", DEVICE)
     F = state.F0s.numpy()
     assert np.allclose(np.linalg.det(F), -1.0)
     x, c = state.x.numpy(), np.array([0.5, 0.5])
@@ -259,7 +259,7 @@ def test_initial_deformation_and_lattice_offset(tmp_path):
     assert nh["unstable_criterion"] == "inversion" and nh["unstable_step"] == 0  # the initial state
 
     nodes = spec_for(["+extreme=particles_on_nodes_float32"])
-    model, state = mpm.build(nodes.scene, nodes.kernel, "float32", "cpu")
+    model, state = mpm.build(nodes.scene, nodes.kernel, "float32", DEVICE)
     x = state.x.numpy() / model.dx
     assert np.abs(x - np.round(x)).max() < 1e-5 and len(x) == 8 * 8  # one per cell of the 8 x 8-cell box
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import mpm
+from helpers import DEVICE
 from mpm.timestep import STRAIN_STEP, step_limits
 
 
@@ -38,7 +39,7 @@ def test_reported_strain_rate_is_the_current_velocity_gradient():
                       bodies=[mpm.Body(mpm.Box((0.5, 0.5), (0.12, 0.12)), mpm.NeoHookean(E=2e3, nu=0.3),
                                        angular_velocity=10.0)],
                       gravity=(0.0, 0.0), walls=("slip",) * 4)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", "cpu")
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
     solver = mpm.Solver(model, mpm.TLMPM())
     solver.prepare(state)
     dt = 2e-4
