@@ -107,16 +107,53 @@ BAD_INPUTS = [
 ]
 
 
-@pytest.mark.parametrize("args,message", BAD_INPUTS, ids=[" ".join(a) for a, _ in BAD_INPUTS])
-def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
+# also run in a process of their own, like any command line
+OWN_PROCESS = [["material.Ee=1"], ["scene=nope"], ["+foo=1"], ["scene.resolution=100000"],
+               ["hydra.run.dir=/proc/no/run"]]
+
+
+def _check_refusal(args, message, code, stderr, out) -> str | None:
+    """Why the outcome of ``args`` is not a one-line refusal with exit code 2
+    that leaves nothing behind (None: it is)."""
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    if code != 2:
+        return f"exit code {code}: {stderr}"
+    if lines != lines[:1] or not lines[0].startswith(f"error: {message}"):
+        return f"not the one line 'error: {message}...': {stderr}"
+    if "Traceback" in stderr:
+        return stderr
+    if out is not None and out.exists():
+        return f"left {out} behind"
+    return None
+
+
+def _run_dir(args, out):
+    return [] if any(a.startswith("hydra.run.dir=") for a in args) else [f"hydra.run.dir={out}"]
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path):
+    """Every BAD_INPUTS entry, each through pipelines.run's main as from a
+    fresh process, all in one process (tests/cli_batch.py: a process per
+    command line costs seconds of imports each)."""
+    outs = [tmp_path / str(i) for i in range(len(BAD_INPUTS))]
+    cases = [args + _run_dir(args, out) for (args, _), out in zip(BAD_INPUTS, outs)]
+    (tmp_path / "in.json").write_text(json.dumps(cases))
+    p = subprocess.run([sys.executable, str(ROOT / "tests" / "cli_batch.py"), str(tmp_path / "in.json"),
+                        str(tmp_path / "out.json")], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr
+    results = json.loads((tmp_path / "out.json").read_text())
+    wrong = {" ".join(args): why for (args, message), out, (code, stderr) in zip(BAD_INPUTS, outs, results)
+             if (why := _check_refusal(args, message, code, stderr, None if _run_dir(args, out) == [] else out))}
+    assert not wrong, "\n".join(f"{k}: {v}" for k, v in wrong.items())
+
+
+@pytest.mark.parametrize("args", OWN_PROCESS, ids=" ".join)
+def test_bad_input_from_a_fresh_process(args, tmp_path):
+    message = next(m for a, m in BAD_INPUTS if a == args)
     out = tmp_path / "run"
-    own_dir = any(a.startswith("hydra.run.dir=") for a in args)
-    p = run_cli(args + ([] if own_dir else [f"hydra.run.dir={out}"]), cwd=ROOT, timeout=120)
-    assert p.returncode == 2, p.stderr
-    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
-    assert lines == [lines[0]] and lines[0].startswith(f"error: {message}"), p.stderr
-    assert "Traceback" not in p.stderr
-    assert not out.exists()  # nothing was run, nothing left behind
+    p = run_cli(args + _run_dir(args, out), cwd=ROOT, timeout=120)
+    why = _check_refusal(args, message, p.returncode, p.stderr, None if _run_dir(args, out) == [] else out)
+    assert why is None, why
 
 
 # documented outcomes of inputs that are not errors: (args, exit code, a stderr

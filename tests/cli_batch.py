@@ -1,0 +1,43 @@
+"""Run many ``python -m pipelines.run`` command lines in one process, for
+the tests of one-line configuration errors (a process per command line costs
+seconds of imports each): ``python cli_batch.py IN.json OUT.json`` with IN a
+list of argument lists; OUT gets [exit code, stderr] per list."""
+
+import contextlib
+import io
+import json
+import runpy
+import sys
+import traceback
+
+from hydra.core.global_hydra import GlobalHydra
+
+from pipelines import report
+
+
+def one(args: list[str]) -> tuple[int, str]:
+    """One command line, as ``python -m pipelines.run`` runs it (the module
+    runs afresh as __main__: Hydra finds conf/ from its file)."""
+    GlobalHydra.instance().clear()
+    report.SWEEPS.clear()
+    sys.argv = ["pipelines/run.py", *args]
+    err = io.StringIO()
+    code = 0
+    with contextlib.redirect_stderr(err):
+        try:
+            runpy.run_module("pipelines.run", run_name="__main__", alter_sys=True)
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+        except BaseException:  # noqa: BLE001 - an uncaught exception: exit 1 with its traceback
+            traceback.print_exc()
+            code = 1
+    return code, err.getvalue()
+
+
+if __name__ == "__main__":
+    source, target = sys.argv[1:3]
+    with open(source) as f:
+        cases = json.load(f)
+    results = [one(args) for args in cases]
+    with open(target, "w") as f:
+        json.dump(results, f)
