@@ -27,6 +27,7 @@ from .contact import make_contact
 from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
+from .launch import Launches
 from .layout import GridLayout
 from .memory import array_bytes
 from .stencil import fuse
@@ -176,6 +177,7 @@ class Solver:
                                        gradients=transfer != "mls" or k.gradient_affine, fused=self.fused)
                         for b in range(nb)}
 
+        self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=shared)
         with wp.ScopedDevice(dev):
             box = STATUS_HEADER + STATUS_PER_BODY * nb  # per-body figures, then the boxes
@@ -404,7 +406,7 @@ class Solver:
         with the stress impulse, and node positions."""
         m = self.model
         for kernel, g in self._p2g:
-            wp.launch(kernel, g.count, device=m.device, inputs=[
+            self.launch(kernel, g.count, [
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
                 state.x, state.v, state.C, state.F0s, state.Fsn, self.body_force, state.history,
                 state.stencils,
@@ -414,7 +416,7 @@ class Solver:
 
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
-        wp.launch(self._grid_update, self.layout.n_nodes, device=self.model.device, inputs=[
+        self.launch(self._grid_update, self.layout.n_nodes, [
             self.grid_m, self._gravity, dt, self._time, self._boundary_data, self.grid_kin,
             self.grid_kin_id, self.grid_v, self.grid_q, self.status])
 
@@ -428,24 +430,24 @@ class Solver:
         self.contact_dV.zero_()
         common = [lay.offset_d, self.n_bodies, self.model.kernel.n_grids, self._inv_dx, self._cells,
                   self._global_strides, n_global]
-        wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
+        self.launch(splat, lay.n_nodes, [
             self.grid_m, self.grid_v, self.grid_q, *common, self.contact_M, self.contact_P])
-        wp.launch(resolve, n_global, device=m.device, inputs=[
+        self.launch(resolve, n_global, [
             self.n_bodies, self._cells, self._global_strides, n_global, self._rest_mass,
             self._fill, self.contact_M, self.contact_P, self.contact_dV])
-        wp.launch(gather, lay.n_nodes, device=m.device, inputs=[
+        self.launch(gather, lay.n_nodes, [
             self.grid_m, self.grid_q, *common, self.contact_dV, self.grid_v])
 
     def _apply_boundary(self):
         """Walls, after contact."""
-        wp.launch(self._boundary, self.layout.n_nodes, device=self.model.device, inputs=[
+        self.launch(self._boundary, self.layout.n_nodes, [
             self.grid_m, self.grid_q, self._time, self._boundary_data, self.grid_kin,
             self.grid_kin_id, self.grid_v, self.status])
 
     def _interpolate(self, state: State, dt):
         """G2P: velocities, affine matrices, positions, F^sn, the criterion."""
         m = self.model
-        wp.launch(self._g2p, m.n_particles, device=m.device, inputs=[
+        self.launch(self._g2p, m.n_particles, [
             m.body, self.layout.shape_d, self.n_bodies, self.grid_v,
             state.stencils,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
@@ -466,7 +468,7 @@ class Solver:
     def _launch_update(self, state: State, b: int) -> None:
         m = self.model
         start, count = m.body_ranges[b]
-        wp.launch(self._update[b], count, device=m.device, inputs=[
+        self.launch(self._update[b], count, [
             m.body, m.body_params, self.layout.lo_d, self.layout.shape_d, self.layout.offset_d,
             self._grid_offsets, self._dx, start, state.x, state.X, state.C, state.F0s, state.Fsn,
             state.stencils])
@@ -609,7 +611,7 @@ class Solver:
         m = self.model
         self.diagnostics.zero_()
         D = m.types.scalar(m.kernel.moment * m.dx**2 if m.kernel.moment is not None else 0.0)
-        wp.launch(self._measure, m.n_particles, device=m.device, inputs=[
+        self.launch(self._measure, m.n_particles, [
             m.mass, state.x, state.v, state.C, state.Fsn, D, state.stencils.K, self._gravity,
             m.types.vec(*self._center), self.diagnostics])
         out = about_center_of_mass(self.diagnostics.numpy(), m.dim)
