@@ -7,6 +7,12 @@ are sent as chunks of their own, so chunking does not depend on timing).
 step and update times, start time, host and command line. Both carry the same
 recording id, so the viewer merges them when opened together.
 
+Particle frames are written by a thread of their own (colours, conversion
+and serialisation overlap the next steps, whose Warp launches release the
+GIL): ``particles`` hands the arrays over and returns, at most
+``FRAMES_IN_FLIGHT`` frames wait, and ``close`` writes every one before the
+files are finalised.
+
 Layout of the recording (timelines ``step`` and ``sim_time``):
 
   /particles          Points2D/3D positions per logged frame, with the
@@ -31,6 +37,8 @@ and of the timings file:
 
 from __future__ import annotations
 
+import queue
+import threading
 import uuid
 from collections import defaultdict
 from pathlib import Path
@@ -84,8 +92,11 @@ def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
     return rec
 
 
+FRAMES_IN_FLIGHT = 2  # particle frames handed to the writer thread and not yet written
+
+
 class RerunSink(Sink):
-    def __init__(self, path: Path, flush_every: int = 500):
+    def __init__(self, path: Path, flush_every: int = 500, threaded: bool = True):
         self.path = Path(path)
         self.flush_every = flush_every
         recording_id = str(uuid.uuid4())
@@ -100,6 +111,13 @@ class RerunSink(Sink):
         self._color = "body"
         self._range = 0.0  # the colour map's upper end: the largest value logged so far
         self._body = None
+        self._frames: queue.Queue | None = None  # to the writer thread (threaded)
+        self._writer: threading.Thread | None = None
+        self._failure: BaseException | None = None  # raised by the writer, re-raised here
+        if threaded:
+            self._frames = queue.Queue(maxsize=FRAMES_IN_FLIGHT)
+            self._writer = threading.Thread(target=self._write_frames, name="rerun-frames", daemon=True)
+            self._writer.start()
 
     # ---------------------------------------------------------------- static
     def start(self, meta: RunMeta) -> None:
@@ -191,6 +209,36 @@ class RerunSink(Sink):
 
     # ---------------------------------------------------------------- per step
     def particles(self, step, t, x, dJ, fields=None, index=None):
+        """One frame; the arrays must not change afterwards (the writer
+        thread reads them later)."""
+        if self._frames is None:
+            self._write_particles(step, t, x, dJ, fields, index)
+            return
+        self._check_writer()
+        self._frames.put((step, t, x, dJ, fields, index))
+
+    def _write_frames(self) -> None:
+        """The writer thread: frames in order until None."""
+        while (frame := self._frames.get()) is not None:
+            if self._failure is None:
+                try:
+                    self._write_particles(*frame)
+                except BaseException as e:  # noqa: BLE001 - handed to the main thread
+                    self._failure = e
+
+    def _check_writer(self) -> None:
+        if self._failure is not None:
+            failure, self._failure = self._failure, None
+            raise RuntimeError(f"writing particle frames failed: {failure!r}") from failure
+
+    def _drain(self) -> None:
+        """Wait until every frame handed over is written; stop the writer."""
+        if self._writer is not None and self._writer.is_alive():
+            self._frames.put(None)
+            self._writer.join()
+        self._writer = None
+
+    def _write_particles(self, step, t, x, dJ, fields=None, index=None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
         for path, c in self._moving:
@@ -252,7 +300,9 @@ class RerunSink(Sink):
             return
         self._open = False
         try:
+            self._drain()
             self.flush()
+            self._check_writer()
         finally:
             try:  # leaving the streams (last entered first) flushes and finalises the files
                 self.clock.__exit__(None, None, None)
