@@ -83,9 +83,10 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
              with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
              fused: bool = False):
     """P2G for the particles of one material model: see :func:`_make_p2g`
-    (``fused``: stencils located from the reference positions, mpm.stencil.fuse)."""
+    (``lagrangian`` matters to plastic models only: one kernel otherwise;
+    ``fused``: stencils located from the reference positions, mpm.stencil.fuse)."""
     return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian, with_stress, fused)
+                     lagrangian or not material.plastic, with_stress, fused)
 
 
 @functools.cache
@@ -99,10 +100,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     A plastic model's return mapping runs first (mpm.materials.plastic): the
     trial F_E = F^sn F^0s is returned, the stress is that of the returned F_E,
     and, when ``write`` is set (a step, not a stress evaluation between
-    steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored.
-    ``lagrangian`` False (EMPM) knows F^sn = I here (its every-step update
-    reset it): F = F^0s, L = C, node positions x_p + r, and a plastic model
-    stores F_E as it is (the same numbers as multiplying by the exact I).
+    steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored;
+    ``lagrangian`` False (EMPM) knows F^sn = I here and stores F_E as it is.
     A model that hardens records its largest stiffening factor per body in
     ``status`` (for the time step). ``with_stress`` False leaves the stress
     impulse out (the implicit integrator adds the stress of the step's end,
@@ -172,10 +171,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         P = t.mat()
         psi = S(0.0)
         if wp.static(plastic):
-            trial = F0  # F_E trial = F^sn F^0s
-            if wp.static(lagrangian):
-                trial = Fs * F0
-            FE, P, psi, h = plastic_update(trial, body_params[b], history[p], dt)
+            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
             if wp.static(lagrangian):
                 F0 = wp.inverse(Fs) * FE
             else:
@@ -188,12 +184,9 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                               f64(stiffening(body_params[b], h)))
         else:
             L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
-            F = F0
-            if wp.static(lagrangian):
-                F = Fs * F0
-                if wp.static(needs_L):
-                    L = Cp * wp.inverse(Fs)
-            P, psi = stress_energy(F, L, body_params[b])
+            if wp.static(needs_L):
+                L = Cp * wp.inverse(Fs)
+            P, psi = stress_energy(Fs * F0, L, body_params[b])
         wp.atomic_add(energy, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
         if wp.static(not with_stress):
@@ -225,10 +218,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                         else:
                             wp.atomic_add(grid_mv, i, w * mv
                                           - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
-                        if wp.static(lagrangian):
-                            wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
-                        else:
-                            wp.atomic_add(grid_mq, i, (w * m) * (xp + r))
+                        wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
                         if wp.static(with_regions):
                             if rid > 0:
                                 wp.atomic_add(grid_kin, i, w * m)
