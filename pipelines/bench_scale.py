@@ -216,7 +216,7 @@ def profile(spec_for, steps: int = 20, rounds: int = 3) -> list[dict]:
     return rows
 
 
-def bench_stages(spec_for, workdir: Path, steps: int = 200, rounds: int = 3) -> list[dict]:
+def bench_stages(spec_for, workdir: Path, steps: int = 300, rounds: int = 5) -> list[dict]:
     """Each stage in turn, ``rounds`` interleaved rounds, the fastest median;
     a logged row counts the logging time too."""
     common = ["log.progress=false"]
