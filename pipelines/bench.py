@@ -299,6 +299,7 @@ def main(argv=None) -> None:
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
+    p.set_defaults(speed=True)  # the first table (--only may leave it out)
     args = p.parse_args(argv)
     for c in args.cases:
         if c not in CASES:
@@ -323,7 +324,7 @@ def main(argv=None) -> None:
         print(f"warp {wp.__version__}, device {device}, float32; median over the timed steps",
               file=sys.stderr)
         rows = ([bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
-                if getattr(args, "speed", True) else [])
+                if args.speed else [])
         schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
@@ -406,8 +407,8 @@ def main(argv=None) -> None:
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,
-                                         "integrators": integrators, "fused": fused, "stages": stages, "profile": profile,
-                                         "paper": paper, "scaling": scaling}, indent=2) + "\n")
+                                         "integrators": integrators, "fused": fused, "stages": stages,
+                                         "profile": profile, "paper": paper, "scaling": scaling}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
