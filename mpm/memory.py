@@ -8,10 +8,7 @@ array it was taken from).
 
 import warp as wp
 
-try:  # the class of @wp.struct instances (its place moved between Warp versions)
-    from warp._src.codegen import StructInstance
-except ImportError:  # pragma: no cover
-    from warp.codegen import StructInstance
+from .types import StructInstance
 
 
 def _children(obj):

@@ -11,6 +11,13 @@ from dataclasses import dataclass
 
 import warp as wp
 
+try:  # the class of @wp.struct instances (its place moved between Warp versions)
+    from warp._src.codegen import StructInstance
+except ImportError:  # pragma: no cover
+    from warp.codegen import StructInstance
+
+__all__ = ["PRECISIONS", "N_MATERIAL_PARAMS", "N_HISTORY", "StructInstance", "Types", "make_types"]
+
 PRECISIONS = ("float32", "float64")
 
 # Length of the per-body material parameter vector (see mpm.materials).
