@@ -16,6 +16,12 @@ import warp as wp
 from .types import StructInstance
 
 
+def kernel_name(kernel) -> str:
+    """A specialised kernel's readable name: ``make_g2p.g2p`` for the kernel
+    ``g2p`` that ``make_g2p`` builds."""
+    return kernel.key.replace("__locals__", ".").lstrip("_")
+
+
 def _same(a, b) -> bool:
     """Whether ``a`` passes the same value to a kernel as ``b`` did."""
     if a is b:
@@ -59,6 +65,3 @@ class Launches:
             entry[2] = dim
         cmd.launch()
 
-    def forget(self) -> None:
-        """Drop the recorded launches (their arrays are kept alive by them)."""
-        self._recorded.clear()

@@ -27,7 +27,7 @@ from .contact import make_contact
 from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
-from .launch import Launches
+from .launch import Launches, kernel_name
 from .layout import GridLayout
 from .memory import array_bytes
 from .stencil import fuse
@@ -247,8 +247,8 @@ class Solver:
         """The stages of one step, in order, and the kernels each launches
         (what this scene compiles; an absent stage is work the scene does
         not need)."""
-        def names(*ks):  # make_p2g.p2g for the kernel p2g that make_p2g specialises
-            return [k.key.replace("__locals__", ".").lstrip("_") for k in ks if k is not None]
+        def names(*ks):
+            return [kernel_name(k) for k in ks if k is not None]
 
         sch = self.scheme
         stages = [("clear the grid", [])]

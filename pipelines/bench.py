@@ -58,14 +58,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
-
 from . import bench_scale, schema
+from .bench_runs import QUIET, interleaved, loop_s, spec_for, timed
 from .runner import execute
-from .validate import resolve
 from .warp_setup import init_warp
-
-CONF = Path(__file__).resolve().parents[1] / "conf"
 
 CASES = {
     "ball_2d": ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated"],
@@ -79,26 +75,6 @@ KERNEL_CASE = ["scene=elastic_ball_3d", "scene.resolution=64", "material=neo_hoo
 MATERIAL_CASE = ["scene=elastic_ball_3d", "scene.resolution=64"]
 MATERIALS = ("fixed_corotated", "neo_hookean", "viscous", "snow", "sand", "von_mises", "nacc",
              "viscoplastic")
-
-
-def spec_for(overrides: list[str]):
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return resolve(compose(config_name="config", overrides=overrides))
-
-
-REPEATS = 5  # timed runs of each configuration; the fastest median is reported
-
-
-def timed(overrides: list[str], workdir: Path, repeats: int = REPEATS) -> dict:
-    """Run ``repeats`` times; the metrics of the run with the smallest median
-    step time (the machine's noise only ever adds time)."""
-    runs = []
-    for k in range(repeats):
-        m = execute(spec_for(overrides), workdir / f"run{k}")
-        if m["status"] != "completed":
-            raise RuntimeError(f"{' '.join(overrides)}: {m['status']}: {m['reason']}")
-        runs.append(m)
-    return min(runs, key=lambda m: m["step_time_ms"] + (m["log_time_ms"] or 0.0))
 
 
 def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> dict:
@@ -120,22 +96,12 @@ def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> di
 
 
 def bench_schemes(workdir: Path, steps: int) -> list[dict]:
-    """The schemes in turn, REPEATS rounds (so that drifts of the machine's
-    speed hit all alike); the fastest median of each."""
-    best: dict[str, dict] = {}
-    overrides = {s: CASES["ball_2d"] + [f"scheme={s}", f"run.steps={steps}", "log.every=0",
-                                        "log.scalars=false", "log.progress=false"] for s in SCHEMES}
-    for scheme in SCHEMES:
-        execute(spec_for(CASES["ball_2d"] + [f"scheme={scheme}", "run.steps=5", "log.every=0"]),
-                workdir / f"{scheme}_warm")
-    for k in range(REPEATS):
-        for scheme in SCHEMES:
-            m = timed(overrides[scheme], workdir / f"scheme_{scheme}_{k}", repeats=1)
-            if scheme not in best or m["step_time_ms"] < best[scheme]["step_time_ms"]:
-                best[scheme] = m
-    return [{"scheme": s, "particles": m["particles"], "step_ms": m["step_time_ms"],
+    """The schemes in interleaved rounds; the fastest median of each."""
+    best = interleaved({sch: CASES["ball_2d"] + [f"scheme={sch}"] + QUIET for sch in SCHEMES},
+                       [f"run.steps={steps}"], workdir / "schemes")
+    return [{"scheme": sch, "particles": m["particles"], "step_ms": m["step_time_ms"],
              "update_ms": m["update_time_ms"], "updates": m["config_updates"]["total"]}
-            for s, m in best.items()]
+            for sch, m in best.items()]
 
 
 FLUID_ROUNDS = 3  # interleaved rounds of the fluid runs; the fastest of each counts
@@ -150,15 +116,8 @@ def bench_updates(workdir: Path) -> list[dict]:
     scheme the round with the least stepping time."""
     rows = []
     for scene, over in FLUIDS.items():
-        best: dict[str, dict] = {}
-        for k in range(FLUID_ROUNDS):
-            for name, scheme in FLUID_SCHEMES.items():
-                o = over + scheme + ["log.every=0", "log.scalars=false", "log.progress=false"]
-                m = execute(spec_for(o), workdir / f"{scene}_{name}_{k}")
-                if m["status"] != "completed":
-                    raise RuntimeError(f"{scene} {name}: {m['status']}: {m['reason']}")
-                if name not in best or m["loop_time_s"] < best[name]["loop_time_s"]:
-                    best[name] = m
+        best = interleaved({name: over + scheme + QUIET for name, scheme in FLUID_SCHEMES.items()}, [],
+                           workdir / scene, FLUID_ROUNDS, by=loop_s, warm=None)
         for name, m in best.items():
             rows.append({"scene": scene, "scheme": name, "particles": m["particles"], "steps": m["steps"],
                          "tau": m["updates_per_1e4_steps"], "update_ms": m["update_time_ms"],
@@ -172,19 +131,8 @@ def bench_kernels(workdir: Path, steps: int) -> list[dict]:
     combos = [(tr, s, k) for tr in ("pic", "mls") for s in ("tlmpm", "empm")
               for k in ("quadratic", "compact")]
 
-    def overrides(tr, scheme, kernel, n):
-        return KERNEL_CASE + [f"scheme={scheme}", f"kernel={kernel}", f"kernel.transfer={tr}",
-                              f"run.steps={n}", "log.every=0", "log.scalars=false",
-                              "log.progress=false"]
-
-    for c in combos:
-        execute(spec_for(overrides(*c, 3)), workdir / f"k_{'_'.join(c)}_warm")
-    best: dict[tuple, dict] = {}
-    for k in range(REPEATS):
-        for c in combos:
-            m = timed(overrides(*c, steps), workdir / f"k_{'_'.join(c)}_{k}", repeats=1)
-            if c not in best or m["step_time_ms"] < best[c]["step_time_ms"]:
-                best[c] = m
+    best = interleaved({c: KERNEL_CASE + [f"scheme={c[1]}", f"kernel={c[2]}", f"kernel.transfer={c[0]}"] + QUIET
+                        for c in combos}, [f"run.steps={steps}"], workdir / "kernels")
     return [{"transfer": tr, "scheme": s, "kernel": k, "particles": m["particles"],
              "grid_nodes": m["grid_nodes"], "step_ms": m["step_time_ms"]}
             for (tr, s, k), m in best.items()]
@@ -192,19 +140,8 @@ def bench_kernels(workdir: Path, steps: int) -> list[dict]:
 
 def bench_materials(workdir: Path, steps: int) -> list[dict]:
     """Every material on the 3D sphere, in turns (as bench_schemes)."""
-
-    def overrides(material, n):
-        return MATERIAL_CASE + [f"material={material}", f"run.steps={n}", "log.every=0",
-                                "log.scalars=false", "log.progress=false"]
-
-    for mat in MATERIALS:
-        execute(spec_for(overrides(mat, 3)), workdir / f"m_{mat}_warm")
-    best: dict[str, dict] = {}
-    for k in range(REPEATS):
-        for mat in MATERIALS:
-            m = timed(overrides(mat, steps), workdir / f"m_{mat}_{k}", repeats=1)
-            if mat not in best or m["step_time_ms"] < best[mat]["step_time_ms"]:
-                best[mat] = m
+    best = interleaved({mat: MATERIAL_CASE + [f"material={mat}"] + QUIET for mat in MATERIALS},
+                       [f"run.steps={steps}"], workdir / "materials")
     return [{"material": mat, "particles": m["particles"], "step_ms": m["step_time_ms"]}
             for mat, m in best.items()]
 
@@ -220,17 +157,8 @@ def bench_integrators(workdir: Path) -> list[dict]:
     """Explicit, implicit and semi-implicit on the paper-size 2D ball at the
     same fixed step, whole runs in interleaved rounds; per integrator the
     round with the least stepping time."""
-    common = ["log.every=0", "log.scalars=false", "log.progress=false"]
-    for name, over in INTEGRATORS.items():
-        execute(spec_for(INTEGRATOR_CASE + over + common + ["run.steps=3"]), workdir / f"i_{name}_warm")
-    best: dict[str, dict] = {}
-    for k in range(INTEGRATOR_ROUNDS):
-        for name, over in INTEGRATORS.items():
-            m = execute(spec_for(INTEGRATOR_CASE + over + common + ["run.duration=1.0"]), workdir / f"i_{name}_{k}")
-            if m["status"] != "completed":
-                raise RuntimeError(f"{name}: {m['status']}: {m['reason']}")
-            if name not in best or m["loop_time_s"] < best[name]["loop_time_s"]:
-                best[name] = m
+    best = interleaved({name: INTEGRATOR_CASE + over + QUIET for name, over in INTEGRATORS.items()},
+                       ["run.duration=1.0"], workdir / "integrators", INTEGRATOR_ROUNDS, by=loop_s)
     base = best["explicit"]
     rows = []
     for name, m in best.items():
@@ -253,19 +181,9 @@ FUSED_ROUNDS = 3
 def bench_fused(workdir: Path, steps: int) -> list[dict]:
     """EMPM with stencils located in P2G and G2P (fused) against cached at
     every update, interleaved rounds, fastest median of each."""
-    common = ["scheme=empm", "log.every=0", "log.scalars=false", "log.progress=false", "detect.action=off"]
-    best: dict = {}
-    for name, over in FUSED_CASES.items():
-        for fuse in ("true", "false"):
-            execute(spec_for(over + common + ["run.steps=3", f"run.fuse={fuse}"]), workdir / "f_warm")
-    for k in range(FUSED_ROUNDS):
-        for name, over in FUSED_CASES.items():
-            for fuse in ("true", "false"):
-                m = execute(spec_for(over + common + [f"run.steps={steps}", f"run.fuse={fuse}"]),
-                            workdir / f"f_{k}")
-                key = (name, fuse)
-                if key not in best or m["step_time_ms"] < best[key]["step_time_ms"]:
-                    best[key] = m
+    best = interleaved({(name, fuse): over + ["scheme=empm", "detect.action=off", f"run.fuse={fuse}"] + QUIET
+                        for name, over in FUSED_CASES.items() for fuse in ("true", "false")},
+                       [f"run.steps={steps}"], workdir / "fused", FUSED_ROUNDS)
     return [{"case": name, "particles": best[(name, "true")]["particles"],
              "fused_ms": best[(name, "true")]["step_time_ms"], "cached_ms": best[(name, "false")]["step_time_ms"]}
             for name in FUSED_CASES]
@@ -273,6 +191,9 @@ def bench_fused(workdir: Path, steps: int) -> list[dict]:
 
 TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "stages", "profile",
           "paper", "scaling")
+SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
+             "integrators": "integrator", "fused": "fused-against-cached EMPM", "stages": "optional-stage",
+             "profile": "per-kernel profile"}  # tables in the default run: --no-<table> leaves one out
 
 
 def main(argv=None) -> None:
@@ -281,21 +202,8 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=None, help="steps per timed run")
     p.add_argument("--cold", action="store_true", help="compile into an empty kernel cache")
     p.add_argument("--json", type=Path, default=None, help="also write the results here")
-    p.add_argument("--no-schemes", dest="schemes", action="store_false", help="skip the scheme table")
-    p.add_argument("--no-updates", dest="updates", action="store_false",
-                   help="skip the update-cost table")
-    p.add_argument("--no-kernels", dest="kernels", action="store_false",
-                   help="skip the kernel table")
-    p.add_argument("--no-materials", dest="materials", action="store_false",
-                   help="skip the material table")
-    p.add_argument("--no-integrators", dest="integrators", action="store_false",
-                   help="skip the integrator table")
-    p.add_argument("--no-fused", dest="fused", action="store_false",
-                   help="skip the fused-against-cached EMPM table")
-    p.add_argument("--no-stages", dest="stages", action="store_false",
-                   help="skip the optional-stage table")
-    p.add_argument("--no-profile", dest="profile", action="store_false",
-                   help="skip the per-kernel profile of a step")
+    for table, what in SKIPPABLE.items():
+        p.add_argument(f"--no-{table}", dest=table, action="store_false", help=f"skip the {what} table")
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
@@ -331,10 +239,10 @@ def main(argv=None) -> None:
         materials = bench_materials(Path(tmp), 40) if args.materials else []
         integrators = bench_integrators(Path(tmp)) if args.integrators else []
         fused = bench_fused(Path(tmp), 40) if args.fused else []
-        stages = bench_scale.bench_stages(spec_for, Path(tmp)) if args.stages else []
-        profile = bench_scale.profile(spec_for) if args.profile else []
-        paper = bench_scale.bench_paper(spec_for, Path(tmp)) if args.paper else []
-        scaling = bench_scale.bench_scaling(spec_for, Path(tmp)) if args.scaling else []
+        stages = bench_scale.bench_stages(Path(tmp)) if args.stages else []
+        profile = bench_scale.profile() if args.profile else []
+        paper = bench_scale.bench_paper(Path(tmp)) if args.paper else []
+        scaling = bench_scale.bench_scaling(Path(tmp)) if args.scaling else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "

@@ -24,11 +24,10 @@ from pathlib import Path
 import warp as wp
 
 import mpm
-from mpm.launch import Launches
+from mpm.launch import Launches, kernel_name
 
+from .bench_runs import QUIET, interleaved, spec_for, step_ms, timed
 from .runner import execute, solver_options
-
-QUIET = ["log.every=0", "log.scalars=false", "log.progress=false"]
 
 # A-ULMPM Table 2 (journal version): scene label, overrides, seconds per step, machine, particles
 PAPER_TABLE2 = [
@@ -49,24 +48,12 @@ PAPER_TABLE2 = [
 PAPER_STEPS = {2: 40, 3: 10}
 
 
-def _best(spec_for, overrides: list[str], workdir: Path, repeats: int) -> dict:
-    """The run with the smallest median step time of ``repeats``."""
-    best = None
-    for k in range(repeats):
-        m = execute(spec_for(overrides), workdir / f"run{k}")
-        if m["status"] != "completed":
-            raise RuntimeError(f"{' '.join(overrides)}: {m['status']}: {m['reason']}")
-        if best is None or m["step_time_ms"] < best["step_time_ms"]:
-            best = m
-    return best
-
-
-def bench_paper(spec_for, workdir: Path, repeats: int = 2) -> list[dict]:
+def bench_paper(workdir: Path, repeats: int = 2) -> list[dict]:
     rows = []
     for label, over, paper_s, machine, paper_n in PAPER_TABLE2:
         over = over + QUIET + [f"run.steps={PAPER_STEPS[spec_for(over).scene.dim]}"]
         warm = execute(spec_for(over[:-1] + ["run.steps=2"]), workdir / "warm")  # compile
-        m = _best(spec_for, over, workdir / label.replace(" ", "_"), repeats)
+        m = timed(over, workdir / label.replace(" ", "_"), repeats)
         rows.append({"scene": label, "overrides": over, "particles": m["particles"], "paper_particles": paper_n,
                      "grid_nodes": m["grid_nodes"], "steps": m["steps"], "compile_time_s": warm["compile_time_s"],
                      "step_ms": m["step_time_ms"], "particle_steps_per_s": m["particle_steps_per_s"],
@@ -82,16 +69,15 @@ SCALING = {
 }
 
 
-def bench_scaling(spec_for, workdir: Path, repeats: int = 2, cases=tuple(SCALING)) -> list[dict]:
+def bench_scaling(workdir: Path, repeats: int = 2) -> list[dict]:
     """Ascending sizes in one process, so that the peak resident memory after
     each is the peak of the largest run so far, that is of this one."""
     rows = []
-    for case in cases:
-        over, resolutions, steps = SCALING[case]
+    for case, (over, resolutions, steps) in SCALING.items():
         execute(spec_for(over + QUIET + [f"scene.resolution={resolutions[0]}", "run.steps=2"]), workdir / "warm")
         for res in resolutions:
-            m = _best(spec_for, over + QUIET + [f"scene.resolution={res}", f"run.steps={steps}"],
-                      workdir / f"{case}_{res}", repeats)
+            m = timed(over + QUIET + [f"scene.resolution={res}", f"run.steps={steps}"], workdir / f"{case}_{res}",
+                      repeats)
             rows.append({"case": case, "resolution": res, "particles": m["particles"],
                          "grid_nodes": m["grid_nodes"], "step_ms": m["step_time_ms"],
                          "particle_steps_per_s": m["particle_steps_per_s"], "memory_mb": m["memory_mb"],
@@ -158,7 +144,7 @@ class _Counted:
                         wp.synchronize_device(self.device)
                 finally:
                     inside.pop()
-                name = kernel.key.replace("__locals__", ".").lstrip("_")  # make_g2p.g2p
+                name = kernel_name(kernel)
                 self.ms[name] = self.ms.get(name, 0.0) + 1e3 * (time.perf_counter() - t0)
                 return out
             return wrapper
@@ -190,7 +176,7 @@ PROFILE_CASES = {"ball_2d (128^2)": ["scene=elastic_ball_2d", "scene.resolution=
                  "sphere_3d (64^3)": ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated"]}
 
 
-def profile(spec_for, steps: int = 20, rounds: int = 3) -> list[dict]:
+def profile(steps: int = 20, rounds: int = 3) -> list[dict]:
     """Where a step's time goes, per kernel (each launch timed, synchronised
     on CUDA) and the rest of Solver.advance (host work: read-back, the
     layout, Python), EMPM with the defaults; the fastest of ``rounds``."""
@@ -216,29 +202,17 @@ def profile(spec_for, steps: int = 20, rounds: int = 3) -> list[dict]:
     return rows
 
 
-def bench_stages(spec_for, workdir: Path, steps: int = 300, rounds: int = 5) -> list[dict]:
+def bench_stages(workdir: Path, steps: int = 300, rounds: int = 5) -> list[dict]:
     """Each stage in turn, ``rounds`` interleaved rounds, the fastest median;
     a logged row counts the logging time too."""
-    common = ["log.progress=false"]
-    over = {name: STAGE_BASE + QUIET + extra + common + [f"run.steps={steps}"] for name, extra in STAGES.items()}
-    for name in STAGES:
-        execute(spec_for(over[name][:-1] + ["run.steps=2"]), workdir / "warm")
-    best: dict[str, dict] = {}
-    for k in range(rounds):
-        for name in STAGES:
-            m = execute(spec_for(over[name]), workdir / f"stage_{k}")
-            if m["status"] != "completed":
-                raise RuntimeError(f"{name}: {m['status']}: {m['reason']}")
-            m["total_ms"] = m["step_time_ms"] + (m["log_time_ms"] or 0.0)
-            if name not in best or m["total_ms"] < best[name]["total_ms"]:
-                best[name] = m
-    base = best["plain step"]["total_ms"]
+    runs = {name: STAGE_BASE + QUIET + extra for name, extra in STAGES.items()}
+    best = interleaved(runs, [f"run.steps={steps}"], workdir / "stages", rounds)
+    base = step_ms(best["plain step"])
     rows = []
-    for name in STAGES:
-        m = best[name]
-        launches, memory = launches_per_step(spec_for(over[name]))
+    for name, m in best.items():
+        launches, memory = launches_per_step(spec_for(runs[name]))
         rows.append({"stage": name, "particles": m["particles"], "step_ms": m["step_time_ms"],
-                     "log_ms": m["log_time_ms"] or 0.0, "vs_plain": m["total_ms"] / base,
+                     "log_ms": m["log_time_ms"] or 0.0, "vs_plain": step_ms(m) / base,
                      "launches": launches, "copies_fills": memory})
     return rows
 

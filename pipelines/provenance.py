@@ -63,7 +63,7 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
 
 
 # pipeline modules that read results but never shape a run
-POST_PROCESSING = {"report.py", "replay.py", "recordings.py", "bench.py"}
+POST_PROCESSING = {"report.py", "replay.py", "recordings.py", "bench.py", "bench_runs.py", "bench_scale.py"}
 
 
 def code_hash(root: Path = REPO) -> str:

@@ -227,7 +227,6 @@ class Run:
     def build(self) -> None:
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
-        self.record_dJ = log.particles and log.dJ
         self.solver = mpm.Solver(self.model, spec.scheme, solver_options(spec))
         self.implicit = self.solver.implicit
         self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
@@ -302,7 +301,7 @@ class Run:
         # copies: on the CPU .numpy() is a view of memory the next step
         # overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
-        dJ = self.state.dJ.numpy().copy() if self.record_dJ else None
+        dJ = self.state.dJ.numpy().copy() if self.solver.options.record_dJ else None
         fields = self.plastic_fields()
         index = self.solver.kept  # the particles left inside, once some were removed at open walls
         if index is not None:

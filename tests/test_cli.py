@@ -112,9 +112,9 @@ OWN_PROCESS = [["material.Ee=1"], ["scene=nope"], ["+foo=1"], ["scene.resolution
                ["hydra.run.dir=/proc/no/run"]]
 
 
-def _check_refusal(args, message, code, stderr, out) -> str | None:
-    """Why the outcome of ``args`` is not a one-line refusal with exit code 2
-    that leaves nothing behind (None: it is)."""
+def _check_refusal(message, code, stderr, out) -> str | None:
+    """Why an outcome is not a one-line refusal ``error: <message>...`` with
+    exit code 2 that leaves ``out`` absent (None: it is)."""
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
     if code != 2:
         return f"exit code {code}: {stderr}"
@@ -127,32 +127,35 @@ def _check_refusal(args, message, code, stderr, out) -> str | None:
     return None
 
 
-def _run_dir(args, out):
-    return [] if any(a.startswith("hydra.run.dir=") for a in args) else [f"hydra.run.dir={out}"]
+def _with_run_dir(args, out):
+    """``args`` with the run directory ``out``, unless they name their own;
+    and the directory that must stay absent (None: their own)."""
+    if any(a.startswith("hydra.run.dir=") for a in args):
+        return args, None
+    return args + [f"hydra.run.dir={out}"], out
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path):
     """Every BAD_INPUTS entry, each through pipelines.run's main as from a
     fresh process, all in one process (tests/cli_batch.py: a process per
     command line costs seconds of imports each)."""
-    outs = [tmp_path / str(i) for i in range(len(BAD_INPUTS))]
-    cases = [args + _run_dir(args, out) for (args, _), out in zip(BAD_INPUTS, outs)]
-    (tmp_path / "in.json").write_text(json.dumps(cases))
+    cases = [_with_run_dir(args, tmp_path / str(i)) for i, (args, _) in enumerate(BAD_INPUTS)]
+    (tmp_path / "in.json").write_text(json.dumps([argv for argv, _ in cases]))
     p = subprocess.run([sys.executable, str(ROOT / "tests" / "cli_batch.py"), str(tmp_path / "in.json"),
                         str(tmp_path / "out.json")], cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stderr
     results = json.loads((tmp_path / "out.json").read_text())
-    wrong = {" ".join(args): why for (args, message), out, (code, stderr) in zip(BAD_INPUTS, outs, results)
-             if (why := _check_refusal(args, message, code, stderr, None if _run_dir(args, out) == [] else out))}
+    wrong = {" ".join(args): why for (args, message), (_, out), (code, stderr) in zip(BAD_INPUTS, cases, results)
+             if (why := _check_refusal(message, code, stderr, out))}
     assert not wrong, "\n".join(f"{k}: {v}" for k, v in wrong.items())
 
 
 @pytest.mark.parametrize("args", OWN_PROCESS, ids=" ".join)
 def test_bad_input_from_a_fresh_process(args, tmp_path):
     message = next(m for a, m in BAD_INPUTS if a == args)
-    out = tmp_path / "run"
-    p = run_cli(args + _run_dir(args, out), cwd=ROOT, timeout=120)
-    why = _check_refusal(args, message, p.returncode, p.stderr, None if _run_dir(args, out) == [] else out)
+    argv, out = _with_run_dir(args, tmp_path / "run")
+    p = run_cli(argv, cwd=ROOT, timeout=120)
+    why = _check_refusal(message, p.returncode, p.stderr, out)
     assert why is None, why
 
 
