@@ -22,7 +22,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
-from .stencil import make_locate, make_stencil_cache
+from .stencil import make_locate, make_origin, make_stencil_cache
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
@@ -30,18 +30,20 @@ MOMENT_REGULARISATION = 1.0e-6
 
 @functools.cache
 def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradients: bool,
-                fused: bool = False):
+                fused: bool = False, moment: bool = True):
     """``project``: the material's projection factory or None; ``gradients``:
     cache the weight derivatives too (APIC and PIC transfers); ``fused``: the
     transfers locate the stencils themselves (mpm.stencil.fuse): only K_p is
-    cached."""
+    cached; ``moment``: the transfer uses K_p (not PIC), built when the
+    kernel's moment varies per particle."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
+    origin = make_origin(t, kernel, gradients)
     proj = project(t) if project is not None else None
     Cache = make_stencil_cache(t, kernel)
     Gv = wp.types.vector(G, S)
-    per_particle_K = kernel.moment is None
+    per_particle_K = moment and kernel.moment is None
     inv_G = 1.0 / G
 
     @wp.kernel(module="unique")
@@ -78,9 +80,10 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         F0s[p] = F
         Fsn[p] = wp.identity(n=dim, dtype=S)
         D = t.mat()
+        u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
         for g in range(wp.static(0 if fused and not per_particle_K else G)):
             box = b * G + g
-            flat, fx, W, dW = locate(Xp, S(1.0) / dx, grid_offsets[g], lo[box], shape[box], offset[box])
+            flat, fx, W, dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo[box], shape[box], offset[box])
             if wp.static(not fused):
                 k = p * G + g
                 cache.base[k] = flat

@@ -104,7 +104,7 @@ def make_weight_gradient(t: Types, kernel: Kernel, mls: bool):
 
 def _specialisation(t: Types, kernel: Kernel, transfer: str):
     mls = transfer == "mls" and not kernel.gradient_affine
-    return mls, make_cached(t, kernel, not mls), make_node(t, kernel), make_weight_gradient(t, kernel, mls)
+    return mls, *make_cached(t, kernel, not mls), make_node(t, kernel), make_weight_gradient(t, kernel, mls)
 
 
 @functools.cache
@@ -114,7 +114,7 @@ def make_gather(t: Types, kernel: Kernel, transfer: str):
     G2P will take (F^sn += dt D), for grid velocities (or a direction) v."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
     Cache = make_stencil_cache(t, kernel)
     inv_G = 1.0 / G
     mat = t.mat
@@ -124,8 +124,9 @@ def make_gather(t: Types, kernel: Kernel, transfer: str):
                dx: S, K: S, Kp: t.mat):
         inv_dx = S(1.0) / dx
         D = mat()
+        u0, ph = reference(p, cache)
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -145,7 +146,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     principal_stress = make_principal_stress(t, material, psd)
@@ -211,8 +212,9 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
         # A's diagonal, (dt^2 / G) V0 e_k . dP(e_k wv^T) wv with wv = F0^T g, in the
         # principal frames: u_k = U^T e_k (row k of U), z = V^T wv
         VF0T = wp.transpose(T.V) * wp.transpose(F0)
+        u0, ph = reference(p, cache)
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -237,7 +239,7 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
     stress part; the mass part is added per node by :func:`make_node_kernels`)."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     action = make_tangent_action(t)
@@ -275,8 +277,9 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
             L = D * Finv
             dS += visc[p] * S(0.5) * (L + wp.transpose(L)) * wp.transpose(Finv)
         dS = dt * dS
+        u0, ph = reference(p, cache)
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):

@@ -170,11 +170,14 @@ class Solver:
                              if self.implicit else None)
         self._inside = make_inside_count(t, self.collider_kinds) if colliders else None
         self._collider_speed = max([c.speed() for c in colliders], default=0.0)  # [m/s], for the step
-        self._measure = make_measure(t, per_particle_K=k.moment is None)
+        # K_p per particle: the kernel's moment varies and the transfer has an affine term
+        per_particle_K = k.moment is None and transfer != "pic"
+        self._measure = make_measure(t, per_particle_K=per_particle_K)
         self._fracture = make_fracture(t)
         transform = scheme.affine == "transform"
         self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform,
-                                       gradients=transfer != "mls" or k.gradient_affine, fused=self.fused)
+                                       gradients=transfer != "mls" or k.gradient_affine, fused=self.fused,
+                                       moment=per_particle_K)
                         for b in range(nb)}
 
         self.launch = Launches(dev)  # the step's launches, repacking only what changed

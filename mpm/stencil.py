@@ -42,37 +42,75 @@ def make_strides(t: Types):
 
 
 @functools.cache
+def make_origin(t: Types, kernel: Kernel, with_gradients: bool):
+    """``origin(X, inv_dx, grid_offsets) -> (u0, P)``: the coordinate of X on
+    grid 0 in cells, ``u0 = X / dx - o_0``, and per axis (row d) what the
+    kernel's grids share (its ``phase``; zero when it has none). Every grid's
+    stencil is located from these (:func:`make_locate`)."""
+    S = t.scalar
+    Pm = wp.types.matrix((t.dim, 3), S)
+    Gv = wp.types.vector(kernel.n_grids, S)
+    phase = kernel.phase(t, with_gradients) if kernel.phase is not None else None
+
+    @wp.func
+    def origin(X: t.vec, inv_dx: S, grid_offsets: Gv):
+        u0 = X * inv_dx
+        P = Pm()
+        for d in range(wp.static(t.dim)):
+            u0[d] = u0[d] - grid_offsets[0]
+            if wp.static(phase is not None):
+                ph = phase(u0[d] - wp.floor(u0[d]))  # periodic: the fraction keeps the argument small
+                for k in range(3):
+                    P[d, k] = ph[k]
+        return u0, P
+
+    return origin
+
+
+@functools.cache
 def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
-    """``locate(X, inv_dx, grid_offset, lo, shape, offset) -> (flat, fx, W, dW)``
-    in one grid's box (dW left zero unless ``with_gradients``). The stencil is
-    clamped to the box, so that a runaway particle never addresses memory
-    outside it (G2P flags such particles)."""
+    """``locate(u0, P, shift, g, lo, shape, offset) -> (flat, fx, W, dW)`` in
+    grid g's box, from :func:`make_origin`'s ``(u0, P)`` and the grid's shift
+    from grid 0 in cells, ``o_g - o_0`` (0 or 1/2: exact in floating point, so
+    the grids' coordinates differ by exactly that); dW left zero unless
+    ``with_gradients``. The stencil is clamped to the box, so that a runaway
+    particle never addresses memory outside it (G2P flags such particles)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)
-    weights, gradients = kernel.weights(t), kernel.gradients(t)
+    Pm = wp.types.matrix((t.dim, 3), S)
+    shared = kernel.phase is not None
+    if shared:
+        weights, gradients = kernel.weights_at(t), kernel.gradients_at(t)
+    else:
+        weights, gradients = kernel.weights(t), kernel.gradients(t)
     strides = make_strides(t)
     k_offset = kernel.offset
     support = kernel.support
     vec = t.vec
 
     @wp.func
-    def locate(X: t.vec, inv_dx: S, grid_offset: S, lo: t.ivec, shape: t.ivec, offset: int):
-        g = X * inv_dx
+    def locate(u0: t.vec, P: Pm, shift: S, g: int, lo: t.ivec, shape: t.ivec, offset: int):
         st = strides(shape)
         fx = vec()
         W = Wm()
         dW = Wm()
         flat = offset
         for d in range(wp.static(t.dim)):
-            u = g[d] - grid_offset
+            u = u0[d] - shift
             b = wp.clamp(int(wp.floor(u - S(k_offset))), lo[d], lo[d] + shape[d] - support)
             flat += (b - lo[d]) * st[d]
             fx[d] = u - S(b)
-            w = weights(fx[d])
+            if wp.static(shared):
+                w = weights(fx[d], P[d], g)
+            else:
+                w = weights(fx[d])
             for s in range(wp.static(support)):
                 W[d, s] = w[s]
             if wp.static(with_gradients):
-                dw = gradients(fx[d])
+                if wp.static(shared):
+                    dw = gradients(fx[d], P[d], g)
+                else:
+                    dw = gradients(fx[d])
                 for s in range(wp.static(support)):
                     dW[d, s] = dw[s]
         return flat, fx, W, dW
@@ -140,21 +178,31 @@ def fuse(cache, t: Types, kernel: Kernel, X: wp.array, lo: wp.array, offset: wp.
 
 @functools.cache
 def make_cached(t: Types, kernel: Kernel, with_gradients: bool, fused: bool = False):
-    """``cached(p, g, body, shape, cache) -> (strides, flat, fx, W, dW)``:
-    particle p's stencil on kernel grid g, as the last configuration update
+    """``reference(p, cache) -> (u0, P)`` once per particle, then
+    ``cached(p, g, body, shape, cache, u0, P) -> (strides, flat, fx, W, dW)``
+    per kernel grid g: particle p's stencil as the last configuration update
     left it (dW zero unless ``with_gradients``); ``fused``: located again
-    from the reference position (the same arithmetic as the update's)."""
+    from the reference position (the same arithmetic as the update's; u0 and
+    P are :func:`make_origin`'s, unused otherwise)."""
     G = kernel.n_grids
     strides = make_strides(t)
     Wm = weight_matrix_type(t, kernel)
+    Pm = wp.types.matrix((t.dim, 3), t.scalar)
     Cache = make_stencil_cache(t, kernel)
     locate = make_locate(t, kernel, with_gradients)
+    origin = make_origin(t, kernel, with_gradients)
 
     @wp.func
-    def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec), cache: Cache):
+    def reference(p: int, cache: Cache):
+        if wp.static(fused):
+            return origin(cache.X[p], cache.inv_dx, cache.grid_offsets)
+        return t.vec(), Pm()
+
+    @wp.func
+    def cached(p: int, g: int, body: int, shape: wp.array(dtype=t.ivec), cache: Cache, u0: t.vec, P: Pm):
         box = body * G + g
         if wp.static(fused):
-            flat, fx, W, dW = locate(cache.X[p], cache.inv_dx, cache.grid_offsets[g], cache.lo[box],
+            flat, fx, W, dW = locate(u0, P, cache.grid_offsets[g] - cache.grid_offsets[0], g, cache.lo[box],
                                      shape[box], cache.offset[box])
             return strides(shape[box]), flat, fx, W, dW
         k = p * G + g
@@ -163,7 +211,7 @@ def make_cached(t: Types, kernel: Kernel, with_gradients: bool, fused: bool = Fa
             dW = cache.dW[k]
         return strides(shape[box]), cache.base[k], cache.fx[k], cache.W[k], dW
 
-    return cached
+    return reference, cached
 
 
 @functools.cache

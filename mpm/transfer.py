@@ -116,7 +116,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
-    cached = make_cached(t, kernel, not mls, fused)
+    reference, cached = make_cached(t, kernel, not mls, fused)
     plastic = material.plastic
     plastic_update = stiffening = stress_energy = None
     if plastic:
@@ -203,8 +203,9 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         rid = int(0)
         if wp.static(with_regions):
             rid = region[p]
+        u0, ph = reference(p, cache)
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):
@@ -273,7 +274,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
     affine_from_gradient = affine and kernel.gradient_affine
-    cached = make_cached(t, kernel, not mls, fused)
+    reference, cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
 
     @wp.func
@@ -326,8 +327,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         vp = vec()
         B = mat()
         grad_v = mat()
+        u0, ph = reference(p, cache)
         for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache)
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             for a in range(Ks):
                 for bb in range(Ks):
                     for c in range(wp.static(Ks if dim == 3 else 1)):

@@ -142,3 +142,53 @@ def test_compact_weights_are_accurate_next_to_a_node_in_float32():
     exact = (x**3 / 6 - x**5 / 120 + x**7 / 5040) / (2 * np.pi)  # far node, t - sin(2 pi t)/(2 pi)
     np.testing.assert_allclose(w.numpy()[:, 1], exact, rtol=1e-5)
     np.testing.assert_allclose(dw.numpy()[:, 1], 2 * np.sin(x / 2) ** 2, rtol=1e-5)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+@pytest.mark.parametrize("with_gradients", [False, True])
+def test_compact_grids_share_one_phase(precision, with_gradients):
+    """The stencils the solver locates (mpm.stencil: both grids from grid 0's
+    sine, sin 2 pi t_1 = -sin 2 pi t_0, sin^2 pi t_1 = cos^2 pi t_0) equal the
+    kernel's 1-D weights and slopes evaluated on each grid's own coordinate,
+    to round-off of an O(1) quantity; also where the stencil is clamped to
+    the box (t outside [0, 1)) and next to a node (the series)."""
+    from mpm.stencil import make_locate, make_origin, weight_matrix_type
+
+    k = mpm.KERNELS["compact"]
+    t = make_types(3, precision)
+    origin, locate = make_origin(t, k, with_gradients), make_locate(t, k, with_gradients)
+    weights, gradients = k.weights(t), k.gradients(t)
+    Wm = weight_matrix_type(t, k)
+    G = wp.types.vector(2, t.scalar)
+
+    @wp.kernel(module="unique")
+    def run(X: wp.array(dtype=t.vec), lo: t.ivec, shape: t.ivec, W: wp.array2d(dtype=Wm),
+            dW: wp.array2d(dtype=Wm), W1: wp.array2d(dtype=Wm), dW1: wp.array2d(dtype=Wm)):
+        i = wp.tid()
+        offsets = G(t.scalar(-0.25), t.scalar(0.25))
+        u0, P = origin(X[i], t.scalar(1.0), offsets)
+        for g in range(2):
+            flat, fx, w, dw = locate(u0, P, offsets[g] - offsets[0], g, lo, shape, 0)
+            W[i, g] = w
+            dW[i, g] = dw
+            for d in range(3):  # the 1-D functions on this grid's own coordinate
+                a = weights(fx[d])
+                b = gradients(fx[d])
+                for s in range(2):
+                    W1[i, g][d, s] = a[s]
+                    dW1[i, g][d, s] = b[s]
+
+    rng = np.random.default_rng(7)
+    X = rng.uniform(2.0, 30.0, (400, 3))
+    X[:50] = np.round(X[:50] * 4.0) / 4.0 + rng.uniform(-1e-3, 1e-3, (50, 3))  # next to a node of a grid
+    X[50:60] = rng.uniform(0.0, 2.0, (10, 3))  # before the box: clamped stencils
+    lo, shape = t.ivec(2, 2, 2), t.ivec(30, 30, 30)
+    out = [wp.zeros((len(X), 2), dtype=Wm) for _ in range(4)]
+    wp.launch(run, len(X), inputs=[wp.array(X, dtype=t.vec), lo, shape, *out])
+    W, dW, W1, dW1 = (a.numpy() for a in out)
+    eps = np.finfo(np.float32 if precision == "float32" else np.float64).eps
+    np.testing.assert_allclose(W, W1, rtol=0, atol=16 * eps)
+    if with_gradients:
+        np.testing.assert_allclose(dW, dW1, rtol=0, atol=16 * eps)
+    inside = np.r_[0:50, 60:len(X)]  # each grid: a partition of unity (a clamped stencil is not)
+    np.testing.assert_allclose(W[inside].sum(-1), 1.0, atol=4 * eps)

@@ -22,6 +22,13 @@ kernel on its nodes), so the affine matrix and the force come from the kernel
 gradient, C_p = sum_i v_i grad w_ip^T, as the APIC paper does for multilinear
 weights; the MLS and APIC transfers then coincide.
 
+``phase``, ``weights_at``, ``gradients_at`` (optional): for a kernel whose
+grids share work, ``phase(types, with_gradients)`` gives a Warp function
+``u_0 -> P`` evaluated once per axis on grid 0's coordinate, and
+``weights_at(types)`` / ``gradients_at(types)`` the functions
+``(t, P, g) -> weights`` on grid g (the compact kernel: one sine per axis for
+both grids).
+
 ``margin`` [cells]: a particle closer than this to the domain edge reaches
 outside the grid.
 """
@@ -43,6 +50,9 @@ class Kernel:
     gradients: Callable = None
     grids: tuple[float, ...] = (0.0,)
     gradient_affine: bool = False
+    phase: Callable = None
+    weights_at: Callable = None
+    gradients_at: Callable = None
 
     @property
     def n_grids(self) -> int:

@@ -45,16 +45,42 @@ def _g_series(t: Types):
 
 
 @functools.cache
-def _weights(t: Types):
-    """(g(1 - u), g(u)) with one sine: sin(2 pi (1 - u)) = -sin(2 pi u)."""
+def _phase(t: Types, with_gradients: bool):
+    """``phase(u) -> (sin 2 pi u, sin^2 pi u, cos^2 pi u)`` (the last two only
+    ``with_gradients``): what both grids' weights and slopes take from the
+    sines. Grid 1 sits half a cell from grid 0, t_1 = t_0 - 1/2 + n, so
+    sin 2 pi t_1 = -sin 2 pi t_0 and sin^2 pi t_1 = cos^2 pi t_0: one sine per
+    axis (one sine and cosine with slopes) for both grids."""
+    S = t.scalar
+    P = wp.types.vector(3, S)
+    half_turn, two_pi = math.pi, 2.0 * math.pi  # Python floats: Warp would evaluate 2 * pi in float32
+
+    @wp.func
+    def phase(u: S):
+        if wp.static(with_gradients):
+            s = wp.sin(S(half_turn) * u)
+            c = wp.cos(S(half_turn) * u)
+            return P(S(2.0) * s * c, s * s, c * c)
+        else:
+            return P(wp.sin(S(two_pi) * u), S(0.0), S(0.0))
+
+    return phase
+
+
+@functools.cache
+def _weights_at(t: Types):
+    """(g(1 - u), g(u)) on grid g from the shared ``phase`` of grid 0."""
     S = t.scalar
     W = wp.types.vector(2, S)
+    P = wp.types.vector(3, S)
     g_series = _g_series(t)
     two_pi = 2.0 * math.pi
 
     @wp.func
-    def weights(u: S):
-        r = wp.sin(S(two_pi) * u) / S(two_pi)
+    def weights_at(u: S, ph: P, g: int):
+        r = ph[0] / S(two_pi)  # sin(2 pi u) / (2 pi); sin(2 pi (1 - u)) = -sin(2 pi u)
+        if g == 1:
+            r = -r
         a = S(1.0) - u
         wa = a + r
         wb = u - r
@@ -64,6 +90,35 @@ def _weights(t: Types):
             wb = g_series(u)
         return W(wa, wb)
 
+    return weights_at
+
+
+@functools.cache
+def _gradients_at(t: Types):
+    S = t.scalar
+    W = wp.types.vector(2, S)
+    P = wp.types.vector(3, S)
+
+    @wp.func
+    def gradients_at(u: S, ph: P, g: int):
+        s2 = ph[1]  # sin^2(pi u) on grid 0, cos^2 on grid 1
+        if g == 1:
+            s2 = ph[2]
+        dk = S(-2.0) * s2  # K'(t) = cos(2 pi t) - 1 = -2 sin^2(pi t)
+        return W(dk, -dk)
+
+    return gradients_at
+
+
+@functools.cache
+def _weights(t: Types):
+    """(g(1 - u), g(u)) on its own: one sine."""
+    phase, weights_at = _phase(t, False), _weights_at(t)
+
+    @wp.func
+    def weights(u: t.scalar):
+        return weights_at(u, phase(u), 0)
+
     return weights
 
 
@@ -71,11 +126,11 @@ def _weights(t: Types):
 def _gradients(t: Types):
     S = t.scalar
     W = wp.types.vector(2, S)
-    pi = math.pi
+    half_turn = math.pi
 
     @wp.func
     def gradients(u: S):
-        s = wp.sin(S(pi) * u)
+        s = wp.sin(S(half_turn) * u)
         dk = S(-2.0) * s * s  # K'(t) = cos(2 pi t) - 1
         return W(dk, -dk)
 
@@ -83,4 +138,5 @@ def _gradients(t: Types):
 
 
 COMPACT = Kernel(name="compact", support=2, offset=0.0, moment=None, margin=1.0,
-                 weights=_weights, gradients=_gradients, grids=(-0.25, 0.25))
+                 weights=_weights, gradients=_gradients, grids=(-0.25, 0.25),
+                 phase=_phase, weights_at=_weights_at, gradients_at=_gradients_at)
