@@ -34,6 +34,7 @@ class GridLayout:
         self.shape = np.ones((n_boxes, t.dim), np.int32)  # nodes per axis
         self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
+        self._uploaded = None  # (lo, shape, offset) as the device tables hold them
         with wp.ScopedDevice(device):
             self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
             self.shape_d = wp.zeros(n_boxes, dtype=t.ivec)
@@ -51,16 +52,21 @@ class GridLayout:
             self._fitted[body] = (np.asarray(xmin, float), np.asarray(xmax, float))
             xmin = np.min([a for a, _ in self._fitted.values()], axis=0)
             xmax = np.max([b for _, b in self._fitted.values()], axis=0)
-        for g, o in enumerate(k.grids):
-            lo = np.clip(np.floor(np.asarray(xmin) / self.dx - o - k.offset).astype(np.int64), 0, last)
-            hi = np.clip(np.floor(np.asarray(xmax) / self.dx - o - k.offset).astype(np.int64), 0, last)
-            boxes = range(g, len(self.lo), k.n_grids) if self.shared else [body * k.n_grids + g]
-            for box in boxes:
-                self.lo[box] = lo
-                self.shape[box] = hi - lo + k.support
+        # per grid (rows) the first stencil node of the lowest and highest position
+        shift = np.asarray(k.grids)[:, None] + k.offset
+        lo = np.clip(np.floor(np.asarray(xmin) / self.dx - shift), 0, last).astype(np.int32)
+        hi = np.clip(np.floor(np.asarray(xmax) / self.dx - shift), 0, last).astype(np.int32)
+        if self.shared:
+            self.lo[:] = np.tile(lo, (len(self.lo) // k.n_grids, 1))
+            self.shape[:] = np.tile(hi - lo + k.support, (len(self.lo) // k.n_grids, 1))
+        else:
+            self.lo[body * k.n_grids:(body + 1) * k.n_grids] = lo
+            self.shape[body * k.n_grids:(body + 1) * k.n_grids] = hi - lo + k.support
 
     def commit(self) -> None:
-        """Recompute offsets and upload the tables (after one or more ``fit``)."""
+        """Recompute offsets and upload the tables (after one or more ``fit``);
+        a table that did not change is not uploaded again (an Eulerian body's
+        boxes change only when its bounds cross a cell)."""
         sizes = np.prod(self.shape.astype(np.int64), axis=1)
         if self.shared:  # the grids of body 0, for everyone
             G = self.kernel.n_grids
@@ -70,6 +76,9 @@ class GridLayout:
         else:
             self.offset[:] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
             self.n_nodes = int(sizes.sum())
-        self.lo_d.assign(self.lo)
-        self.shape_d.assign(self.shape)
-        self.offset_d.assign(self.offset)
+        old = self._uploaded
+        for i, (host, device) in enumerate(((self.lo, self.lo_d), (self.shape, self.shape_d),
+                                             (self.offset, self.offset_d))):
+            if old is None or not np.array_equal(old[i], host):
+                device.assign(host)
+        self._uploaded = (self.lo.copy(), self.shape.copy(), self.offset.copy())
