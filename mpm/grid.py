@@ -33,6 +33,7 @@ from .transfer import STATUS_WORK
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
+from .stencil import make_node_position
 from .types import Types
 
 STICKY = WALL_TYPES.index("sticky")
@@ -244,10 +245,15 @@ def make_work(t: Types):
 
 @functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
-                     colliders: tuple[str, ...] = ()):
+                     colliders: tuple[str, ...] = (), lattice: bool = False, n_grids: int = 1):
     """Momentum to velocity and gravity; the boundary conditions too unless
-    ``with_boundary`` is False (contact comes first, then :func:`make_boundary`)."""
+    ``with_boundary`` is False (contact comes first, then :func:`make_boundary`).
+    The node positions are P2G's mass-weighted ones, or, ``lattice`` (the
+    Eulerian scheme, whose reference grid is the current one), the lattice
+    positions of the layout (mpm.stencil.make_node_position)."""
     S = t.scalar
+    node_position = make_node_position(t, n_grids)
+    Gv = wp.types.vector(n_grids, S)
     conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
     work = make_work(t)
@@ -262,15 +268,25 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
-        grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position, out: position
+        grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position (not lattice), out: position
         status: wp.array(dtype=wp.float64),  # STATUS_WORK += the energy the conditions gave
+        # the layout (lattice):
+        lo: wp.array(dtype=t.ivec),
+        shape: wp.array(dtype=t.ivec),
+        offset: wp.array(dtype=wp.int32),
+        n_boxes: int,
+        grid_offsets: Gv,
+        dx: S,
     ):
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
         vi = grid_v[i] / m + dt * gravity
-        qi = grid_q[i] / m
+        if wp.static(lattice):
+            qi = node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx)
+        else:
+            qi = grid_q[i] / m
         if wp.static(with_boundary):
             vb = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
             work(m, vi, vb, status)

@@ -162,7 +162,10 @@ class Solver:
         self.collider_kinds = kinds_of(colliders)
         # the boundary conditions act in the grid update, or after contact or the implicit solve
         separate = self.contact or self.implicit
-        self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds)
+        # the Eulerian grid is the lattice: its node positions need no P2G sum
+        self._lattice = isinstance(scheme, EMPM)
+        self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
+                                             lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
         self._boundary = make_boundary(t, self.regions, self.collider_kinds) if separate else None
         self._constraints = (make_constraints(t, self.regions, self.collider_kinds,
@@ -388,11 +391,13 @@ class Solver:
             wp.copy(state.history, self._backup[1])
 
     def _clear(self):
-        """Zero the grid, the status buffer and the energy sum."""
+        """Zero the grid (the node positions unless on the lattice), the status
+        buffer and the energy sum."""
         n = self.layout.n_nodes
         self.grid_m[:n].zero_()
         self.grid_v[:n].zero_()
-        self.grid_q[:n].zero_()
+        if not self._lattice:
+            self.grid_q[:n].zero_()
         if self.regions:
             self.grid_kin[:n].zero_()
             self.grid_kin_id[:n].zero_()
@@ -419,9 +424,11 @@ class Solver:
 
     def _update_grid(self, dt):
         """Grid momentum to velocity, gravity, walls at the nodes' current positions."""
-        self.launch(self._grid_update, self.layout.n_nodes, [
+        lay = self.layout
+        self.launch(self._grid_update, lay.n_nodes, [
             self.grid_m, self._gravity, dt, self._time, self._boundary_data, self.grid_kin,
-            self.grid_kin_id, self.grid_v, self.grid_q, self.status])
+            self.grid_kin_id, self.grid_v, self.grid_q, self.status,
+            lay.lo_d, lay.shape_d, lay.offset_d, len(lay.lo), self._grid_offsets, self._dx])
 
     def _resolve_contact(self):
         """Frictionless contact between bodies on the global lattice."""

@@ -256,3 +256,39 @@ def make_node_gradient(t: Types, kernel: Kernel):
                                 W[0, a] * W[1, b] * dW[2, c])
 
     return node_gradient
+
+
+@functools.cache
+def make_node_position(t: Types, n_grids: int):
+    """``node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx) -> x_i``
+    [m]: where the layout puts flat grid node i, (first node of its box + its
+    index in the box + o_g) dx: an Eulerian grid's nodes sit on the lattice
+    (the first box holding i; boxes of a shared layout coincide)."""
+    S = t.scalar
+    Gv = wp.types.vector(n_grids, S)
+    strides = make_strides(t)
+
+    @wp.func
+    def node_position(i: int, lo: wp.array(dtype=t.ivec), shape: wp.array(dtype=t.ivec),
+                      offset: wp.array(dtype=wp.int32), n_boxes: int, grid_offsets: Gv, dx: S):
+        box = int(0)
+        for b in range(n_boxes):
+            sh = shape[b]
+            size = sh[0] * sh[1]
+            if wp.static(t.dim == 3):
+                size = size * sh[2]
+            if i >= offset[b] and i < offset[b] + size:
+                box = b
+                break
+        local = i - offset[box]
+        st = strides(shape[box])
+        corner = lo[box]
+        x = t.vec()
+        for d in range(wp.static(t.dim)):
+            k = local / st[d]
+            local = local - k * st[d]
+            x[d] = (S(corner[d] + k) + grid_offsets[box % wp.static(n_grids)]) * dx
+        return x
+
+    return node_position
+

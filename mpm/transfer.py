@@ -83,15 +83,17 @@ def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bo
              with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
              fused: bool = False):
     """P2G for the particles of one material model: see :func:`_make_p2g`
-    (``lagrangian`` matters to plastic models only: one kernel otherwise;
-    ``fused``: stencils located from the reference positions, mpm.stencil.fuse)."""
+    (``lagrangian`` False, the Eulerian scheme: no node positions, which sit
+    on the lattice, and F^sn = I in the return mapping; ``fused``: stencils
+    located from the reference positions, mpm.stencil.fuse)."""
     return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian or not material.plastic, with_stress, fused)
+                     lagrangian or not material.plastic, with_stress, fused, positions=lagrangian)
 
 
 @functools.cache
 def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-              with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False):
+              with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False,
+              positions: bool = True):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
@@ -219,7 +221,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                         else:
                             wp.atomic_add(grid_mv, i, w * mv
                                           - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
-                        wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
+                        if wp.static(positions):
+                            wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
                         if wp.static(with_regions):
                             if rid > 0:
                                 wp.atomic_add(grid_kin, i, w * m)
