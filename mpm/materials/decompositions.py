@@ -53,10 +53,11 @@ def make_rotation(t: Types):
         # with the determinant scaling g = |det X_k|^(-1/3) while the steps
         # are large. It converges quadratically to the orthogonal factor,
         # which is a proper rotation when det F > 0: 3-6 iterations for
-        # stretches up to 30 %, about 4x cheaper than wp.svd3 and accurate to
-        # round-off (float32 wp.svd3 misses the rotation by up to 1e-3 at
-        # 30 % stretch). An inverted or degenerate F, where the closest
-        # rotation flips the weakest direction, takes the sign-fixed SVD.
+        # F = Q (I + E) with E of standard deviation up to 0.3, about 4x
+        # cheaper than wp.svd3 and accurate to round-off (float32 wp.svd3
+        # misses that rotation by up to 7e-3). An inverted or degenerate F,
+        # where the closest rotation flips the weakest direction, takes the
+        # sign-fixed SVD.
         X = F
         converged = bool(False)
         if wp.determinant(F) > S(0.0):
