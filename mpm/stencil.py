@@ -1,8 +1,10 @@
 """Locating a particle in its body's reference grids and walking its stencil.
 
 A kernel has one grid (B-splines) or two staggered ones (the compact kernel);
-grid g of body b is box ``b * G + g`` of the layout (mpm.layout). ``locate``
-(used when a configuration is updated) gives, on one grid, the flat index of
+grid g of body b is box ``b * G + g`` of the layout (mpm.layout). ``origin``
+computes once per particle what all grids share (grid 0's coordinate and the
+compact kernel's sines); ``locate`` (used when a configuration is updated)
+gives from it, on one grid, the flat index of
 the first stencil node, the local coordinate ``fx = X / dx - o_g - base`` and
 the per-axis kernel weights ``W`` (row d: the 1-D weights along axis d) and,
 for gradient-based transfers, their t-derivatives ``dW``; the transfers read
@@ -11,6 +13,7 @@ for the weight ``w``, the offset ``r = X_i - X_p`` [m] and the flat index of
 the stencil node at offset (a, b[, c]), and ``node_gradient`` for the
 reference-space weight gradient. Loops over ``range(kernel.support)`` and
 over the grids have compile-time bounds and are unrolled.
+``node_position`` places a flat grid node on the lattice (the Eulerian grid).
 """
 
 import functools
