@@ -182,6 +182,7 @@ def test_compact_grids_share_one_phase(precision, with_gradients):
     X = rng.uniform(2.0, 30.0, (400, 3))
     X[:50] = np.round(X[:50] * 4.0) / 4.0 + rng.uniform(-1e-3, 1e-3, (50, 3))  # next to a node of a grid
     X[50:60] = rng.uniform(0.0, 2.0, (10, 3))  # before the box: clamped stencils
+    X[60:70] = np.floor(X[60:70]) + 0.25  # exactly on a node of grid 1 (dx = 1)
     lo, shape = t.ivec(2, 2, 2), t.ivec(30, 30, 30)
     out = [wp.zeros((len(X), 2), dtype=Wm) for _ in range(4)]
     wp.launch(run, len(X), inputs=[wp.array(X, dtype=t.vec), lo, shape, *out])
@@ -190,5 +191,9 @@ def test_compact_grids_share_one_phase(precision, with_gradients):
     np.testing.assert_allclose(W, W1, rtol=0, atol=16 * eps)
     if with_gradients:
         np.testing.assert_allclose(dW, dW1, rtol=0, atol=16 * eps)
+    # on a node, the far node's weight and slope are exactly zero (no momentum without mass)
+    np.testing.assert_array_equal(W[60:70, 1][:, :, 1], 0.0)
+    if with_gradients:
+        np.testing.assert_array_equal(dW[60:70, 1], 0.0)
     inside = np.r_[0:50, 60:len(X)]  # each grid: a partition of unity (a clamped stencil is not)
     np.testing.assert_allclose(W[inside].sum(-1), 1.0, atol=4 * eps)
