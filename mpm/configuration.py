@@ -44,6 +44,8 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     Cache = make_stencil_cache(t, kernel)
     Gv = wp.types.vector(G, S)
     per_particle_K = moment and kernel.moment is None
+    # grids whose stencils the update locates: none when the transfers locate them and K_p is not cached
+    n_located = 0 if fused and not per_particle_K else G
     inv_G = 1.0 / G
 
     @wp.kernel(module="unique")
@@ -80,8 +82,9 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         F0s[p] = F
         Fsn[p] = wp.identity(n=dim, dtype=S)
         D = t.mat()
-        u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
-        for g in range(wp.static(0 if fused and not per_particle_K else G)):
+        if wp.static(n_located > 0):  # the grids' shared sines only where a stencil is located
+            u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
+        for g in range(wp.static(n_located)):
             box = b * G + g
             flat, fx, W, dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo[box], shape[box], offset[box])
             if wp.static(not fused):

@@ -48,6 +48,7 @@ import functools
 
 import warp as wp
 
+from .stencil import make_node_box
 from .types import Types
 
 
@@ -68,14 +69,12 @@ def make_nearest(t: Types):
 
 @functools.cache
 def make_node_body(t: Types):
+    node_box = make_node_box(t)
+
     @wp.func
     def node_body(i: int, offset: wp.array(dtype=wp.int32), n_bodies: int, n_grids: int):
         """Body of flat node i (box b * n_grids + g starts at offset[box])."""
-        b = int(0)
-        for k in range(n_bodies * n_grids):
-            if i >= offset[k]:
-                b = k // n_grids
-        return b
+        return node_box(i, offset, n_bodies * n_grids) // n_grids
 
     return node_body
 

@@ -262,27 +262,36 @@ def make_node_gradient(t: Types, kernel: Kernel):
 
 
 @functools.cache
+def make_node_box(t: Types):
+    """``node_box(i, offset, n_boxes) -> box``: the box holding flat grid node
+    i, the last whose first node ``offset[box]`` is at most i (the boxes lie
+    one after another; in a shared layout the bodies' boxes coincide)."""
+
+    @wp.func
+    def node_box(i: int, offset: wp.array(dtype=wp.int32), n_boxes: int):
+        box = int(0)
+        for k in range(n_boxes):
+            if i >= offset[k]:
+                box = k
+        return box
+
+    return node_box
+
+
+@functools.cache
 def make_node_position(t: Types, n_grids: int):
     """``node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx) -> x_i``
     [m]: where the layout puts flat grid node i, (first node of its box + its
-    index in the box + o_g) dx: an Eulerian grid's nodes sit on the lattice
-    (the first box holding i; boxes of a shared layout coincide)."""
+    index in the box + o_g) dx: an Eulerian grid's nodes sit on the lattice."""
     S = t.scalar
     Gv = wp.types.vector(n_grids, S)
     strides = make_strides(t)
+    node_box = make_node_box(t)
 
     @wp.func
     def node_position(i: int, lo: wp.array(dtype=t.ivec), shape: wp.array(dtype=t.ivec),
                       offset: wp.array(dtype=wp.int32), n_boxes: int, grid_offsets: Gv, dx: S):
-        box = int(0)
-        for b in range(n_boxes):
-            sh = shape[b]
-            size = sh[0] * sh[1]
-            if wp.static(t.dim == 3):
-                size = size * sh[2]
-            if i >= offset[b] and i < offset[b] + size:
-                box = b
-                break
+        box = node_box(i, offset, n_boxes)
         local = i - offset[box]
         st = strides(shape[box])
         corner = lo[box]
@@ -294,4 +303,3 @@ def make_node_position(t: Types, n_grids: int):
         return x
 
     return node_position
-

@@ -126,15 +126,12 @@ def _weights(t: Types):
 
 @functools.cache
 def _gradients(t: Types):
-    S = t.scalar
-    W = wp.types.vector(2, S)
-    half_turn = math.pi
+    """K'(u) on its own."""
+    phase, gradients_at = _phase(t, True), _gradients_at(t)
 
     @wp.func
-    def gradients(u: S):
-        s = wp.sin(S(half_turn) * u)
-        dk = S(-2.0) * s * s  # K'(t) = cos(2 pi t) - 1
-        return W(dk, -dk)
+    def gradients(u: t.scalar):
+        return gradients_at(u, phase(u), 0)
 
     return gradients
 
