@@ -44,6 +44,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from .launch import warp_kernel
 from .types import Types
 
 KINDS = ("half_space", "wedge", "box", "sphere", "cylinder", "cup", "bowl", "mesh")
@@ -430,7 +431,7 @@ def make_inside_count(t: Types, kinds: tuple[str, ...]):
     Data = make_collider_data(t)
     sdf = make_sdf(t, kinds)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def inside_count(x: wp.array(dtype=t.vec), time: S, depth: S, colliders: wp.array(dtype=Data),
                      count: wp.array(dtype=wp.int32)):
         p = wp.tid()

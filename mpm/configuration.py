@@ -22,6 +22,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
+from .launch import warp_kernel
 from .stencil import make_locate, make_origin, make_stencil_cache
 from .types import Types
 
@@ -48,7 +49,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     n_located = 0 if fused and not per_particle_K else G
     inv_G = 1.0 / G
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def update(
         # Model:
         body: wp.array(dtype=wp.int32),

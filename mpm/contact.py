@@ -48,6 +48,7 @@ import functools
 
 import warp as wp
 
+from .launch import warp_kernel
 from .stencil import make_node_box
 from .types import Types
 
@@ -126,7 +127,7 @@ def make_contact(t: Types):
     node_body = make_node_body(t)
     outward = make_outward(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def splat(
         grid_m: wp.array(dtype=S),
         grid_v: wp.array(dtype=t.vec),
@@ -151,7 +152,7 @@ def make_contact(t: Types):
         wp.atomic_add(M, b * n_global + g, m)
         wp.atomic_add(P, b * n_global + g, m * grid_v[i])
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def resolve(
         n_bodies: int,
         cells: t.ivec,
@@ -198,7 +199,7 @@ def make_contact(t: Types):
                     dV[b * n_global + g] = dV[b * n_global + g] - dv_mean
 
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def gather(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
@@ -246,7 +247,7 @@ def make_contact_constraint(t: Types):
     node_body = make_node_body(t)
     outward = make_outward(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def activate(
         n_bodies: int,
         cells: t.ivec,
@@ -282,7 +283,7 @@ def make_contact_constraint(t: Types):
             normal[a * n_global + g] = n
             normal[c * n_global + g] = -n
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def couple(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
@@ -309,7 +310,7 @@ def make_contact_constraint(t: Types):
             cbin[i] = g
             coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def sums(
         mode: int,
         cbin: wp.array(dtype=wp.int32),
@@ -335,7 +336,7 @@ def make_contact_constraint(t: Types):
             wp.atomic_add(num, g, wp.dot(ct, wp.cw_mul(w, x[i])))
             wp.atomic_add(den, g, wp.dot(ct, wp.cw_mul(w, ct)))
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def project(
         mode: int,
         cbin: wp.array(dtype=wp.int32),

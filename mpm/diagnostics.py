@@ -33,6 +33,7 @@ import functools
 import numpy as np
 import warp as wp
 
+from .launch import warp_kernel
 from .types import Types
 
 
@@ -90,7 +91,7 @@ def make_measure(t: Types, per_particle_K: bool):
     iE = iL + nL  # kinetic energy slot
     iC = iE + 5  # sum m x
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def measure(
         mass: wp.array(dtype=S),
         x: wp.array(dtype=t.vec),

@@ -19,6 +19,7 @@ import functools
 import numpy as np
 import warp as wp
 
+from .launch import warp_kernel
 from .types import Types
 
 
@@ -77,7 +78,7 @@ def make_fracture(t: Types):
     S = t.scalar
     f64 = wp.float64
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def broken_pairs(
         pair_p: wp.array(dtype=wp.int32),
         pair_q: wp.array(dtype=wp.int32),

@@ -29,6 +29,7 @@ import functools
 
 import warp as wp
 
+from .launch import warp_kernel
 from .transfer import STATUS_WORK
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
@@ -177,7 +178,7 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
             Pi = remove_direction(Pi, e)
         return v, Pi
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def constraints(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
@@ -258,7 +259,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     Data = make_boundary_data(t)
     work = make_work(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def grid_update(
         grid_m: wp.array(dtype=S),
         gravity: t.vec,
@@ -305,7 +306,7 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ())
     Data = make_boundary_data(t)
     work = make_work(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def boundary(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),

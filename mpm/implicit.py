@@ -55,6 +55,7 @@ import warp as wp
 from .contact import make_contact_constraint
 from .grid import make_work
 from .kernels import Kernel
+from .launch import warp_kernel
 from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
 from .stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
@@ -160,7 +161,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     n_grids = float(G)
     vec, mat = t.vec, t.mat
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(
         volume: wp.array(dtype=S),
         body: wp.array(dtype=wp.int32),
@@ -247,7 +248,7 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
     per_particle_K = kernel.moment is None
     mat = t.mat
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def apply(
         volume: wp.array(dtype=S),
         body: wp.array(dtype=wp.int32),
@@ -297,7 +298,7 @@ def make_node_kernels(t: Types):
     vec = t.vec
     dim = t.dim
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def finish_residual(m: wp.array(dtype=S), v: wp.array(dtype=vec), v_star: wp.array(dtype=vec),
                         free: wp.array(dtype=t.mat), residual: wp.array(dtype=vec),
                         diag: wp.array(dtype=vec), inv_diag: wp.array(dtype=vec),
@@ -333,7 +334,7 @@ def make_node_kernels(t: Types):
         wp.atomic_add(acc, STIFFNESS2, f64(a2))
         inv_diag[i] = inv
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def finish_apply(m: wp.array(dtype=S), dv: wp.array(dtype=vec), free: wp.array(dtype=t.mat),
                      out: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
         """out = Pi (m dv + out), and dv . out."""
@@ -346,7 +347,7 @@ def make_node_kernels(t: Types):
         out[i] = Ad
         wp.atomic_add(acc, DOT_A, f64(wp.dot(dv[i], Ad)))
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def cg_start(residual: wp.array(dtype=vec), free: wp.array(dtype=t.mat), inv_diag: wp.array(dtype=vec),
                  delta: wp.array(dtype=vec), r: wp.array(dtype=vec), z: wp.array(dtype=vec),
                  d: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
@@ -362,7 +363,7 @@ def make_node_kernels(t: Types):
         if contact == 0 or cbin[i] < 0:
             wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def cg_step(alpha: S, d: wp.array(dtype=vec), Ad: wp.array(dtype=vec), free: wp.array(dtype=t.mat),
                 inv_diag: wp.array(dtype=vec), delta: wp.array(dtype=vec), r: wp.array(dtype=vec),
                 z: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
@@ -379,12 +380,12 @@ def make_node_kernels(t: Types):
             wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(ri, ri)))
             wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def cg_direction(beta: S, z: wp.array(dtype=vec), d: wp.array(dtype=vec)):
         i = wp.tid()
         d[i] = z[i] + beta * d[i]
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def trial(v: wp.array(dtype=vec), delta: wp.array(dtype=vec), alpha: S, residual: wp.array(dtype=vec),
               out: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
         """out = v + alpha delta, and R . delta (the directional derivative of E)."""
@@ -405,7 +406,7 @@ def make_boundary_work(t: Types):
     vec = t.vec
     work = make_work(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
                       status: wp.array(dtype=wp.float64)):
         i = wp.tid()
@@ -421,7 +422,7 @@ def make_friction(t: Types):
     S = t.scalar
     vec = t.vec
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
                  mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
                  v: wp.array(dtype=vec)):

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .launch import warp_kernel
 from .materials import Material
 from .materials.plastic import make_plastic_update
 from .types import Types, make_types
@@ -33,7 +34,7 @@ def _evaluator(t: Types, cls: type[Material]):
     else:
         stress_energy = cls.stress_energy(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(F_tr: wp.array(dtype=t.mat), L: wp.array(dtype=t.mat), params: t.params,
                  history: wp.array(dtype=t.history), dt: S,
                  F_E: wp.array(dtype=t.mat), P: wp.array(dtype=t.mat), psi: wp.array(dtype=S)):

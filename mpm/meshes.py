@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .launch import warp_kernel
+
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".usd", ".usda", ".usdc")
 ASSETS_DIR = os.path.join(os.path.dirname(wp.__file__), "examples", "assets")
@@ -70,7 +72,7 @@ def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"{path}: no mesh found")
 
 
-@wp.kernel
+@warp_kernel
 def _inside(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.int32)):
     i = wp.tid()
     q = wp.mesh_query_point_sign_winding_number(mesh, pts[i], 1.0e6)

@@ -32,6 +32,7 @@ import functools
 import warp as wp
 
 from .kernels import Kernel
+from .launch import warp_kernel
 from .materials.plastic import make_plastic_update
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
@@ -127,7 +128,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     else:
         stress_energy = material.stress_energy(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def p2g(
         # Model:
         mass: wp.array(dtype=S),
@@ -288,7 +289,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             wp.atomic_min(status, box + d, f64(xp[d]))
             wp.atomic_max(status, box + n_bodies * dim + d, f64(xp[d]))
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def g2p(
         # Model:
         body: wp.array(dtype=wp.int32),

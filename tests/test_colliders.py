@@ -9,6 +9,7 @@ import warp as wp
 import mpm
 from helpers import DEVICE
 from mpm.colliders import Collider, kinds_of, make_sdf, pack
+from mpm.launch import warp_kernel
 from mpm.materials import FixedCorotated, Fluid
 from mpm.meshes import MeshShape
 from mpm.scene import Rotated, rotation_matrix
@@ -23,7 +24,7 @@ def _sdf_kernel(t, kinds):
     from mpm.colliders import make_collider_data
     Data = make_collider_data(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(c: wp.array(dtype=Data), q: wp.array(dtype=t.vec), phi: wp.array(dtype=t.scalar),
                  n: wp.array(dtype=t.vec)):
         i = wp.tid()

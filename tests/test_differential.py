@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from mpm.launch import warp_kernel
 from mpm.materials import MATERIALS
 from mpm.materials.differential import (make_principal_stress, make_tangent_action,
                                         make_tangent_quadratic, make_tangent_type)
@@ -20,7 +21,7 @@ def evaluator(t, cls, psd):
     action = make_tangent_action(t)
     stress_energy = None if cls.plastic else cls.stress_energy(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(F: wp.array(dtype=t.mat), dF: wp.array(dtype=t.mat), prm: t.params,
                  history: t.history, P: wp.array(dtype=t.mat), P_matrix: wp.array(dtype=t.mat),
                  dP: wp.array(dtype=t.mat), T: wp.array(dtype=make_tangent_type(t))):
@@ -123,7 +124,7 @@ def quadratic_evaluator(t):
     action = make_tangent_action(t)
     quadratic = make_tangent_quadratic(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(T: wp.array(dtype=make_tangent_type(t)), a: wp.array(dtype=t.vec), b: wp.array(dtype=t.vec),
                  full: wp.array(dtype=t.scalar), fast: wp.array(dtype=t.scalar)):
         i = wp.tid()

@@ -10,6 +10,7 @@ import pytest
 import warp as wp
 
 import mpm
+from mpm.launch import warp_kernel
 from mpm.types import make_types
 
 KERNELS = list(mpm.KERNELS.values())
@@ -21,7 +22,7 @@ def evaluator(kernel):
     weights, gradients = kernel.weights(t), kernel.gradients(t)
     Wv = wp.types.vector(kernel.support, wp.float64)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(u: wp.array(dtype=wp.float64), w: wp.array(dtype=Wv), dw: wp.array(dtype=Wv)):
         i = wp.tid()
         w[i] = weights(u[i])
@@ -129,7 +130,7 @@ def test_compact_weights_are_accurate_next_to_a_node_in_float32():
     weights, gradients = k.weights(t32), k.gradients(t32)
     W = wp.types.vector(2, wp.float32)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(u: wp.array(dtype=wp.float32), w: wp.array(dtype=W), dw: wp.array(dtype=W)):
         i = wp.tid()
         w[i] = weights(u[i])
@@ -161,7 +162,7 @@ def test_compact_grids_share_one_phase(precision, with_gradients):
     Wm = weight_matrix_type(t, k)
     G = wp.types.vector(2, t.scalar)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(X: wp.array(dtype=t.vec), lo: t.ivec, shape: t.ivec, W: wp.array2d(dtype=Wm),
             dW: wp.array2d(dtype=Wm), W1: wp.array2d(dtype=Wm), dW1: wp.array2d(dtype=Wm)):
         i = wp.tid()

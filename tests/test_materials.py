@@ -9,6 +9,7 @@ import pytest
 import warp as wp
 
 import mpm
+from mpm.launch import warp_kernel
 from mpm.types import make_types
 from reference_mpm import energy as reference_energy
 from reference_mpm import polar_rotation
@@ -22,7 +23,7 @@ ALL = SOLIDS + [mpm.Fluid(K=1e5, gamma=7.0, viscosity=0.0)]
 def evaluator(t, cls):
     stress_energy = cls.stress_energy(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def evaluate(F: wp.array(dtype=t.mat), L: wp.array(dtype=t.mat), prm: t.params,
                  P: wp.array(dtype=t.mat), psi: wp.array(dtype=t.scalar)):
         i = wp.tid()
@@ -106,7 +107,7 @@ def test_fluid_projection_keeps_volume_change():
     t = make_types(3, "float64")
     project = mpm.Fluid.project(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(F: wp.array(dtype=t.mat), out: wp.array(dtype=t.mat)):
         i = wp.tid()
         out[i] = project(F[i], t.params())
@@ -133,7 +134,7 @@ def test_svd_with_proper_rotations_also_for_repeated_singular_values(dim):
     t = make_types(dim, "float64")
     svd = make_svd(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(F: wp.array(dtype=t.mat), U: wp.array(dtype=t.mat), s: wp.array(dtype=t.vec),
             V: wp.array(dtype=t.mat)):
         i = wp.tid()
@@ -173,7 +174,7 @@ def test_polar_rotation_to_round_off(dim, precision):
     t = make_types(dim, precision)
     rotation = make_rotation(t)
 
-    @wp.kernel(module="unique")
+    @warp_kernel
     def run(F: wp.array(dtype=t.mat), R: wp.array(dtype=t.mat)):
         i = wp.tid()
         R[i] = rotation(F[i])
