@@ -206,28 +206,52 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         rid = int(0)
         if wp.static(with_regions):
             rid = region[p]
+        # the affine momentum mv + mC r and the mass-weighted node position m (x_p + F^sn r) are
+        # linear in the offset r = (index - fx) dx: evaluated at the stencil's first node, then
+        # stepped by a column of dx mC (or m dx F^sn) per index step (no matrix product per node)
+        mCdx = dx * mC
+        mFdx = (m * dx) * Fs
+        dCT = wp.transpose(mCdx)
+        dFT = wp.transpose(mFdx)
         u0, ph = reference(p, cache)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            pa = mv
+            if wp.static(affine):
+                pa = mv - mCdx * fx
+            qa = m * xp - mFdx * fx
             for a in range(Ks):
+                pb = pa
+                qb = qa
                 for bb in range(Ks):
+                    pc = pb
+                    qc = qb
                     for c in range(wp.static(Ks if dim == 3 else 1)):
                         w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                         wp.atomic_add(grid_m, i, w * m)
                         if wp.static(mls):
-                            wp.atomic_add(grid_mv, i, w * (mv + mC * r))
-                        elif wp.static(affine):
-                            wp.atomic_add(grid_mv, i, w * (mv + mC * r)
-                                          - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                            wp.atomic_add(grid_mv, i, w * pc)
                         else:
-                            wp.atomic_add(grid_mv, i, w * mv
-                                          - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                            wp.atomic_add(grid_mv, i, w * pc - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
                         if wp.static(positions):
-                            wp.atomic_add(grid_mq, i, (w * m) * (xp + Fs * r))
+                            wp.atomic_add(grid_mq, i, w * qc)
                         if wp.static(with_regions):
                             if rid > 0:
                                 wp.atomic_add(grid_kin, i, w * m)
                                 wp.atomic_max(grid_kin_id, i, rid)
+                        if wp.static(dim == 3):
+                            if wp.static(affine):
+                                pc = pc + dCT[2]
+                            if wp.static(positions):
+                                qc = qc + dFT[2]
+                    if wp.static(affine):
+                        pb = pb + dCT[1]
+                    if wp.static(positions):
+                        qb = qb + dFT[1]
+                if wp.static(affine):
+                    pa = pa + dCT[0]
+                if wp.static(positions):
+                    qa = qa + dFT[0]
 
     return p2g
 
@@ -334,17 +358,43 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         u0, ph = reference(p, cache)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            # B = sum w v_i r^T with r = (index - fx) dx, as dx (sum w v_i index^T - (sum w v_i) fx^T):
+            # per axis, the weighted velocities summed over the stencil's slabs, times the slab index
+            vg = vec()
+            col0 = vec()
+            col1 = vec()
+            col2 = vec()
+            fa = S(0.0)  # the slab indices as scalars
             for a in range(Ks):
+                va = vec()
+                fb = S(0.0)
                 for bb in range(Ks):
+                    vb = vec()
+                    fc = S(0.0)
                     for c in range(wp.static(Ks if dim == 3 else 1)):
                         w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                         vi = grid_v[i]
                         wv = w * vi
-                        vp += wv
-                        if wp.static(affine and not affine_from_gradient):
-                            B += wp.outer(wv, r)
+                        vb += wv
+                        if wp.static(dim == 3 and affine and not affine_from_gradient):
+                            col2 += fc * wv
+                            fc += S(1.0)
                         if wp.static(not mls):
                             grad_v += wp.outer(vi, node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                    va += vb
+                    if wp.static(affine and not affine_from_gradient):
+                        col1 += fb * vb
+                        fb += S(1.0)
+                vg += va
+                if wp.static(affine and not affine_from_gradient):
+                    col0 += fa * va
+                    fa += S(1.0)
+            vp += vg
+            if wp.static(affine and not affine_from_gradient):
+                if wp.static(dim == 3):
+                    B += dx * (wp.matrix_from_cols(col0, col1, col2) - wp.outer(vg, fx))
+                else:
+                    B += dx * (wp.matrix_from_cols(col0, col1) - wp.outer(vg, fx))
         vp = S(inv_G) * vp
         Cp = mat()
         if wp.static(mls):
