@@ -251,7 +251,9 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     ``with_boundary`` is False (contact comes first, then :func:`make_boundary`).
     The node positions are P2G's mass-weighted ones, or, ``lattice`` (the
     Eulerian scheme, whose reference grid is the current one), the lattice
-    positions of the layout (mpm.stencil.make_node_position)."""
+    positions of the layout (mpm.stencil.make_node_position); ``positioned``
+    0 (at run time): P2G summed none, since no condition can reach a node in
+    this step, and the conditions are skipped."""
     S = t.scalar
     node_position = make_node_position(t, n_grids)
     Gv = wp.types.vector(n_grids, S)
@@ -278,22 +280,24 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         n_boxes: int,
         grid_offsets: Gv,
         dx: S,
+        positioned: int,  # 0: P2G summed no positions (no condition can reach a node this step)
     ):
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
         vi = grid_v[i] / m + dt * gravity
-        if wp.static(lattice):
-            qi = node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx)
-        else:
-            qi = grid_q[i] / m
-        if wp.static(with_boundary):
-            vb = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
-            work(m, vi, vb, status)
-            vi = vb
+        if positioned != 0:
+            if wp.static(lattice):
+                qi = node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx)
+            else:
+                qi = grid_q[i] / m
+            if wp.static(with_boundary):
+                vb = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
+                work(m, vi, vb, status)
+                vi = vb
+            grid_q[i] = qi
         grid_v[i] = vi
-        grid_q[i] = qi
 
     return grid_update
 

@@ -36,7 +36,8 @@ from .scene import WALL_TYPES
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
 from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_REMOVED,
-                       STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED, STATUS_WORK, TRANSFERS,
+                       STATUS_F_NORM, STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED,
+                       STATUS_WORK, TRANSFERS,
                        make_g2p, make_p2g)
 
 
@@ -88,6 +89,8 @@ class StepReport:
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
     removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
+    max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (Lagrangian schemes; else 0)
+    positioned: bool = True  # P2G summed the node positions (False: no boundary condition could reach them)
 
     @property
     def reason(self) -> str | None:
@@ -164,6 +167,11 @@ class Solver:
         separate = self.contact or self.implicit
         # the Eulerian grid is the lattice: its node positions need no P2G sum
         self._lattice = isinstance(scheme, EMPM)
+        # a moving grid needs its node positions only where a condition can reach a node: with walls
+        # alone, P2G sums them only in steps where a body comes near a closed face (_positions_needed)
+        self._free_flight = not (self._lattice or self.regions or colliders or self.contact or self.implicit)
+        self._positions = 1
+        self._reach = model.dx * max(k.offset + 1.0, k.support - 1.0 - k.offset)  # [m] largest |r_k| of a stencil
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
                                              lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
@@ -260,8 +268,11 @@ class Solver:
         stages = [("clear the grid", [])]
         if self.forcing is not None:
             stages.append(("body force of the closed-form solution (host)", []))
+        positions = ("node positions on the lattice" if self._lattice else
+                     "node positions summed only in steps near a wall" if self._free_flight else
+                     "node positions summed")
         stages.append((f"P2G ({len(self._p2g)} material group(s); stencils "
-                       f"{'located on the fly' if self.fused else 'from the cache'})",
+                       f"{'located on the fly' if self.fused else 'from the cache'}; {positions})",
                        names(*[k for k, _ in self._p2g])))
         stages.append(("grid update: velocities, gravity, walls" + (", regions" if self.regions else "")
                        + (", colliders" if self.collider_kinds else ""), names(self._grid_update)))
@@ -325,6 +336,7 @@ class Solver:
             self._interpolate(state, self.model.types.scalar(dt))
             report = self.check()
         report.dt, report.newton, report.halvings = dt, newton, attempt
+        report.positioned = bool(self._positions)
         if report.removed is not None:
             self._count_removed(report)
         if report.reason is None:
@@ -336,7 +348,30 @@ class Solver:
             if report.updated:
                 self.update_configuration(state, report.updated, report.box_lo, report.box_hi)
             report.update_time = time.perf_counter() - t0
+            self._positions = self._positions_needed(report)
         return report
+
+    def _positions_needed(self, report: StepReport) -> int:
+        """Whether the next step's P2G must sum the node positions (1) or
+        no boundary condition can reach a node (0). With walls alone (no
+        regions, colliders, contact or implicit solve) a condition acts on a
+        node closer than the wall band to a closed face. A node sits at a
+        mass-weighted mean of x_p + F^sn r over its particles, |(F^sn r)_d| <=
+        |F^sn|_inf max_k |r_k|, so every node of body b lies in its particles'
+        box grown by |F^sn|_inf (1 after a configuration update) times the
+        stencil's reach."""
+        if not self._free_flight or report.max_F_norm is None:
+            return 1
+        m = self.model
+        reach = self._reach * np.maximum(report.max_F_norm, 1.0)[:, None]  # [m] per body
+        lo, hi = report.box_lo - reach, report.box_hi + reach
+        band = (m.scene.wall_cells - 0.5) * m.dx + 1e-3 * m.dx  # the wall band, with room for round-off
+        open_code = WALL_TYPES.index("open")
+        closed_lo = np.array(m.wall_codes[0]) != open_code
+        closed_hi = np.array(m.wall_codes[1]) != open_code
+        near = ((lo < band) & closed_lo) | ((hi > np.array(m.domain) - band) & closed_hi)
+        live = self.body_counts > 0
+        return int(bool(np.any(near[live])) or not np.all(np.isfinite(reach[live])))
 
     def _count_removed(self, report: StepReport) -> None:
         """Per body, the particles G2P removed at open faces (mass 0): the
@@ -396,7 +431,7 @@ class Solver:
         n = self.layout.n_nodes
         self.grid_m[:n].zero_()
         self.grid_v[:n].zero_()
-        if not self._lattice:
+        if not self._lattice and self._positions:
             self.grid_q[:n].zero_()
         if self.regions:
             self.grid_kin[:n].zero_()
@@ -418,7 +453,7 @@ class Solver:
                 m.mass, m.volume, m.body, m.body_params, self.layout.shape_d,
                 state.x, state.v, state.C, state.F0s, state.Fsn, self.body_force, state.history,
                 state.stencils,
-                self._dx, self._K, dt, g.start, int(write),
+                self._dx, self._K, dt, g.start, int(write), self._positions,
                 self.grid_m, self.grid_v, self.grid_q, m.region, self.grid_kin, self.grid_kin_id,
                 self.energy, self.status, self.n_bodies])
 
@@ -428,7 +463,7 @@ class Solver:
         self.launch(self._grid_update, lay.n_nodes, [
             self.grid_m, self._gravity, dt, self._time, self._boundary_data, self.grid_kin,
             self.grid_kin_id, self.grid_v, self.grid_q, self.status,
-            lay.lo_d, lay.shape_d, lay.offset_d, len(lay.lo), self._grid_offsets, self._dx])
+            lay.lo_d, lay.shape_d, lay.offset_d, len(lay.lo), self._grid_offsets, self._dx, self._positions])
 
     def _resolve_contact(self):
         """Frictionless contact between bodies on the global lattice."""
@@ -559,6 +594,7 @@ class Solver:
             max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
             min_F_stretch=np.sqrt(field_[STATUS_F_STRETCH]),
+            max_F_norm=None if self._lattice else field_[STATUS_F_NORM].copy(),
             boundary_work=float(s[STATUS_WORK]),
             removed=np.zeros(nb, np.int64) if s[STATUS_REMOVED] > 0 else None,
             kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),

@@ -50,12 +50,13 @@ pic: no affine term, force and F from the kernel gradient."""
 (STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL,
  STATUS_REMOVED) = range(7)
 STATUS_HEADER = 7
-STATUS_PER_BODY = 8  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
+STATUS_PER_BODY = 9  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
 #                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2,
-#                      smallest stretch^2 of F (``track_inversion``)
+#                      smallest stretch^2 of F (``track_inversion``), largest |F^sn|_inf (lagrangian)
 STATUS_STIFFENING = 5
 STATUS_SPEED = 6
 STATUS_F_STRETCH = 7
+STATUS_F_NORM = 8
 
 
 @functools.cache
@@ -108,7 +109,9 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     A model that hardens records its largest stiffening factor per body in
     ``status`` (for the time step). ``with_stress`` False leaves the stress
     impulse out (the implicit integrator adds the stress of the step's end,
-    mpm.implicit); the return mapping and the energy stay."""
+    mpm.implicit); the return mapping and the energy stay. ``sum_positions``
+    0 (at run time) leaves the node positions out in a step where no
+    boundary condition can reach the body (mpm.solver)."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
@@ -152,6 +155,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         dt: S,
         start: int,
         write: int,
+        sum_positions: int,  # 0: no boundary condition can reach a node this step (positions unused)
         # Grid out:
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
@@ -234,7 +238,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                         else:
                             wp.atomic_add(grid_mv, i, w * pc - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
                         if wp.static(positions):
-                            wp.atomic_add(grid_mq, i, w * qc)
+                            if sum_positions != 0:
+                                wp.atomic_add(grid_mq, i, w * qc)
                         if wp.static(with_regions):
                             if rid > 0:
                                 wp.atomic_add(grid_kin, i, w * m)
@@ -271,8 +276,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``fused``: stencils located from the reference positions (mpm.stencil.fuse).
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
-    narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
-    EMPM F^sn = I at the start of every step: it is C);
+    narrowest current cell and the largest |F^sn|_inf, the largest absolute
+    row sum (which bounds how far a node sits from its particles,
+    mpm.solver), and take the velocity gradient
+    as C (F^sn)^-1 (for EMPM F^sn = I at the start of every step: it is C);
     ``track_compression``: a material stiffens under compression (a fluid);
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
     potential energy -m g . x [J], and each body's largest |v_p|^2
@@ -304,6 +311,17 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     affine_from_gradient = affine and kernel.gradient_affine
     reference, cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
+
+    @wp.func
+    def row_sum_norm(F: mat):
+        """|F|_inf = max_d sum_k |F_dk|: |(F r)_d| <= |F|_inf max_k |r_k|."""
+        n = S(0.0)
+        for d in range(wp.static(dim)):
+            row = S(0.0)
+            for k in range(wp.static(dim)):
+                row += wp.abs(F[d, k])
+            n = wp.max(n, row)
+        return n
 
     @wp.func
     def grow_box(status: wp.array(dtype=f64), b: int, n_bodies: int, xp: t.vec):
@@ -454,6 +472,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         if wp.static(lagrangian):
             s2 = min_stretch2(Fs)
             wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))
+            wp.atomic_max(status, STATUS_HEADER + STATUS_F_NORM * n_bodies + b, f64(row_sum_norm(Fs)))
             L = grad_v * wp.inverse(Fsn_old)
             rate2 = wp.ddot(L, L)
         wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))

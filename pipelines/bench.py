@@ -9,7 +9,10 @@ Everything runs through the same code path as ``pipelines.run``
    (particles, dJ and scalars every step). Particles, grid nodes, compile (or
    cache load) time, median ms per step, particle-steps per second, logging
    overhead (logged step + logging time against the step-only time).
-2. schemes: EMPM, TLMPM and A-ULMPM on the same 2D ball, step only.
+2. schemes: EMPM, TLMPM and A-ULMPM on the same 2D ball and 3D sphere, step
+   only, in flight (as the speed table: far from the walls, where the
+   Lagrangian schemes sum no node positions) and placed at the floor (within
+   the wall band's reach from the first step: they sum them every step).
 3. fluids: the 2D droplet at the paper's size (about 6.7K particles on
    128^2) and the 3D water drop (32^3) to 0.5 s with EMPM, A-ULMPM (fluid
    defaults) and A-ULMPM with the paper's criterion, in interleaved rounds:
@@ -95,13 +98,24 @@ def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> di
     }
 
 
-def bench_schemes(workdir: Path, steps: int) -> list[dict]:
-    """The schemes in interleaved rounds; the fastest median of each."""
-    best = interleaved({sch: CASES["ball_2d"] + [f"scheme={sch}"] + QUIET for sch in SCHEMES},
-                       [f"run.steps={steps}"], workdir / "schemes")
-    return [{"scheme": sch, "particles": m["particles"], "step_ms": m["step_time_ms"],
-             "update_ms": m["update_time_ms"], "updates": m["config_updates"]["total"]}
-            for sch, m in best.items()]
+# the balls lowered onto the floor: their nodes reach the wall band from the first step
+AT_FLOOR = {"ball_2d": ["scene.bodies.0.shape.center=[0.5,0.225]"],
+            "ball_3d": ["scene.bodies.0.shape.center=[0.5,0.25,0.5]"]}
+
+
+def bench_schemes(workdir: Path, steps: int | None) -> list[dict]:
+    """The schemes on each ball, in flight and at the floor, in interleaved
+    rounds per ball; the fastest median of each."""
+    rows = []
+    for case in ("ball_2d", "ball_3d"):
+        runs = {(place, sch): CASES[case] + extra + [f"scheme={sch}", f"run.steps={steps or STEPS[case]}"] + QUIET
+                for place, extra in (("in flight", []), ("at the floor", AT_FLOOR[case])) for sch in SCHEMES}
+        best = interleaved(runs, [], workdir / f"schemes_{case}")
+        for (place, sch), m in best.items():
+            rows.append({"case": case, "place": place, "scheme": sch, "particles": m["particles"],
+                         "step_ms": m["step_time_ms"], "vs_empm": m["step_time_ms"] / best[place, "empm"]["step_time_ms"],
+                         "update_ms": m["update_time_ms"], "updates": m["config_updates"]["total"]})
+    return rows
 
 
 FLUID_ROUNDS = 3  # interleaved rounds of the fluid runs; the fastest of each counts
@@ -233,7 +247,7 @@ def main(argv=None) -> None:
               file=sys.stderr)
         rows = ([bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
                 if args.speed else [])
-        schemes = bench_schemes(Path(tmp), args.steps or STEPS["ball_2d"]) if args.schemes else []
+        schemes = bench_schemes(Path(tmp), args.steps) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
         materials = bench_materials(Path(tmp), 40) if args.materials else []
@@ -252,11 +266,11 @@ def main(argv=None) -> None:
               f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} "
               f"{r['logged_step_ms']:>9.3f} {r['log_ms']:>8.3f} {100 * r['log_overhead']:>11.0f}%")
     if schemes:
-        base = schemes[0]["step_ms"]
-        print("\nschemes on the 2D ball (128^2), step only")
-        print(f"{'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} {'updates':>8}")
+        print("\nschemes on the 2D ball (128^2) and the 3D sphere (64^3), step only")
+        print(f"{'case':<8} {'place':<13} {'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} "
+              f"{'updates':>8}")
         for r in schemes:
-            print(f"{r['scheme']:<8} {r['step_ms']:>8.3f} {r['step_ms'] / base:>8.2f} "
+            print(f"{r['case']:<8} {r['place']:<13} {r['scheme']:<8} {r['step_ms']:>8.3f} {r['vs_empm']:>8.2f} "
                   f"{r['update_ms']:>15.4f} {r['updates']:>8}")
     if updates:
         print("\nfluids to 0.5 s: configuration-update cost and total stepping time "

@@ -277,11 +277,14 @@ def test_a_signal_landing_in_a_finaliser_is_not_lost():
 def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
     one = run_cli(["run.plan=true", "run.fuse=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
     assert one.returncode == 0, one.stderr
-    assert "P2G (1 material group(s); stencils located on the fly)" in one.stdout
+    assert "P2G (1 material group(s); stencils located on the fly; node positions on the lattice)" in one.stdout
     assert "contact" not in one.stdout and "removal" not in one.stdout and "implicit" not in one.stdout
     assert not (tmp_path / "a").exists()  # nothing was run
     two = run_cli(["run.plan=true", "scene=falling_bodies", "scheme=aulmpm", "scene.walls=open",
                    f"hydra.run.dir={tmp_path / 'b'}"], cwd=ROOT, timeout=120)
     assert two.returncode == 0, two.stderr
-    assert "stencils from the cache" in two.stdout and "contact between bodies" in two.stdout
+    assert "stencils from the cache; node positions summed)" in two.stdout and "contact between bodies" in two.stdout
     assert "removal at open walls" in two.stdout and "when the criterion fires" in two.stdout
+    three = run_cli(["run.plan=true", "scheme=tlmpm", f"hydra.run.dir={tmp_path / 'c'}"], cwd=ROOT, timeout=120)
+    assert three.returncode == 0, three.stderr
+    assert "node positions summed only in steps near a wall" in three.stdout  # walls alone
