@@ -35,6 +35,7 @@ class GridLayout:
         self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
         self._uploaded = None  # (lo, shape, offset) as the device tables hold them
+        self._changed = True  # a fit changed a box since the last commit
         with wp.ScopedDevice(device):
             self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
             self.shape_d = wp.zeros(n_boxes, dtype=t.ivec)
@@ -56,17 +57,20 @@ class GridLayout:
         shift = np.asarray(k.grids)[:, None] + k.offset
         lo = np.clip(np.floor(np.asarray(xmin) / self.dx - shift), 0, last).astype(np.int32)
         hi = np.clip(np.floor(np.asarray(xmax) / self.dx - shift), 0, last).astype(np.int32)
-        if self.shared:
-            self.lo[:] = np.tile(lo, (len(self.lo) // k.n_grids, 1))
-            self.shape[:] = np.tile(hi - lo + k.support, (len(self.lo) // k.n_grids, 1))
-        else:
-            self.lo[body * k.n_grids:(body + 1) * k.n_grids] = lo
-            self.shape[body * k.n_grids:(body + 1) * k.n_grids] = hi - lo + k.support
+        rows = slice(None) if self.shared else slice(body * k.n_grids, (body + 1) * k.n_grids)
+        reps = (len(self.lo) // k.n_grids, 1) if self.shared else (1, 1)
+        lo, shape = np.tile(lo, reps), np.tile(hi - lo + k.support, reps)
+        if not (np.array_equal(self.lo[rows], lo) and np.array_equal(self.shape[rows], shape)):
+            self.lo[rows], self.shape[rows] = lo, shape
+            self._changed = True
 
     def commit(self) -> None:
         """Recompute offsets and upload the tables (after one or more ``fit``);
         a table that did not change is not uploaded again (an Eulerian body's
         boxes change only when its bounds cross a cell)."""
+        if not self._changed and self._uploaded is not None:
+            return
+        self._changed = False
         sizes = np.prod(self.shape.astype(np.int64), axis=1)
         if self.shared:  # the grids of body 0, for everyone
             G = self.kernel.n_grids

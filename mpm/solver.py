@@ -223,6 +223,7 @@ class Solver:
         self._solve = ImplicitSolve(self, self.options.integrator) if self.implicit else None
         self._backup = None  # F^0s and history before an implicit step (plastic models, for a retry)
         self._capacity = 0
+        self._views = None  # (node count, grid_m, views) of _live_nodes
         self.grid_m = self.grid_v = self.grid_q = self.grid_kin = self.grid_kin_id = None
         self.time = 0.0  # [s] simulated time of the state (kinematic regions depend on it)
         self._center = np.zeros(t.dim)  # centre of mass [m]: at prepare, then at the last measure
@@ -428,16 +429,26 @@ class Solver:
     def _clear(self):
         """Zero the grid (the node positions unless on the lattice), the status
         buffer and the energy sum."""
-        n = self.layout.n_nodes
-        self.grid_m[:n].zero_()
-        self.grid_v[:n].zero_()
+        m, v, q, kin, kin_id = self._live_nodes()
+        m.zero_()
+        v.zero_()
         if not self._lattice and self._positions:
-            self.grid_q[:n].zero_()
+            q.zero_()
         if self.regions:
-            self.grid_kin[:n].zero_()
-            self.grid_kin_id[:n].zero_()
+            kin.zero_()
+            kin_id.zero_()
         wp.copy(self.status, self._status_reset)
         self.energy.zero_()
+
+    def _live_nodes(self) -> tuple:
+        """Views of the grid arrays over the layout's nodes (kept while the
+        node count and the arrays stay: slicing a Warp array every step costs
+        more host time than zeroing the 2D ball's grid)."""
+        n = self.layout.n_nodes
+        if self._views is None or self._views[0] != n or self._views[1] is not self.grid_m:
+            arrays = (self.grid_m, self.grid_v, self.grid_q, self.grid_kin, self.grid_kin_id)
+            self._views = (n, self.grid_m, tuple(a[:n] if len(a) >= n else a for a in arrays))
+        return self._views[2]
 
     def _apply_forcing(self, t0: float):
         """The manufactured solution's body force at the step's start time t0 [s]."""
