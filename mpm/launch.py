@@ -20,7 +20,7 @@ def warp_kernel(f):
     """``wp.kernel`` as this project builds every kernel: in a module of its
     own (a closure specialised per run compiles alone) and without adjoint
     code (nothing differentiates through a step; the adjoints doubled the
-    compile time, 14.1 against 6.8 s for the 3D ball's kernels into an empty
+    compile time, 14.1 against 7.3 s for the 3D ball's kernels into an empty
     cache)."""
     return wp.kernel(f, enable_backward=False, module="unique")
 

@@ -89,8 +89,8 @@ class StepReport:
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (options.track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
     removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
-    max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (Lagrangian schemes; else 0)
-    positioned: bool = True  # P2G summed the node positions (False: no boundary condition could reach them)
+    max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (walls-only Lagrangian scenes; else None)
+    positioned: bool = True  # the node positions were available (False: not summed, no condition could reach them)
 
     @property
     def reason(self) -> str | None:
@@ -148,15 +148,6 @@ class Solver:
         self.implicit = isinstance(self.options.integrator, Implicit)
         # the Eulerian scheme (explicit) locates the stencils in the transfers: its reference moves every step
         self.fused = self.options.fuse and isinstance(scheme, EMPM) and not self.implicit
-        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
-                               lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
-                               fused=self.fused), g)
-                     for g in model.groups]
-        self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
-                             lagrangian=not isinstance(scheme, EMPM),
-                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
-                             track_energy=self.options.track_energy, track_inversion=self.options.track_J,
-                             removal=self.removal, fused=self.fused)
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -172,6 +163,17 @@ class Solver:
         self._free_flight = not (self._lattice or self.regions or colliders or self.contact or self.implicit)
         self._positions = 1
         self._reach = model.dx * max(k.offset + 1.0, k.support - 1.0 - k.offset)  # [m] largest |r_k| of a stencil
+        self._band = (model.scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
+        self._closed = (np.array(model.wall_codes[0]) != open_code, np.array(model.wall_codes[1]) != open_code)
+        self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
+                               lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
+                               fused=self.fused), g)
+                     for g in model.groups]
+        self._g2p = make_g2p(t, k, transfer, self.options.record_dJ, scheme.tracks_marks(),
+                             lagrangian=not isinstance(scheme, EMPM),
+                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
+                             track_energy=self.options.track_energy, track_inversion=self.options.track_J,
+                             removal=self.removal, fused=self.fused, bound_reach=self._free_flight)
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
                                              lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
@@ -240,7 +242,7 @@ class Solver:
             rows = [((0.0,) * d, np.zeros((d, d)), (0.0,) * d, (0.0, 0.0))]
         data = make_boundary_data(t)()
         data.domain = t.vec(*m.domain)
-        data.band = t.scalar((m.scene.wall_cells - 0.5) * m.dx)
+        data.band = t.scalar(self._band)
         data.wall_lo = t.ivec(*m.wall_codes[0])
         data.wall_hi = t.ivec(*m.wall_codes[1])
         tables = [wp.array(np.array([r[k] for r in rows], dtype=state_dtype(m)), dtype=T)
@@ -304,6 +306,7 @@ class Solver:
         """Take the initial positions as every body's reference configuration
         and record the neighbour pairs of the fracture measure."""
         x = state.x.numpy()
+        self._positions = 1  # no bound before the first step
         self.X0 = x.astype(np.float64)  # [m] initial positions (the body force is evaluated there)
         mass = self.model.mass.numpy().astype(np.float64)
         self._center = mass @ self.X0 / mass.sum()  # the angular momentum scale's centre
@@ -340,7 +343,9 @@ class Solver:
         report.positioned = bool(self._positions)
         if report.removed is not None:
             self._count_removed(report)
-        if report.reason is None:
+        if report.reason is not None:
+            self._positions = 1  # no bound from a failed step
+        else:
             t0 = time.perf_counter()
             report.updated = [b for b in range(self.n_bodies) if self.body_counts[b] > 0
                               and self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
@@ -363,14 +368,10 @@ class Solver:
         stencil's reach."""
         if not self._free_flight or report.max_F_norm is None:
             return 1
-        m = self.model
         reach = self._reach * np.maximum(report.max_F_norm, 1.0)[:, None]  # [m] per body
         lo, hi = report.box_lo - reach, report.box_hi + reach
-        band = (m.scene.wall_cells - 0.5) * m.dx + 1e-3 * m.dx  # the wall band, with room for round-off
-        open_code = WALL_TYPES.index("open")
-        closed_lo = np.array(m.wall_codes[0]) != open_code
-        closed_hi = np.array(m.wall_codes[1]) != open_code
-        near = ((lo < band) & closed_lo) | ((hi > np.array(m.domain) - band) & closed_hi)
+        band = self._band + 1e-3 * self.model.dx  # with room for round-off
+        near = (lo < band) & self._closed[0] | (hi > np.asarray(self.model.domain) - band) & self._closed[1]
         live = self.body_counts > 0
         return int(bool(np.any(near[live])) or not np.all(np.isfinite(reach[live])))
 
@@ -605,7 +606,7 @@ class Solver:
             max_rate=np.sqrt(field_[4]), stiffening=field_[5].copy(), box_lo=box[0].copy(),
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
             min_F_stretch=np.sqrt(field_[STATUS_F_STRETCH]),
-            max_F_norm=None if self._lattice else field_[STATUS_F_NORM].copy(),
+            max_F_norm=field_[STATUS_F_NORM].copy() if self._free_flight else None,
             boundary_work=float(s[STATUS_WORK]),
             removed=np.zeros(nb, np.int64) if s[STATUS_REMOVED] > 0 else None,
             kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),

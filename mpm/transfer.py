@@ -213,17 +213,25 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         # the affine momentum mv + mC r and the mass-weighted node position m (x_p + F^sn r) are
         # linear in the offset r = (index - fx) dx: evaluated at the stencil's first node, then
         # stepped by a column of dx mC (or m dx F^sn) per index step (no matrix product per node)
-        mCdx = dx * mC
-        mFdx = (m * dx) * Fs
-        dCT = wp.transpose(mCdx)
-        dFT = wp.transpose(mFdx)
+        mCdx = t.mat()
+        dCT = t.mat()
+        if wp.static(affine):
+            mCdx = dx * mC
+            dCT = wp.transpose(mCdx)
+        mFdx = t.mat()
+        dFT = t.mat()
+        if wp.static(positions):
+            mFdx = (m * dx) * Fs
+            dFT = wp.transpose(mFdx)
         u0, ph = reference(p, cache)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             pa = mv
             if wp.static(affine):
                 pa = mv - mCdx * fx
-            qa = m * xp - mFdx * fx
+            qa = t.vec()
+            if wp.static(positions):
+                qa = m * xp - mFdx * fx
             for a in range(Ks):
                 pb = pa
                 qb = qa
@@ -264,7 +272,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 @functools.cache
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
-             track_inversion: bool = False, removal: bool = False, fused: bool = False):
+             track_inversion: bool = False, removal: bool = False, fused: bool = False,
+             bound_reach: bool = False):
     """G2P for all particles.
 
     ``removal`` (a domain with open faces): a particle that crosses the
@@ -276,10 +285,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``fused``: stencils located from the reference positions (mpm.stencil.fuse).
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
-    narrowest current cell and the largest |F^sn|_inf, the largest absolute
-    row sum (which bounds how far a node sits from its particles,
-    mpm.solver), and take the velocity gradient
-    as C (F^sn)^-1 (for EMPM F^sn = I at the start of every step: it is C);
+    narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
+    EMPM F^sn = I at the start of every step: it is C); ``bound_reach`` (with
+    it): the largest |F^sn|_inf, the largest absolute row sum, which bounds
+    how far a node sits from its particles (mpm.solver);
     ``track_compression``: a material stiffens under compression (a fluid);
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
     potential energy -m g . x [J], and each body's largest |v_p|^2
@@ -294,8 +303,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     that stiffen under compression), the smallest stretch of F^sn (a
     reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
     step must shrink with it), the largest velocity gradient |L| (the strain
-    increment dt |L| of a step must stay small), and the bounding box of the
-    new positions (min per axis, then max per axis).
+    increment dt |L| of a step must stay small), the largest speed
+    (``track_energy``), the smallest stretch of F (``track_inversion``), the
+    largest |F^sn|_inf (``bound_reach``), and the bounding box of the new
+    positions (min per axis, then max per axis).
     """
     S = t.scalar
     f64 = wp.float64
@@ -376,43 +387,43 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         u0, ph = reference(p, cache)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            # B = sum w v_i r^T with r = (index - fx) dx, as dx (sum w v_i index^T - (sum w v_i) fx^T):
-            # per axis, the weighted velocities summed over the stencil's slabs, times the slab index
+            # B = sum w v_i r^T with r = (index - fx) dx: per axis, the weighted velocities summed over
+            # the stencil's slabs, times the slab's offset index - fx (no outer product per node)
             vg = vec()
             col0 = vec()
             col1 = vec()
             col2 = vec()
-            fa = S(0.0)  # the slab indices as scalars
+            ra = -fx[0]  # the slabs' offsets r / dx
             for a in range(Ks):
                 va = vec()
-                fb = S(0.0)
+                rb = -fx[1]
                 for bb in range(Ks):
                     vb = vec()
-                    fc = S(0.0)
+                    rc = -fx[dim - 1]
                     for c in range(wp.static(Ks if dim == 3 else 1)):
                         w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                         vi = grid_v[i]
                         wv = w * vi
                         vb += wv
                         if wp.static(dim == 3 and affine and not affine_from_gradient):
-                            col2 += fc * wv
-                            fc += S(1.0)
+                            col2 += rc * wv
+                            rc += S(1.0)
                         if wp.static(not mls):
                             grad_v += wp.outer(vi, node_gradient(a, bb, c, W, dW, S(1.0) / dx))
                     va += vb
                     if wp.static(affine and not affine_from_gradient):
-                        col1 += fb * vb
-                        fb += S(1.0)
+                        col1 += rb * vb
+                        rb += S(1.0)
                 vg += va
                 if wp.static(affine and not affine_from_gradient):
-                    col0 += fa * va
-                    fa += S(1.0)
+                    col0 += ra * va
+                    ra += S(1.0)
             vp += vg
             if wp.static(affine and not affine_from_gradient):
                 if wp.static(dim == 3):
-                    B += dx * (wp.matrix_from_cols(col0, col1, col2) - wp.outer(vg, fx))
+                    B += dx * wp.matrix_from_cols(col0, col1, col2)
                 else:
-                    B += dx * (wp.matrix_from_cols(col0, col1) - wp.outer(vg, fx))
+                    B += dx * wp.matrix_from_cols(col0, col1)
         vp = S(inv_G) * vp
         Cp = mat()
         if wp.static(mls):
@@ -472,7 +483,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         if wp.static(lagrangian):
             s2 = min_stretch2(Fs)
             wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))
-            wp.atomic_max(status, STATUS_HEADER + STATUS_F_NORM * n_bodies + b, f64(row_sum_norm(Fs)))
+            if wp.static(bound_reach):
+                wp.atomic_max(status, STATUS_HEADER + STATUS_F_NORM * n_bodies + b, f64(row_sum_norm(Fs)))
             L = grad_v * wp.inverse(Fsn_old)
             rate2 = wp.ddot(L, L)
         wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))
