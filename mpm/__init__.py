@@ -4,7 +4,7 @@ Build a :class:`Scene`, turn it into a :class:`Model` and initial
 :class:`State` with :func:`build`, and advance it with :class:`Solver`.
 """
 
-from . import analytic  # noqa: F401 - mpm.analytic
+from . import analytic
 from .colliders import Collider
 from .integrators import INTEGRATORS, Explicit, Implicit
 from .kernels import KERNELS, Kernel
@@ -17,7 +17,7 @@ from .stability import DETECTION_ACTIONS, Detection, Detector
 from .timestep import cfl_dt
 
 __all__ = [
-    "Collider", "INTEGRATORS", "Explicit", "Implicit", "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
+    "analytic", "Collider", "INTEGRATORS", "Explicit", "Implicit", "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
     "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
     "KinematicRegion",
     "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
