@@ -34,8 +34,7 @@ class GridLayout:
         self.shape = np.ones((n_boxes, t.dim), np.int32)  # nodes per axis
         self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
-        self._uploaded = None  # (lo, shape, offset) as the device tables hold them
-        self._changed = True  # a fit changed a box since the last commit
+        self._changed = True  # a fit changed a box since the last commit (or none was made)
         with wp.ScopedDevice(device):
             self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
             self.shape_d = wp.zeros(n_boxes, dtype=t.ivec)
@@ -66,9 +65,9 @@ class GridLayout:
 
     def commit(self) -> None:
         """Recompute offsets and upload the tables (after one or more ``fit``);
-        a table that did not change is not uploaded again (an Eulerian body's
-        boxes change only when its bounds cross a cell)."""
-        if not self._changed and self._uploaded is not None:
+        nothing when no fit changed a box since the last commit (an Eulerian
+        body's boxes change only when its bounds cross a cell)."""
+        if not self._changed:
             return
         self._changed = False
         sizes = np.prod(self.shape.astype(np.int64), axis=1)
@@ -80,9 +79,6 @@ class GridLayout:
         else:
             self.offset[:] = np.concatenate([[0], np.cumsum(sizes)[:-1]])
             self.n_nodes = int(sizes.sum())
-        old = self._uploaded
-        for i, (host, device) in enumerate(((self.lo, self.lo_d), (self.shape, self.shape_d),
-                                             (self.offset, self.offset_d))):
-            if old is None or not np.array_equal(old[i], host):
-                device.assign(host)
-        self._uploaded = (self.lo.copy(), self.shape.copy(), self.offset.copy())
+        self.lo_d.assign(self.lo)
+        self.shape_d.assign(self.shape)
+        self.offset_d.assign(self.offset)

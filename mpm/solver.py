@@ -165,6 +165,7 @@ class Solver:
         self._reach = model.dx * max(k.offset + 1.0, k.support - 1.0 - k.offset)  # [m] largest |r_k| of a stencil
         self._band = (model.scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
         self._closed = (np.array(model.wall_codes[0]) != open_code, np.array(model.wall_codes[1]) != open_code)
+        self._domain = np.asarray(model.domain, float)  # [m]
         self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
                                lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
                                fused=self.fused), g)
@@ -371,7 +372,7 @@ class Solver:
         reach = self._reach * np.maximum(report.max_F_norm, 1.0)[:, None]  # [m] per body
         lo, hi = report.box_lo - reach, report.box_hi + reach
         band = self._band + 1e-3 * self.model.dx  # with room for round-off
-        near = (lo < band) & self._closed[0] | (hi > np.asarray(self.model.domain) - band) & self._closed[1]
+        near = (lo < band) & self._closed[0] | (hi > self._domain - band) & self._closed[1]
         live = self.body_counts > 0
         return int(bool(np.any(near[live])) or not np.all(np.isfinite(reach[live])))
 

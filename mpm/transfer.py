@@ -131,6 +131,18 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     else:
         stress_energy = material.stress_energy(t)
 
+    @wp.func
+    def next_index(p: t.vec, q: t.vec, dCT: t.mat, dFT: t.mat, k: int):
+        """The affine momentum p and the position term q one stencil index
+        further along axis k (dCT, dFT: the transposed steps)."""
+        p_next = p
+        q_next = q
+        if wp.static(affine):
+            p_next = p + dCT[k]
+        if wp.static(positions):
+            q_next = q + dFT[k]
+        return p_next, q_next
+
     @warp_kernel
     def p2g(
         # Model:
@@ -253,18 +265,9 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                                 wp.atomic_add(grid_kin, i, w * m)
                                 wp.atomic_max(grid_kin_id, i, rid)
                         if wp.static(dim == 3):
-                            if wp.static(affine):
-                                pc = pc + dCT[2]
-                            if wp.static(positions):
-                                qc = qc + dFT[2]
-                    if wp.static(affine):
-                        pb = pb + dCT[1]
-                    if wp.static(positions):
-                        qb = qb + dFT[1]
-                if wp.static(affine):
-                    pa = pa + dCT[0]
-                if wp.static(positions):
-                    qa = qa + dFT[0]
+                            pc, qc = next_index(pc, qc, dCT, dFT, 2)
+                    pb, qb = next_index(pb, qb, dCT, dFT, 1)
+                pa, qa = next_index(pa, qa, dCT, dFT, 0)
 
     return p2g
 
@@ -320,8 +323,18 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     mls = transfer == "mls" and not kernel.gradient_affine
     affine = transfer != "pic"
     affine_from_gradient = affine and kernel.gradient_affine
+    with_B = affine and not affine_from_gradient  # B = sum w v r^T for C
     reference, cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
+
+    @wp.func
+    def slab(col: vec, r: S, v: vec):
+        """A column of B / dx takes in a slab's weighted velocity v at offset
+        r = index - fx; the next slab's offset."""
+        col_next = col
+        if wp.static(with_B):
+            col_next = col + r * v
+        return col_next, r + S(1.0)
 
     @wp.func
     def row_sum_norm(F: mat):
@@ -389,7 +402,6 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
             # B = sum w v_i r^T with r = (index - fx) dx: per axis, the weighted velocities summed over
             # the stencil's slabs, times the slab's offset index - fx (no outer product per node)
-            vg = vec()
             col0 = vec()
             col1 = vec()
             col2 = vec()
@@ -405,21 +417,15 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                         vi = grid_v[i]
                         wv = w * vi
                         vb += wv
-                        if wp.static(dim == 3 and affine and not affine_from_gradient):
-                            col2 += rc * wv
-                            rc += S(1.0)
+                        if wp.static(dim == 3):
+                            col2, rc = slab(col2, rc, wv)
                         if wp.static(not mls):
                             grad_v += wp.outer(vi, node_gradient(a, bb, c, W, dW, S(1.0) / dx))
                     va += vb
-                    if wp.static(affine and not affine_from_gradient):
-                        col1 += rb * vb
-                        rb += S(1.0)
-                vg += va
-                if wp.static(affine and not affine_from_gradient):
-                    col0 += ra * va
-                    ra += S(1.0)
-            vp += vg
-            if wp.static(affine and not affine_from_gradient):
+                    col1, rb = slab(col1, rb, vb)
+                vp += va
+                col0, ra = slab(col0, ra, va)
+            if wp.static(with_B):
                 if wp.static(dim == 3):
                     B += dx * wp.matrix_from_cols(col0, col1, col2)
                 else:
