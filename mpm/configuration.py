@@ -23,10 +23,84 @@ import warp as wp
 
 from .kernels import Kernel
 from .launch import warp_kernel
-from .stencil import make_locate, make_origin, make_stencil_cache
+from .stencil import make_locate, make_origin, make_stencil_cache, weight_matrix_type
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
+
+# an unbounded box: a stencil located in it is never clamped (the layout's boxes
+# hold every stencil of a particle inside them, so the coordinates are the same)
+UNBOUNDED_LO = -(1 << 28)
+UNBOUNDED_SHAPE = 1 << 29
+
+
+@functools.cache
+def make_moment(t: Types, kernel: Kernel, gradients: bool):
+    """``moment(fx, W, dx) -> D_g``: one grid's share of the second moment
+    sum_i w r r^T [m^2] from the 1-D moments (module docstring);
+    ``moment_inverse(D, dx) -> K_p`` [1/m^2] of the sum over the grids;
+    ``moment_at(X, inv_dx, grid_offsets, dx) -> K_p`` at a reference
+    position X [m], the grids located in an unbounded box (``gradients``:
+    the origin as the transfers with slopes compute it, so that the weights
+    are theirs bit for bit)."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    Gv = wp.types.vector(G, S)
+    Wm = weight_matrix_type(t, kernel)
+    locate = make_locate(t, kernel, gradients)
+    origin = make_origin(t, kernel, gradients)
+    inv_G = 1.0 / G
+
+    @wp.func
+    def moment(fx: t.vec, W: Wm, dx: S):
+        m1 = t.vec()
+        m2 = t.vec()
+        for a in range(dim):
+            for s in range(Ks):
+                r = (S(s) - fx[a]) * dx
+                m1[a] += W[a, s] * r
+                m2[a] += W[a, s] * r * r
+        D = wp.outer(m1, m1)
+        for a in range(dim):
+            D[a, a] += m2[a] - m1[a] * m1[a]
+        return D
+
+    @wp.func
+    def moment_inverse(D: t.mat, dx: S):
+        return wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx * wp.identity(n=dim, dtype=S))
+
+    @wp.func
+    def moment_at(X: t.vec, inv_dx: S, grid_offsets: Gv, dx: S):
+        u0, P = origin(X, inv_dx, grid_offsets)
+        D = t.mat()
+        lo = t.ivec()
+        shape = t.ivec()
+        for d in range(wp.static(dim)):
+            lo[d] = UNBOUNDED_LO
+            shape[d] = UNBOUNDED_SHAPE
+        for g in range(wp.static(G)):
+            _flat, fx, W, _dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo, shape, 0)
+            D += moment(fx, W, dx)
+        return moment_inverse(D, dx)
+
+    return moment, moment_inverse, moment_at
+
+
+@functools.cache
+def make_committed(t: Types, project):
+    """``committed(F_sn, F_0s, params) -> F^0s`` of the new reference:
+    project(F^sn F^0s) with the material's projection (``project``: its
+    factory, or None)."""
+    proj = project(t) if project is not None else None
+
+    @wp.func
+    def committed(Fsn: t.mat, F0s: t.mat, params: t.params):
+        F = Fsn * F0s
+        if wp.static(proj is not None):
+            F = proj(F, params)
+        return F
+
+    return committed
 
 
 @functools.cache
@@ -38,16 +112,15 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     cached; ``moment``: the transfer uses K_p (not PIC), built when the
     kernel's moment varies per particle."""
     S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    dim, G = t.dim, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
     origin = make_origin(t, kernel, gradients)
-    proj = project(t) if project is not None else None
+    committed = make_committed(t, project)
+    one_grid_moment, moment_inverse, moment_at = make_moment(t, kernel, gradients)
     Cache = make_stencil_cache(t, kernel)
     Gv = wp.types.vector(G, S)
     per_particle_K = moment and kernel.moment is None
-    # grids whose stencils the update locates: none when the transfers locate them and K_p is not cached
-    n_located = 0 if fused and not per_particle_K else G
-    inv_G = 1.0 / G
+    located = not fused  # the cache holds the stencils (fused: the transfers locate them)
 
     @warp_kernel
     def update(
@@ -74,40 +147,29 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         b = body[p]
         Xp = x[p]
         Fs = Fsn[p]
-        F = Fs * F0s[p]
-        if wp.static(proj is not None):
-            F = proj(F, body_params[b])
         if wp.static(transform_affine):
             C[p] = C[p] * wp.inverse(Fs)
         X[p] = Xp
-        F0s[p] = F
+        F0s[p] = committed(Fs, F0s[p], body_params[b])
         Fsn[p] = wp.identity(n=dim, dtype=S)
-        D = t.mat()
-        if wp.static(n_located > 0):  # the grids' shared sines only where a stencil is located
+        if wp.static(located):
+            D = t.mat()
             u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
-        for g in range(wp.static(n_located)):
-            box = b * G + g
-            flat, fx, W, dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo[box], shape[box], offset[box])
-            if wp.static(not fused):
+            for g in range(wp.static(G)):
+                box = b * G + g
+                flat, fx, W, dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo[box], shape[box],
+                                         offset[box])
                 k = p * G + g
                 cache.base[k] = flat
                 cache.fx[k] = fx
                 cache.W[k] = W
                 if wp.static(gradients):
                     cache.dW[k] = dW
+                if wp.static(per_particle_K):
+                    D += one_grid_moment(fx, W, dx)
             if wp.static(per_particle_K):
-                m1 = t.vec()
-                m2 = t.vec()
-                for a in range(dim):
-                    for s in range(Ks):
-                        r = (S(s) - fx[a]) * dx
-                        m1[a] += W[a, s] * r
-                        m2[a] += W[a, s] * r * r
-                D += wp.outer(m1, m1)
-                for a in range(dim):
-                    D[a, a] += m2[a] - m1[a] * m1[a]
-        if wp.static(per_particle_K):
-            cache.K[p] = wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx
-                                    * wp.identity(n=dim, dtype=S))
+                cache.K[p] = moment_inverse(D, dx)
+        elif wp.static(per_particle_K):  # as G2P's commit computes it (mpm.transfer)
+            cache.K[p] = moment_at(Xp, S(1.0) / dx, grid_offsets, dx)
 
     return update

@@ -55,11 +55,14 @@ class SolverOptions:
     track_energy: bool = False
     """report the new state's kinetic and potential energy and each body's
     fastest particle every step (mpm.stability)"""
-    fuse: bool = False
+    fuse: bool | None = None
     """the explicit Eulerian scheme locates stencils in P2G and G2P instead
-    of caching them at its every-step update (the same results bit for bit).
-    Off by default: on the CPU it does not pay (the compact kernel's sines
-    are evaluated twice more per step; pipelines.bench measures it)"""
+    of caching them, and (when its bodies share one projection) G2P does
+    the every-step configuration update, so that no update pass runs; the
+    same results bit for bit. None: where it pays on this project's CPU
+    (pipelines.bench "fused"): B-splines, whose weights cost less to
+    recompute than to store; not the compact kernel, whose sines (and
+    K_p at the new position) would be evaluated twice more per step"""
 
 
 @dataclass
@@ -147,7 +150,11 @@ class Solver:
         self.forcing = solution if getattr(solution, "has_body_force", False) else None
         self.implicit = isinstance(self.options.integrator, Implicit)
         # the Eulerian scheme (explicit) locates the stencils in the transfers: its reference moves every step
-        self.fused = self.options.fuse and isinstance(scheme, EMPM) and not self.implicit
+        projections = {b.material.project for b in model.scene.bodies}
+        fuse = self.options.fuse
+        if fuse is None:
+            fuse = k.moment is not None and len(projections) == 1
+        self.fused = fuse and isinstance(scheme, EMPM) and not self.implicit
         shared = model.scene.contact == "shared"
         if shared and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
@@ -166,6 +173,9 @@ class Solver:
         self._band = (model.scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
         self._closed = (np.array(model.wall_codes[0]) != open_code, np.array(model.wall_codes[1]) != open_code)
         self._domain = np.asarray(model.domain, float)  # [m]
+        # fused EMPM: G2P does the configuration update too when the bodies share one projection
+        self._g2p_commits = self.fused and len(projections) == 1
+        transform = scheme.affine == "transform"
         self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
                                lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
                                fused=self.fused), g)
@@ -174,7 +184,9 @@ class Solver:
                              lagrangian=not isinstance(scheme, EMPM),
                              track_compression=any(b.material.stiffens for b in model.scene.bodies),
                              track_energy=self.options.track_energy, track_inversion=self.options.track_J,
-                             removal=self.removal, fused=self.fused, bound_reach=self._free_flight)
+                             removal=self.removal, fused=self.fused, bound_reach=self._free_flight,
+                             commit=self._g2p_commits, project=next(iter(projections)),
+                             transform_affine=transform)
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
                                              lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
@@ -188,7 +200,6 @@ class Solver:
         per_particle_K = k.moment is None and transfer != "pic"
         self._measure = make_measure(t, per_particle_K=per_particle_K)
         self._fracture = make_fracture(t)
-        transform = scheme.affine == "transform"
         self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform,
                                        gradients=transfer != "mls" or k.gradient_affine, fused=self.fused,
                                        moment=per_particle_K)
@@ -287,10 +298,13 @@ class Solver:
         if self._boundary is not None:
             stages.append(("boundary after contact", names(self._boundary)))
         g2p = "G2P" + (", removal at open walls" if self.removal else "") + (
-            ", energy and speed for the detection" if self.options.track_energy else "")
+            ", energy and speed for the detection" if self.options.track_energy else "") + (
+            ", the configuration update" if self._g2p_commits else "")
         stages.append((g2p, names(self._g2p)))
         update = {"empm": "every step", "tlmpm": "never (initial reference)"}.get(
             sch.name, f"when the criterion fires (epsilon {getattr(sch, 'epsilon', 0):g})")
+        if self._g2p_commits:
+            update = "every step, in G2P; the grids follow (host); the update kernel only at the start"
         stages.append((f"configuration update: {update}", sorted(set(names(*self._update.values())))))
         stages.append(("diagnostics, fracture measure" + (", particles inside colliders" if self._inside else "")
                        + " (at logging cadence)", names(self._measure, self._fracture, self._inside)))
@@ -352,8 +366,9 @@ class Solver:
                               and self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
                                                      float(report.max_dJ[b]),
                                                      float(report.min_stretch[b]))]
-            if report.updated:
-                self.update_configuration(state, report.updated, report.box_lo, report.box_hi)
+            if report.updated:  # (G2P has moved the fused Eulerian references: only their grids follow)
+                self.update_configuration(state, report.updated, report.box_lo, report.box_hi,
+                                          launch=not self._g2p_commits)
             report.update_time = time.perf_counter() - t0
             self._positions = self._positions_needed(report)
         return report
@@ -510,18 +525,21 @@ class Solver:
             state.stencils,
             self._dx, self._K, dt, self._epsilon, self._inside_lo, self._inside_hi,
             state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, self.status, m.mass, self._gravity,
-            m.volume, self._open_lo, self._open_hi])
+            m.volume, self._open_lo, self._open_hi, m.body_params])
 
     # -------------------------------------------------- configuration update
     def update_configuration(self, state: State, bodies: list[int], lo: np.ndarray,
-                             hi: np.ndarray) -> None:
+                             hi: np.ndarray, launch: bool = True) -> None:
         """Move the reference configuration of ``bodies`` to the current one;
-        ``lo``/``hi`` [body, axis] bound their current positions (from G2P)."""
+        ``lo``/``hi`` [body, axis] bound their current positions (from G2P);
+        ``launch`` False: the particles' part is done (G2P's commit), fit the
+        grids only."""
         for b in bodies:
             self.layout.fit(b, lo[b], hi[b])
         self._commit_layout()
-        for b in bodies:
-            self._launch_update(state, b)
+        if launch:
+            for b in bodies:
+                self._launch_update(state, b)
 
     def _launch_update(self, state: State, b: int) -> None:
         m = self.model

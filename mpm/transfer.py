@@ -31,6 +31,7 @@ import functools
 
 import warp as wp
 
+from .configuration import make_committed, make_moment
 from .kernels import Kernel
 from .launch import warp_kernel
 from .materials.plastic import make_plastic_update
@@ -276,7 +277,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
-             bound_reach: bool = False):
+             bound_reach: bool = False, commit: bool = False, project=None, transform_affine: bool = False):
     """G2P for all particles.
 
     ``removal`` (a domain with open faces): a particle that crosses the
@@ -285,7 +286,14 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     stays where it crossed, clamped to the interior, at rest, and G2P skips
     it from then on; ``status[STATUS_REMOVED]`` counts the removals. A
     particle crossing a closed face still counts as outside (unstable).
-    ``fused``: stencils located from the reference positions (mpm.stencil.fuse).
+    ``fused``: stencils located from the reference positions (mpm.stencil.fuse);
+    ``commit`` (with it: the Eulerian scheme, whose reference follows the
+    particles every step): G2P also does the configuration update
+    (mpm.configuration) that would otherwise be a pass of its own: X <- x,
+    F^0s <- project(F^sn F^0s) (``project``: the bodies' common projection
+    factory, or None), F^sn <- I, C <- C (F^sn)^-1 with ``transform_affine``,
+    and K_p at the new position where the kernel's moment varies (the same
+    arithmetic, so the results are those of the separate update bit for bit).
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
@@ -326,6 +334,19 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     with_B = affine and not affine_from_gradient  # B = sum w v r^T for C
     reference, cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
+    committed = make_committed(t, project)
+    moment_at = make_moment(t, kernel, not mls)[2]
+    commit_K = commit and per_particle_K and affine  # the update's K_p (the affine transfers read it)
+
+    @wp.func
+    def commit_reference(p: int, Xp: vec, Fs: mat, F0: mat, params: t.params, F0s: wp.array(dtype=mat),
+                         Fsn: wp.array(dtype=mat), cache: Cache, dx: S):
+        """The reference configuration moves to Xp (``commit``)."""
+        cache.X[p] = Xp
+        F0s[p] = committed(Fs, F0, params)
+        Fsn[p] = wp.identity(n=dim, dtype=S)
+        if wp.static(commit_K):
+            cache.K[p] = moment_at(Xp, S(1.0) / dx, cache.grid_offsets, dx)
 
     @wp.func
     def slab(col: vec, r: S, v: vec):
@@ -387,12 +408,16 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         volume: wp.array(dtype=S),
         open_lo: t.vec,
         open_hi: t.vec,
+        # with commit:
+        body_params: wp.array(dtype=t.params),
     ):
         p = wp.tid()
         b = body[p]
         if wp.static(removal):
             if mass[p] == S(0.0):  # removed: parked inside, still in its body's reference box
                 grow_box(status, b, n_bodies, x[p])
+                if wp.static(commit):
+                    commit_reference(p, x[p], Fsn[p], F0s[p], body_params[b], F0s, Fsn, cache, dx)
                 return
         vp = vec()
         B = mat()
@@ -465,11 +490,17 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 volume[p] = S(0.0)
                 wp.atomic_add(status, STATUS_REMOVED, f64(1.0))
                 grow_box(status, b, n_bodies, xp)
+                if wp.static(commit):  # F^sn was not advanced for a removed particle
+                    commit_reference(p, xp, Fsn_old, F0s[p], body_params[b], F0s, Fsn, cache, dx)
                 return
         x[p] = xp
         v[p] = vp
-        C[p] = Cp
-        Fsn[p] = Fs
+        if wp.static(commit and transform_affine):
+            C[p] = Cp * wp.inverse(Fs)
+        else:
+            C[p] = Cp
+        if wp.static(not commit):
+            Fsn[p] = Fs
         dj = wp.abs(wp.determinant(Fs) - S(1.0))
         if wp.static(record_dJ):
             dJ[p] = dj
@@ -512,5 +543,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             grow_box(status, b, n_bodies, xp)
             if outside:
                 wp.atomic_add(status, STATUS_OUTSIDE, f64(1.0))
+        if wp.static(commit):
+            commit_reference(p, xp, Fs, F0s[p], body_params[b], F0s, Fsn, cache, dx)
 
     return g2p

@@ -169,7 +169,8 @@ class RunConfig:
     device: str = "${oc.env:MPM_DEVICE,auto}"
     force: bool = False  # in a sweep: run even if a job with the same config hash finished
     plan: bool = False  # print the stages and kernels of a step and exit (nothing compiled or run)
-    fuse: bool = False  # explicit EMPM locates stencils in P2G/G2P instead of caching them (same results)
+    # explicit EMPM locates stencils in P2G/G2P, G2P updates the reference (same results); null: where it pays
+    fuse: Optional[bool] = None
     reference: Optional[str] = None  # a run directory (or its final_state.npz) to measure the error against
 
 

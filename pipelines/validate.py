@@ -46,7 +46,7 @@ class RunSettings:
     reference: str | None  # final_state.npz of a reference run
     precision: str
     device: str
-    fuse: bool = False  # explicit EMPM: stencils located in the transfers (mpm.SolverOptions.fuse)
+    fuse: bool | None = None  # explicit EMPM: stencils located in the transfers (mpm.SolverOptions.fuse)
 
 
 @dataclass
@@ -637,7 +637,7 @@ def make_run(node, key: str = "run") -> RunSettings:
         dt_max=_number(f"{key}.dt_max", d["dt_max"], gt=0.0),
         dt_collapse=_number(f"{key}.dt_collapse", d["dt_collapse"], ge=0.0, le=1.0),
         reference=_reference(f"{key}.reference", d.get("reference")),
-        precision=precision, device=device, fuse=bool(d.get("fuse", False)))
+        precision=precision, device=device, fuse=None if d.get("fuse") is None else bool(d["fuse"]))
 
 
 MEMORY_FRACTION = 0.8  # of the machine's memory a run may plan to use

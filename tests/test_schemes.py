@@ -2,6 +2,8 @@
 reference of the reference-configuration step, the identities between them,
 and the update criterion."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -133,23 +135,62 @@ def test_aulmpm_defaults_follow_the_materials():
     assert mpm.AULMPM(epsilon=0.2).resolved("fluid").epsilon == 0.2
 
 
-@pytest.mark.bitwise
-@pytest.mark.parametrize("dim,kernel,transfer", [(2, "quadratic", "mls"), (2, "compact", "pic")])
-def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer):
-    """EMPM with the stencils located in P2G and G2P (SolverOptions.fuse) is
-    the same arithmetic as through the cache: equal bit for bit."""
+def scene_of(dim: int, bodies: str) -> mpm.Scene:
+    """The tiny scene (a solid, a fluid and in 2D another solid) or part of
+    it: ``mixed`` all bodies (two projections), ``solids``, ``fluid`` (its
+    projection), ``open`` the fluid alone thrown at an open left wall."""
     scene = tiny_scene(dim)
-    steps = 12 if dim == 2 else 4
+    fluid = [b for b in scene.bodies if isinstance(b.material, mpm.Fluid)]
+    if bodies == "solids":
+        return dataclasses.replace(scene, bodies=[b for b in scene.bodies if b not in fluid])
+    if bodies == "fluid":
+        return dataclasses.replace(scene, bodies=fluid)
+    if bodies == "open":
+        thrown = dataclasses.replace(fluid[0], velocity=(-8.0,) + (0.0,) * (dim - 1))
+        return dataclasses.replace(scene, bodies=[thrown], walls=("open",) + scene.walls[1:])
+    return scene
+
+
+@pytest.mark.bitwise
+@pytest.mark.parametrize("dim,kernel,transfer,bodies", [
+    (2, "quadratic", "mls", "mixed"), (2, "compact", "pic", "mixed"),  # fused, separate update pass
+    (2, "quadratic", "mls", "solids"), (2, "compact", "mls", "solids"),  # G2P updates (K_p too)
+    (2, "compact", "apic", "fluid"), (3, "compact", "mls", "fluid"),  # G2P updates with the projection
+    (2, "quadratic", "pic", "open"), (2, "compact", "mls", "open")])  # removed particles
+def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer, bodies):
+    """EMPM with the stencils located in P2G and G2P (SolverOptions.fuse),
+    and G2P doing the configuration update where the bodies share one
+    projection, is the same arithmetic as through the cache and the update
+    kernel: equal bit for bit (K_p and the reference positions too, removed
+    particles included)."""
+    scene = scene_of(dim, bodies)
+    steps, dt = (4, 2e-4) if dim == 3 else (40, 2e-3) if bodies == "open" else (12, 2e-4)
     out = []
     for fuse in (False, True):
         model, state = mpm.build(scene, mpm.KERNELS[kernel], "float32", DEVICE)
         solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(transfer=transfer, fuse=fuse))
         assert solver.fused == fuse
+        assert solver._g2p_commits == (fuse and bodies != "mixed")
         solver.prepare(state)
         for _ in range(steps):
-            solver.advance(state, 2e-4)
-        out.append(state.numpy())
-    for key in ("x", "v", "C", "F0s", "Fsn"):
+            solver.advance(state, dt)
+        out.append({**state.numpy(), "K": state.stencils.K.numpy(), "removed": solver.removed.sum()})
+    for key in ("x", "v", "C", "F0s", "Fsn", "X", "K"):
         np.testing.assert_array_equal(out[1][key], out[0][key], err_msg=key)
     assert np.abs(out[0]["x"] - out[0]["X"]).max() == 0  # EMPM: the reference is where the particles are
     assert np.abs(out[0]["v"]).max() > 0
+    assert (out[0]["removed"] > 0) == (bodies == "open") and out[1]["removed"] == out[0]["removed"]
+
+
+def test_fused_by_default_where_it_pays():
+    """SolverOptions.fuse None: EMPM fuses with the B-splines when the bodies
+    share a projection, keeps the cache for the compact kernel (its sines),
+    and never fuses the Lagrangian schemes or the implicit integrator."""
+    def fused(bodies, kernel="quadratic", scheme=mpm.EMPM(), **options):
+        model, _ = mpm.build(scene_of(2, bodies), mpm.KERNELS[kernel], "float32", DEVICE)
+        return mpm.Solver(model, scheme, mpm.SolverOptions(**options)).fused
+
+    assert fused("solids") and fused("fluid") and fused("solids", "cubic")
+    assert not fused("mixed") and not fused("solids", "compact")
+    assert not fused("solids", scheme=mpm.AULMPM(epsilon=0.0)) and not fused("solids", scheme=mpm.TLMPM())
+    assert not fused("solids", integrator=mpm.Implicit())
