@@ -14,14 +14,19 @@ SMALL = ["scene=elastic_ball_2d", "scene.resolution=32", "scheme=empm", "detect.
 
 
 def test_a_step_launches_only_the_stages_the_scene_needs():
-    """One body, explicit EMPM: P2G, grid update, G2P, configuration update.
-    Two bodies with contact add splat, resolve, gather, the boundary pass and a
-    second update (mpm.solver.Solver.plan)."""
+    """One body, explicit EMPM: P2G, grid update, G2P (which does the
+    configuration update with the quadratic kernel; the compact kernel's is a
+    launch of its own). Two bodies with contact add splat, resolve, gather and
+    the boundary pass (mpm.solver.Solver.plan)."""
     launches, _ = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
+    assert launches == 3
+    launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["kernel=compact"]), steps=3)
     assert launches == 4
     two = SMALL + [bench_scale.TWO_BALLS, "scene.contact=frictionless"]
     launches, _ = bench_scale.launches_per_step(spec_for(two), steps=3)
-    assert launches == 4 + 3 + 1 + 1
+    assert launches == 3 + 3 + 1
+    launches, _ = bench_scale.launches_per_step(spec_for(two + ["run.fuse=false"]), steps=3)
+    assert launches == 3 + 3 + 1 + 2  # and an update per body
     # TLMPM never updates its configuration
     launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["scheme=tlmpm"]), steps=3)
     assert launches == 3
