@@ -185,8 +185,9 @@ class Solver:
                              track_compression=any(b.material.stiffens for b in model.scene.bodies),
                              track_energy=self.options.track_energy, track_inversion=self.options.track_J,
                              removal=self.removal, fused=self.fused, bound_reach=self._free_flight,
-                             commit=self._g2p_commits, project=next(iter(projections)),
-                             transform_affine=transform)
+                             commit=self._g2p_commits,
+                             project=next(iter(projections)) if self._g2p_commits else None,
+                             transform_affine=transform and self._g2p_commits)
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
                                              lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
