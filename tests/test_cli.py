@@ -275,9 +275,11 @@ def test_a_signal_landing_in_a_finaliser_is_not_lost():
 
 
 def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
-    one = run_cli(["run.plan=true", "run.fuse=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
+    one = run_cli(["run.plan=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
     assert one.returncode == 0, one.stderr
+    # the default EMPM with the quadratic kernel: fused, no update pass (run.fuse null)
     assert "P2G (1 material group(s); stencils located on the fly; node positions on the lattice)" in one.stdout
+    assert "configuration update: every step, in G2P" in one.stdout
     assert "contact" not in one.stdout and "removal" not in one.stdout and "implicit" not in one.stdout
     assert not (tmp_path / "a").exists()  # nothing was run
     two = run_cli(["run.plan=true", "scene=falling_bodies", "scheme=aulmpm", "scene.walls=open",
@@ -288,3 +290,6 @@ def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
     three = run_cli(["run.plan=true", "scheme=tlmpm", f"hydra.run.dir={tmp_path / 'c'}"], cwd=ROOT, timeout=120)
     assert three.returncode == 0, three.stderr
     assert "node positions summed only in steps near a wall" in three.stdout  # walls alone
+    four = run_cli(["run.plan=true", "kernel=compact", f"hydra.run.dir={tmp_path / 'd'}"], cwd=ROOT, timeout=120)
+    assert four.returncode == 0, four.stderr  # the compact kernel keeps its cache and its update pass
+    assert "stencils from the cache" in four.stdout and "configuration update: every step:" in four.stdout
