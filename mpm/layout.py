@@ -35,6 +35,13 @@ class GridLayout:
         self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
         self._changed = True  # a fit changed a box since the last commit (or none was made)
+        G = kernel.n_grids
+        self._shift = np.asarray(kernel.grids)[:, None] + kernel.offset  # [cells] per grid (row)
+        self._last = self.cells - (kernel.support - 1)  # the highest first node of a stencil
+        # (lo, shape) views per body [grid, axis]; shared: all bodies at once [body, grid, axis]
+        by_body = (self.lo.reshape(n_bodies, G, t.dim), self.shape.reshape(n_bodies, G, t.dim))
+        self._grids = by_body if shared else [(by_body[0][b], by_body[1][b]) for b in range(n_bodies)]
+        self._fitted: dict = {}  # shared: each body's last bounds
         with wp.ScopedDevice(device):
             self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
             self.shape_d = wp.zeros(n_boxes, dtype=t.ivec)
@@ -42,25 +49,25 @@ class GridLayout:
 
     def fit(self, body: int, xmin: np.ndarray, xmax: np.ndarray) -> None:
         """Make ``body``'s boxes cover every stencil of positions in [xmin, xmax]
-        (left as they are if the bounds are not finite)."""
-        if not (np.all(np.isfinite(xmin)) and np.all(np.isfinite(xmax))):
+        (left as they are if the bounds are not finite). Called every step
+        for an Eulerian body: a few small NumPy operations, no copies."""
+        xmin, xmax = np.asarray(xmin, float), np.asarray(xmax, float)
+        if not (np.isfinite(xmin).all() and np.isfinite(xmax).all()):
             return
         k = self.kernel
-        last = self.cells - (k.support - 1)
         if self.shared:
-            self._fitted = getattr(self, "_fitted", {})
-            self._fitted[body] = (np.asarray(xmin, float), np.asarray(xmax, float))
+            self._fitted[body] = (xmin, xmax)
             xmin = np.min([a for a, _ in self._fitted.values()], axis=0)
             xmax = np.max([b for _, b in self._fitted.values()], axis=0)
         # per grid (rows) the first stencil node of the lowest and highest position
-        shift = np.asarray(k.grids)[:, None] + k.offset
-        lo = np.clip(np.floor(np.asarray(xmin) / self.dx - shift), 0, last).astype(np.int32)
-        hi = np.clip(np.floor(np.asarray(xmax) / self.dx - shift), 0, last).astype(np.int32)
-        rows = slice(None) if self.shared else slice(body * k.n_grids, (body + 1) * k.n_grids)
-        reps = (len(self.lo) // k.n_grids, 1) if self.shared else (1, 1)
-        lo, shape = np.tile(lo, reps), np.tile(hi - lo + k.support, reps)
-        if not (np.array_equal(self.lo[rows], lo) and np.array_equal(self.shape[rows], shape)):
-            self.lo[rows], self.shape[rows] = lo, shape
+        lo = np.floor(xmin / self.dx - self._shift).clip(0, self._last).astype(np.int32)
+        hi = np.floor(xmax / self.dx - self._shift).clip(0, self._last).astype(np.int32)
+        shape = hi - lo + np.int32(k.support)
+        # shared: every body's rows take body 0's boxes
+        rows = self._grids if self.shared else self._grids[body]
+        if not ((rows[0] == lo).all() and (rows[1] == shape).all()):
+            rows[0][...] = lo
+            rows[1][...] = shape
             self._changed = True
 
     def commit(self) -> None:
