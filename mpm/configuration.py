@@ -23,36 +23,28 @@ import warp as wp
 
 from .kernels import Kernel
 from .launch import warp_kernel
-from .stencil import make_locate, make_origin, make_stencil_cache, weight_matrix_type
+from .stencil import make_locate, make_origin, make_stencil_cache, make_weigh, weight_matrix_type
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
 
-# an unbounded box: a stencil located in it is never clamped (the layout's boxes
-# hold every stencil of a particle inside them, so the coordinates are the same)
-UNBOUNDED_LO = -(1 << 28)
-UNBOUNDED_SHAPE = 1 << 29
+# the bounds of an unclamped stencil's first node (lattice index) for K_p at a position
+UNBOUNDED = 1 << 30
 
 
 @functools.cache
-def make_moment(t: Types, kernel: Kernel, gradients: bool):
-    """``moment(fx, W, dx) -> D_g``: one grid's share of the second moment
-    sum_i w r r^T [m^2] from the 1-D moments (module docstring);
-    ``moment_inverse(D, dx) -> K_p`` [1/m^2] of the sum over the grids;
-    ``moment_at(X, inv_dx, grid_offsets, dx) -> K_p`` at a reference
-    position X [m], the grids located in an unbounded box (``gradients``:
-    the origin as the transfers with slopes compute it, so that the weights
-    are theirs bit for bit)."""
+def make_moment(t: Types, kernel: Kernel):
+    """``add_moment(D, fx, W, dx) -> D``: D [m^2] takes in one grid's share
+    of the second moment sum_i w r r^T, from the 1-D moments (module
+    docstring); ``moment_inverse(D, dx) -> K_p`` [1/m^2] of the sum over the
+    grids."""
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    Gv = wp.types.vector(G, S)
     Wm = weight_matrix_type(t, kernel)
-    locate = make_locate(t, kernel, gradients)
-    origin = make_origin(t, kernel, gradients)
     inv_G = 1.0 / G
 
     @wp.func
-    def moment(fx: t.vec, W: Wm, dx: S):
+    def add_moment(D: t.mat, fx: t.vec, W: Wm, dx: S):
         m1 = t.vec()
         m2 = t.vec()
         for a in range(dim):
@@ -60,30 +52,45 @@ def make_moment(t: Types, kernel: Kernel, gradients: bool):
                 r = (S(s) - fx[a]) * dx
                 m1[a] += W[a, s] * r
                 m2[a] += W[a, s] * r * r
-        D = wp.outer(m1, m1)
+        D_new = D + wp.outer(m1, m1)
         for a in range(dim):
-            D[a, a] += m2[a] - m1[a] * m1[a]
-        return D
+            D_new[a, a] += m2[a] - m1[a] * m1[a]
+        return D_new
 
     @wp.func
     def moment_inverse(D: t.mat, dx: S):
         return wp.inverse(S(inv_G) * D + S(MOMENT_REGULARISATION) * dx * dx * wp.identity(n=dim, dtype=S))
 
+    return add_moment, moment_inverse
+
+
+@functools.cache
+def make_moment_at(t: Types, kernel: Kernel, gradients: bool):
+    """``moment_at(X, inv_dx, grid_offsets, dx) -> K_p`` [1/m^2] at a
+    reference position X [m], its stencils unclamped: those of the layout's
+    boxes, which hold every stencil of the positions they were fitted to
+    (``gradients``: the origin as the transfers with slopes compute it, so
+    that the weights are theirs bit for bit). Where the host's float64 fit
+    lets a box clamp a float32 stencil at its edge (fx = 1 exactly), only a
+    zero weight moves and K_p is the same."""
+    S = t.scalar
+    G = kernel.n_grids
+    Gv = wp.types.vector(G, S)
+    weigh = make_weigh(t, kernel, gradients)
+    origin = make_origin(t, kernel, gradients)
+    add_moment, moment_inverse = make_moment(t, kernel)
+
     @wp.func
     def moment_at(X: t.vec, inv_dx: S, grid_offsets: Gv, dx: S):
         u0, P = origin(X, inv_dx, grid_offsets)
         D = t.mat()
-        lo = t.ivec()
-        shape = t.ivec()
-        for d in range(wp.static(dim)):
-            lo[d] = UNBOUNDED_LO
-            shape[d] = UNBOUNDED_SHAPE
         for g in range(wp.static(G)):
-            _flat, fx, W, _dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo, shape, 0)
-            D += moment(fx, W, dx)
+            _first, fx, W, _dW = weigh(u0, P, grid_offsets[g] - grid_offsets[0], g,
+                                       t.ivec(-UNBOUNDED), t.ivec(UNBOUNDED))
+            D = add_moment(D, fx, W, dx)
         return moment_inverse(D, dx)
 
-    return moment, moment_inverse, moment_at
+    return moment_at
 
 
 @functools.cache
@@ -116,7 +123,8 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     locate = make_locate(t, kernel, gradients)
     origin = make_origin(t, kernel, gradients)
     committed = make_committed(t, project)
-    one_grid_moment, moment_inverse, moment_at = make_moment(t, kernel, gradients)
+    add_moment, moment_inverse = make_moment(t, kernel)
+    moment_at = make_moment_at(t, kernel, gradients)
     Cache = make_stencil_cache(t, kernel)
     Gv = wp.types.vector(G, S)
     per_particle_K = moment and kernel.moment is None
@@ -166,7 +174,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
                 if wp.static(gradients):
                     cache.dW[k] = dW
                 if wp.static(per_particle_K):
-                    D += one_grid_moment(fx, W, dx)
+                    D = add_moment(D, fx, W, dx)
             if wp.static(per_particle_K):
                 cache.K[p] = moment_inverse(D, dx)
         elif wp.static(per_particle_K):  # as G2P's commit computes it (mpm.transfer)

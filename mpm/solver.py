@@ -59,10 +59,11 @@ class SolverOptions:
     """the explicit Eulerian scheme locates stencils in P2G and G2P instead
     of caching them, and (when its bodies share one projection) G2P does
     the every-step configuration update, so that no update pass runs; the
-    same results bit for bit. None: where it pays on this project's CPU
-    (pipelines.bench "fused"): B-splines, whose weights cost less to
-    recompute than to store; not the compact kernel, whose sines (and
-    K_p at the new position) would be evaluated twice more per step"""
+    same results bit for bit after every completed step. None: where it
+    pays on this project's CPU (pipelines.bench "fused"): the quadratic and
+    cubic kernels (a constant moment), whose weights cost less to recompute
+    than to store; not the compact kernel, whose sines (and K_p at the new
+    position) would be evaluated twice more per step, nor the linear one"""
 
 
 @dataclass
@@ -174,8 +175,8 @@ class Solver:
         self._closed = (np.array(model.wall_codes[0]) != open_code, np.array(model.wall_codes[1]) != open_code)
         self._domain = np.asarray(model.domain, float)  # [m]
         # fused EMPM: G2P does the configuration update too when the bodies share one projection
-        self._g2p_commits = self.fused and len(projections) == 1
-        transform = scheme.affine == "transform"
+        # (the Eulerian scheme keeps its affine matrices: nothing to transform)
+        self._g2p_commits = self.fused and len(projections) == 1 and scheme.affine == "keep"
         self._p2g = [(make_p2g(t, k, transfer, g.cls, self.regions, self.forcing is not None,
                                lagrangian=not isinstance(scheme, EMPM), with_stress=not self.implicit,
                                fused=self.fused), g)
@@ -186,8 +187,7 @@ class Solver:
                              track_energy=self.options.track_energy, track_inversion=self.options.track_J,
                              removal=self.removal, fused=self.fused, bound_reach=self._free_flight,
                              commit=self._g2p_commits,
-                             project=next(iter(projections)) if self._g2p_commits else None,
-                             transform_affine=transform and self._g2p_commits)
+                             project=next(iter(projections)) if self._g2p_commits else None)
         self._grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
                                              lattice=self._lattice, n_grids=k.n_grids)
         self._contact = make_contact(t) if self.contact else ()
@@ -201,6 +201,7 @@ class Solver:
         per_particle_K = k.moment is None and transfer != "pic"
         self._measure = make_measure(t, per_particle_K=per_particle_K)
         self._fracture = make_fracture(t)
+        transform = scheme.affine == "transform"
         self._update = {b: make_update(t, k, model.scene.bodies[b].material.project, transform,
                                        gradients=transfer != "mls" or k.gradient_affine, fused=self.fused,
                                        moment=per_particle_K)
@@ -369,7 +370,7 @@ class Solver:
                                                      float(report.min_stretch[b]))]
             if report.updated:  # (G2P has moved the fused Eulerian references: only their grids follow)
                 self.update_configuration(state, report.updated, report.box_lo, report.box_hi,
-                                          launch=not self._g2p_commits)
+                                          refit_only=self._g2p_commits)
             report.update_time = time.perf_counter() - t0
             self._positions = self._positions_needed(report)
         return report
@@ -530,15 +531,15 @@ class Solver:
 
     # -------------------------------------------------- configuration update
     def update_configuration(self, state: State, bodies: list[int], lo: np.ndarray,
-                             hi: np.ndarray, launch: bool = True) -> None:
+                             hi: np.ndarray, refit_only: bool = False) -> None:
         """Move the reference configuration of ``bodies`` to the current one;
         ``lo``/``hi`` [body, axis] bound their current positions (from G2P);
-        ``launch`` False: the particles' part is done (G2P's commit), fit the
+        ``refit_only``: the particles' part is done (G2P's commit), fit the
         grids only."""
         for b in bodies:
             self.layout.fit(b, lo[b], hi[b])
         self._commit_layout()
-        if launch:
+        if not refit_only:
             for b in bodies:
                 self._launch_update(state, b)
 

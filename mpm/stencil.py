@@ -18,6 +18,7 @@ over the grids have compile-time bounds and are unrolled.
 
 import functools
 
+import numpy as np
 import warp as wp
 
 from .kernels import Kernel
@@ -77,7 +78,31 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
     from grid 0 in cells, ``o_g - o_0`` (0 or 1/2: exact in floating point, so
     the grids' coordinates differ by exactly that); dW left zero unless
     ``with_gradients``. The stencil is clamped to the box, so that a runaway
-    particle never addresses memory outside it (G2P flags such particles)."""
+    particle never addresses memory outside it (G2P flags such particles).
+    :func:`make_weigh` is its part that needs no box."""
+    weigh = make_weigh(t, kernel, with_gradients)
+    strides = make_strides(t)
+    support = kernel.support
+
+    @wp.func
+    def locate(u0: t.vec, P: wp.types.matrix((t.dim, 3), t.scalar), shift: t.scalar, g: int, lo: t.ivec,
+               shape: t.ivec, offset: int):
+        first, fx, W, dW = weigh(u0, P, shift, g, lo, lo + shape - t.ivec(support))
+        st = strides(shape)
+        flat = offset
+        for d in range(wp.static(t.dim)):
+            flat += (first[d] - lo[d]) * st[d]
+        return flat, fx, W, dW
+
+    return locate
+
+
+@functools.cache
+def make_weigh(t: Types, kernel: Kernel, with_gradients: bool):
+    """``weigh(u0, P, shift, g, first_lo, first_hi) -> (first, fx, W, dW)``:
+    grid g's stencil as :func:`make_locate` finds it, its first node (lattice
+    index) clamped to [first_lo, first_hi] per axis, without a box's flat
+    index (mpm.configuration computes K_p at a position this way)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)
     Pm = wp.types.matrix((t.dim, 3), S)
@@ -86,22 +111,20 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
         weights, gradients = kernel.weights_at(t), kernel.gradients_at(t)
     else:
         weights, gradients = kernel.weights(t), kernel.gradients(t)
-    strides = make_strides(t)
     k_offset = kernel.offset
     support = kernel.support
     vec = t.vec
 
     @wp.func
-    def locate(u0: t.vec, P: Pm, shift: S, g: int, lo: t.ivec, shape: t.ivec, offset: int):
-        st = strides(shape)
+    def weigh(u0: t.vec, P: Pm, shift: S, g: int, first_lo: t.ivec, first_hi: t.ivec):
+        first = t.ivec()
         fx = vec()
         W = Wm()
         dW = Wm()
-        flat = offset
         for d in range(wp.static(t.dim)):
             u = u0[d] - shift
-            b = wp.clamp(int(wp.floor(u - S(k_offset))), lo[d], lo[d] + shape[d] - support)
-            flat += (b - lo[d]) * st[d]
+            b = wp.clamp(int(wp.floor(u - S(k_offset))), first_lo[d], first_hi[d])
+            first[d] = b
             fx[d] = u - S(b)
             if wp.static(shared):
                 w = weights(fx[d], P[d], g)
@@ -116,9 +139,9 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
                     dw = gradients(fx[d])
                 for s in range(wp.static(support)):
                     dW[d, s] = dw[s]
-        return flat, fx, W, dW
+        return first, fx, W, dW
 
-    return locate
+    return weigh
 
 
 @functools.cache
@@ -175,7 +198,8 @@ def fuse(cache, t: Types, kernel: Kernel, X: wp.array, lo: wp.array, offset: wp.
     cache.dW = wp.zeros(1, dtype=weight_matrix_type(t, kernel))
     cache.X, cache.lo, cache.offset = X, lo, offset
     cache.grid_offsets = wp.types.vector(kernel.n_grids, t.scalar)(*kernel.grids)
-    cache.inv_dx = t.scalar(1.0 / dx)
+    real = np.float32 if t.precision == "float32" else np.float64
+    cache.inv_dx = t.scalar(real(1.0) / real(dx))  # 1/dx in the kernels' precision, as the update divides
     return cache
 
 

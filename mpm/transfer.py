@@ -31,7 +31,7 @@ import functools
 
 import warp as wp
 
-from .configuration import make_committed, make_moment
+from .configuration import make_committed, make_moment_at
 from .kernels import Kernel
 from .launch import warp_kernel
 from .materials.plastic import make_plastic_update
@@ -277,7 +277,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
-             bound_reach: bool = False, commit: bool = False, project=None, transform_affine: bool = False):
+             bound_reach: bool = False, commit: bool = False, project=None):
     """G2P for all particles.
 
     ``removal`` (a domain with open faces): a particle that crosses the
@@ -291,9 +291,13 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     particles every step): G2P also does the configuration update
     (mpm.configuration) that would otherwise be a pass of its own: X <- x,
     F^0s <- project(F^sn F^0s) (``project``: the bodies' common projection
-    factory, or None), F^sn <- I, C <- C (F^sn)^-1 with ``transform_affine``,
-    and K_p at the new position where the kernel's moment varies (the same
-    arithmetic, so the results are those of the separate update bit for bit).
+    factory, or None), F^sn <- I (the Eulerian scheme keeps C as it is), and
+    K_p at the new position where the kernel's moment varies: the same
+    arithmetic, so every step that completes ends as with the separate update,
+    bit for bit. (A failed step - non-finite, outside - has moved the
+    references too, where the separate update would not run; the run stops
+    there. The massless particles of a body whose particles were all removed
+    keep being committed in place.)
 
     ``lagrangian``: the reference may lag behind (not EMPM), so track the
     narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
@@ -335,7 +339,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     reference, cached = make_cached(t, kernel, not mls, fused)
     inv_G = 1.0 / G
     committed = make_committed(t, project)
-    moment_at = make_moment(t, kernel, not mls)[2]
+    moment_at = make_moment_at(t, kernel, not mls)
     commit_K = commit and per_particle_K and affine  # the update's K_p (the affine transfers read it)
 
     @wp.func
@@ -495,10 +499,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 return
         x[p] = xp
         v[p] = vp
-        if wp.static(commit and transform_affine):
-            C[p] = Cp * wp.inverse(Fs)
-        else:
-            C[p] = Cp
+        C[p] = Cp
         if wp.static(not commit):
             Fsn[p] = Fs
         dj = wp.abs(wp.determinant(Fs) - S(1.0))

@@ -41,7 +41,7 @@ Everything runs through the same code path as ``pipelines.run``
    configuration update done in G2P (``run.fuse=true``) against cached at
    an update pass of its own (``false``), on the 2D ball and the 3D sphere,
    quadratic MLS and PIC, compact MLS and PIC (``run.fuse`` null picks the
-   fused path for the B-splines).
+   fused path for the quadratic and cubic kernels).
 8. stages: the 2D ball with one optional stage added at a time, and the
    launches per step; profile: where a step's time goes, per kernel and
    host work, on the 2D ball and the 3D sphere (pipelines.bench_scale).
