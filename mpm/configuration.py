@@ -28,10 +28,6 @@ from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
 
-# the bounds of an unclamped stencil's first node (lattice index) for K_p at a position
-UNBOUNDED = 1 << 30
-
-
 @functools.cache
 def make_moment(t: Types, kernel: Kernel):
     """``add_moment(D, fx, W, dx) -> D``: D [m^2] takes in one grid's share
@@ -76,7 +72,7 @@ def make_moment_at(t: Types, kernel: Kernel, gradients: bool):
     S = t.scalar
     G = kernel.n_grids
     Gv = wp.types.vector(G, S)
-    weigh = make_weigh(t, kernel, gradients)
+    weigh = make_weigh(t, kernel, gradients, clamped=False)
     origin = make_origin(t, kernel, gradients)
     add_moment, moment_inverse = make_moment(t, kernel)
 
@@ -85,8 +81,7 @@ def make_moment_at(t: Types, kernel: Kernel, gradients: bool):
         u0, P = origin(X, inv_dx, grid_offsets)
         D = t.mat()
         for g in range(wp.static(G)):
-            _first, fx, W, _dW = weigh(u0, P, grid_offsets[g] - grid_offsets[0], g,
-                                       t.ivec(-UNBOUNDED), t.ivec(UNBOUNDED))
+            _first, fx, W, _dW = weigh(u0, P, grid_offsets[g] - grid_offsets[0], g, t.ivec(), t.ivec())
             D = add_moment(D, fx, W, dx)
         return moment_inverse(D, dx)
 

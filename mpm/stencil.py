@@ -80,14 +80,13 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
     ``with_gradients``. The stencil is clamped to the box, so that a runaway
     particle never addresses memory outside it (G2P flags such particles).
     :func:`make_weigh` is its part that needs no box."""
-    weigh = make_weigh(t, kernel, with_gradients)
+    weigh = make_weigh(t, kernel, with_gradients, clamped=True)
     strides = make_strides(t)
-    support = kernel.support
 
     @wp.func
     def locate(u0: t.vec, P: wp.types.matrix((t.dim, 3), t.scalar), shift: t.scalar, g: int, lo: t.ivec,
                shape: t.ivec, offset: int):
-        first, fx, W, dW = weigh(u0, P, shift, g, lo, lo + shape - t.ivec(support))
+        first, fx, W, dW = weigh(u0, P, shift, g, lo, shape)
         st = strides(shape)
         flat = offset
         for d in range(wp.static(t.dim)):
@@ -98,11 +97,12 @@ def make_locate(t: Types, kernel: Kernel, with_gradients: bool):
 
 
 @functools.cache
-def make_weigh(t: Types, kernel: Kernel, with_gradients: bool):
-    """``weigh(u0, P, shift, g, first_lo, first_hi) -> (first, fx, W, dW)``:
-    grid g's stencil as :func:`make_locate` finds it, its first node (lattice
-    index) clamped to [first_lo, first_hi] per axis, without a box's flat
-    index (mpm.configuration computes K_p at a position this way)."""
+def make_weigh(t: Types, kernel: Kernel, with_gradients: bool, clamped: bool):
+    """``weigh(u0, P, shift, g, lo, shape) -> (first, fx, W, dW)``: grid g's
+    stencil as :func:`make_locate` finds it, without a box's flat index:
+    its first node (lattice index), ``clamped`` to the box (lo, shape) or
+    not (lo and shape unused; mpm.configuration computes K_p at a position
+    this way)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)
     Pm = wp.types.matrix((t.dim, 3), S)
@@ -116,14 +116,16 @@ def make_weigh(t: Types, kernel: Kernel, with_gradients: bool):
     vec = t.vec
 
     @wp.func
-    def weigh(u0: t.vec, P: Pm, shift: S, g: int, first_lo: t.ivec, first_hi: t.ivec):
+    def weigh(u0: t.vec, P: Pm, shift: S, g: int, lo: t.ivec, shape: t.ivec):
         first = t.ivec()
         fx = vec()
         W = Wm()
         dW = Wm()
         for d in range(wp.static(t.dim)):
             u = u0[d] - shift
-            b = wp.clamp(int(wp.floor(u - S(k_offset))), first_lo[d], first_hi[d])
+            b = int(wp.floor(u - S(k_offset)))
+            if wp.static(clamped):
+                b = wp.clamp(b, lo[d], lo[d] + shape[d] - support)
             first[d] = b
             fx[d] = u - S(b)
             if wp.static(shared):

@@ -57,3 +57,19 @@ def test_metrics_report_memory(tmp_path):
     # per particle at least x, v, X (2 floats each), C, F0s, Fsn (4 each), mass and volume
     assert m["memory_mb"] * 1e6 >= n * 4 * (3 * 2 + 3 * 4 + 2)
     assert m["peak_rss_mb"] > m["memory_mb"]
+
+
+def test_the_fused_eulerian_path_holds_no_stencil_cache():
+    """EMPM fused (the default with the quadratic kernel) keeps no per-particle
+    stencils: it holds less than the cached path by at least the cache's
+    first nodes, coordinates and weights (and slopes) per particle."""
+    held = {}
+    for fuse in (True, False):
+        spec = spec_for(SMALL + [f"run.fuse={str(fuse).lower()}"])
+        model, state = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
+        solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+        solver.prepare(state)
+        assert solver.fused == fuse
+        held[fuse] = solver.memory_bytes(state)
+    cache = state.stencils  # the cached run's
+    assert held[False] - held[True] >= sum(a.capacity for a in (cache.base, cache.fx, cache.W)) - 64
