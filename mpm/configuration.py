@@ -28,6 +28,7 @@ from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
 
+
 @functools.cache
 def make_moment(t: Types, kernel: Kernel):
     """``add_moment(D, fx, W, dx) -> D``: D [m^2] takes in one grid's share
