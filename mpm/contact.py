@@ -8,7 +8,8 @@ nearest to q_i (spacing dx), one field per body b:
     M_bg = sum_{i in g} m_i,   P_bg = sum_{i in g} m_i v_i.
 (For the Eulerian scheme q_i is a lattice node; a Lagrangian node's q_i is
 anywhere, and spreading it over several lattice nodes would dilute the
-correction it takes back, letting bodies creep into each other.)
+correction it takes back, letting bodies creep into each other.) Every pass
+runs over the body nodes, never over the whole lattice.
 Bodies are in contact at a global node where two or more are present and
 their volume fractions fill it: sum_b M_bg / (rho_b dx^d) >= ``fill``
 (rho_b the body's rest density). Without this test a node would register
@@ -50,6 +51,7 @@ import warp as wp
 
 from .launch import warp_kernel
 from .stencil import make_node_box
+from .transfer import STATUS_CONTACT
 from .types import Types
 
 
@@ -118,14 +120,45 @@ def make_outward(t: Types):
 
 
 @functools.cache
+def make_occupancy(t: Types):
+    """``occupancy(g, n_bodies, n_global, rest_mass, M, P) -> (present, M, P,
+    volume)``: at global node g, the bodies present, their total mass and
+    momentum and the volume fraction they fill, sum_b M_bg / (rho_b dx^d)."""
+    S = t.scalar
+
+    @wp.func
+    def occupancy(g: int, n_bodies: int, n_global: int, rest_mass: wp.array(dtype=S), M: wp.array(dtype=S),
+                  P: wp.array(dtype=t.vec)):
+        present = int(0)
+        m_tot = S(0.0)
+        p_tot = t.vec()
+        volume = S(0.0)
+        for b in range(n_bodies):
+            m = M[b * n_global + g]
+            if m > S(0.0):
+                present += 1
+                m_tot += m
+                p_tot += P[b * n_global + g]
+                volume += m / rest_mass[b]
+        return present, m_tot, p_tot, volume
+
+    return occupancy
+
+
+@functools.cache
 def make_contact(t: Types):
-    """The three contact passes: bin (body nodes), resolve (global nodes),
-    take back (body nodes)."""
+    """The three contact passes, each over the body nodes (never over the
+    whole lattice, which a scene of small bodies in a large domain would pay
+    for every step): ``splat`` bins the nodes, ``correct`` gives each node
+    its bin's correction dV_bg (every node of a bin computes it from the
+    bin's sums: the same value, no per-bin array), ``clear`` zeroes the bins
+    again (M and P are zero between steps: no fill of the lattice)."""
     S = t.scalar
     vec = t.vec
     nearest = make_nearest(t)
     node_body = make_node_body(t)
     outward = make_outward(t)
+    occupancy = make_occupancy(t)
 
     @warp_kernel
     def splat(
@@ -152,55 +185,25 @@ def make_contact(t: Types):
         wp.atomic_add(M, b * n_global + g, m)
         wp.atomic_add(P, b * n_global + g, m * grid_v[i])
 
-    @warp_kernel
-    def resolve(
-        n_bodies: int,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        rest_mass: wp.array(dtype=S),  # rho_b dx^d per body
-        fill: S,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        dV: wp.array(dtype=t.vec),
-    ):
-        g = wp.tid()
-        present = int(0)
-        m_tot = S(0.0)
-        p_tot = vec()
-        volume = S(0.0)
-        for b in range(n_bodies):
-            m = M[b * n_global + g]
-            if m > S(0.0):
-                present += 1
-                m_tot += m
-                p_tot += P[b * n_global + g]
-                volume += m / rest_mass[b]
-        if present < 2 or volume < fill:
-            return
-        v_cm = p_tot / m_tot
-        dp = vec()  # momentum the corrections add at this node
-        for b in range(n_bodies):
-            m_b = M[b * n_global + g]
-            if m_b <= S(0.0):
-                continue
-            n = outward(b, g, n_bodies, cells, strides, n_global, M)
-            if wp.length(n) > S(0.0):
-                rel = wp.dot(P[b * n_global + g] / m_b - v_cm, n)
-                if rel > S(0.0):
-                    dV[b * n_global + g] = -rel * n
-                    dp += (-rel * m_b) * n
-        # two bodies: the normals are opposite and dp vanishes (to round-off);
-        # with more, take the mean correction off every body present
-        if present > 2:
-            dv_mean = dp / m_tot
-            for b in range(n_bodies):
-                if M[b * n_global + g] > S(0.0):
-                    dV[b * n_global + g] = dV[b * n_global + g] - dv_mean
-
+    @wp.func
+    def correction(b: int, g: int, n_bodies: int, cells: t.ivec, strides: t.ivec, n_global: int,
+                   M: wp.array(dtype=S), P: wp.array(dtype=t.vec), v_cm: t.vec):
+        """Body b's dV_bg (0 unless it approaches), its momentum M_bg dV_bg, and whether it approaches."""
+        dv = vec()
+        dp = vec()
+        hit = False
+        m_b = M[b * n_global + g]
+        n = outward(b, g, n_bodies, cells, strides, n_global, M)
+        if wp.length(n) > S(0.0):
+            rel = wp.dot(P[b * n_global + g] / m_b - v_cm, n)
+            if rel > S(0.0):
+                dv = -rel * n
+                dp = (-rel * m_b) * n
+                hit = True
+        return dv, dp, hit
 
     @warp_kernel
-    def gather(
+    def correct(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
         offset: wp.array(dtype=wp.int32),
@@ -210,25 +213,70 @@ def make_contact(t: Types):
         cells: t.ivec,
         strides: t.ivec,
         n_global: int,
-        dV: wp.array(dtype=t.vec),
+        rest_mass: wp.array(dtype=S),  # rho_b dx^d per body
+        fill: S,
+        M: wp.array(dtype=S),
+        P: wp.array(dtype=t.vec),
         grid_v: wp.array(dtype=t.vec),
+        status: wp.array(dtype=wp.float64),  # STATUS_CONTACT += 1 per node of a bin in contact
     ):
         i = wp.tid()
         if grid_m[i] <= S(0.0):
             return
         b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
-        grid_v[i] = grid_v[i] + dV[b * n_global + g]
+        dv = vec()
+        present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
+        if not (present < 2 or volume < fill):
+            wp.atomic_add(status, STATUS_CONTACT, wp.float64(1.0))
+            v_cm = p_tot / m_tot
+            if present == 2:
+                # the normals are opposite and the two corrections' momenta cancel (to round-off)
+                dv, dp, hit = correction(b, g, n_bodies, cells, strides, n_global, M, P, v_cm)
+            else:
+                # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
+                dp_sum = vec()
+                for c in range(n_bodies):
+                    if M[c * n_global + g] > S(0.0):
+                        dv_c, dp_c, hit_c = correction(c, g, n_bodies, cells, strides, n_global, M, P, v_cm)
+                        if hit_c:
+                            dp_sum += dp_c
+                        if c == b:
+                            dv = dv_c
+                dv = dv - dp_sum / m_tot
+        grid_v[i] = grid_v[i] + dv
 
-    return splat, resolve, gather
+    @warp_kernel
+    def clear(
+        grid_m: wp.array(dtype=S),
+        grid_q: wp.array(dtype=t.vec),
+        offset: wp.array(dtype=wp.int32),
+        n_bodies: int,
+        n_grids: int,
+        inv_dx: S,
+        cells: t.ivec,
+        strides: t.ivec,
+        n_global: int,
+        M: wp.array(dtype=S),
+        P: wp.array(dtype=t.vec),
+    ):
+        i = wp.tid()
+        if grid_m[i] <= S(0.0):
+            return
+        b = node_body(i, offset, n_bodies, n_grids)
+        g = nearest(grid_q[i], inv_dx, cells, strides)
+        M[b * n_global + g] = S(0.0)
+        P[b * n_global + g] = vec()
+
+    return splat, correct, clear
 
 
 @functools.cache
 def make_contact_constraint(t: Types):
     """Contact as constraints of the implicit solve (the module docstring):
-    ``activate`` (global nodes: the approaching two-body bins and their
-    normals, on the predictor), ``couple`` (body nodes: the bin and c_i),
-    ``sums`` and ``project`` (the W-orthogonal projection onto B v = 0).
+    ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
+    before its ``clear``: the node's active bin and c_i), ``sums`` and
+    ``project`` (the W-orthogonal projection onto B v = 0).
 
     ``sums`` / ``project`` modes, Pi_i the node's boundary projector and
     c~_i = Pi_i c_i:
@@ -246,42 +294,7 @@ def make_contact_constraint(t: Types):
     nearest = make_nearest(t)
     node_body = make_node_body(t)
     outward = make_outward(t)
-
-    @warp_kernel
-    def activate(
-        n_bodies: int,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        rest_mass: wp.array(dtype=S),
-        fill: S,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        normal: wp.array(dtype=t.vec),  # out: n_b at (b, g) of an active bin, else unchanged (0)
-    ):
-        g = wp.tid()
-        present = int(0)
-        a = int(-1)
-        c = int(-1)
-        volume = S(0.0)
-        for b in range(n_bodies):
-            m = M[b * n_global + g]
-            if m > S(0.0):
-                present += 1
-                volume += m / rest_mass[b]
-                if a < 0:
-                    a = b
-                else:
-                    c = b
-        if present != 2 or volume < fill:
-            return
-        n = outward(a, g, n_bodies, cells, strides, n_global, M)
-        if wp.length(n) <= S(0.0):
-            return
-        # approaching: (V_a - V_b) . n_a > 0
-        if wp.dot(P[a * n_global + g] / M[a * n_global + g] - P[c * n_global + g] / M[c * n_global + g], n) > S(0.0):
-            normal[a * n_global + g] = n
-            normal[c * n_global + g] = -n
+    occupancy = make_occupancy(t)
 
     @warp_kernel
     def couple(
@@ -294,21 +307,43 @@ def make_contact_constraint(t: Types):
         cells: t.ivec,
         strides: t.ivec,
         n_global: int,
+        rest_mass: wp.array(dtype=S),
+        fill: S,
         M: wp.array(dtype=S),
-        normal: wp.array(dtype=t.vec),
+        P: wp.array(dtype=t.vec),
         cbin: wp.array(dtype=wp.int32),  # out: the node's active bin g, or -1
         coef: wp.array(dtype=t.vec),  # out: c_i = (m_i / G) / M_bg n_b
     ):
+        """A node's constraint, if its bin is active: exactly two bodies a < c
+        fill it and approach on the predictor, (V_a - V_c) . n_a > 0, with
+        n_a = outward(a) and n_c = -n_a (every node of the bin finds the same)."""
         i = wp.tid()
         cbin[i] = -1
         if grid_m[i] <= S(0.0):
             return
         b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
-        n = normal[b * n_global + g]
-        if wp.dot(n, n) > S(0.0):
-            cbin[i] = g
-            coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
+        present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
+        if present != 2 or volume < fill:
+            return
+        a = int(-1)
+        c = int(-1)
+        for d in range(n_bodies):
+            if M[d * n_global + g] > S(0.0):
+                if a < 0:
+                    a = d
+                else:
+                    c = d
+        n = outward(a, g, n_bodies, cells, strides, n_global, M)
+        if wp.length(n) <= S(0.0):
+            return
+        if not (wp.dot(P[a * n_global + g] / M[a * n_global + g] - P[c * n_global + g] / M[c * n_global + g], n)
+                > S(0.0)):
+            return
+        if b != a:
+            n = -n
+        cbin[i] = g
+        coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
 
     @warp_kernel
     def sums(
@@ -372,4 +407,4 @@ def make_contact_constraint(t: Types):
             z[i] = zi
             wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
 
-    return activate, couple, sums, project
+    return couple, sums, project

@@ -570,29 +570,24 @@ class ImplicitSolve:
     def _activate(self) -> None:
         """The contact constraints of the step, from the constrained
         predictor in grid_v: the approaching two-body bins, each node's bin
-        and coefficient c_i (mpm.contact)."""
+        and coefficient c_i (mpm.contact; the bins are zero again after)."""
         s, m = self.solver, self.solver.model
-        lay, n_global = s.layout, m.n_nodes
-        splat = s._contact[0]
-        activate, couple = self._contact[:2]
-        s.contact_M.zero_()
-        s.contact_P.zero_()
-        s.contact_dV.zero_()  # the normals here
-        common = [lay.offset_d, s.n_bodies, m.kernel.n_grids, s._inv_dx, s._cells, s._global_strides, n_global]
-        wp.launch(splat, lay.n_nodes, device=m.device, inputs=[
-            s.grid_m, s.grid_v, s.grid_q, *common, s.contact_M, s.contact_P])
-        wp.launch(activate, n_global, device=m.device, inputs=[
-            s.n_bodies, s._cells, s._global_strides, n_global, s._rest_mass, s._fill, s.contact_M,
-            s.contact_P, s.contact_dV])
-        wp.launch(couple, lay.n_nodes, device=m.device, inputs=[
-            s.grid_m, s.grid_q, *common, s.contact_M, s.contact_dV, self.cbin, self.coef])
+        n = s.layout.n_nodes
+        splat, _, clear = s._contact
+        couple = self._contact[0]
+        common = s._contact_args()
+        wp.launch(splat, n, device=m.device, inputs=[s.grid_m, s.grid_v, s.grid_q, *common, s.contact_M,
+                                                     s.contact_P])
+        wp.launch(couple, n, device=m.device, inputs=[
+            s.grid_m, s.grid_q, *common, s._rest_mass, s._fill, s.contact_M, s.contact_P, self.cbin, self.coef])
+        wp.launch(clear, n, device=m.device, inputs=[s.grid_m, s.grid_q, *common, s.contact_M, s.contact_P])
 
     def _project(self, mode: int, x, z=None) -> None:
         """Project x onto the contact constraints (mpm.contact
         ``make_contact_constraint``, modes 0-2)."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
-        sums, project = self._contact[2:]
+        sums, project = self._contact[1:]
         self.contact_num.zero_()
         self.contact_den.zero_()
         common = [mode, self.cbin, self.coef, self.free, s.grid_m, self.inv_diag]

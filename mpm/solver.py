@@ -35,8 +35,8 @@ from .model import Model, State
 from .scene import WALL_TYPES
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
-from .transfer import (STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_REMOVED,
-                       STATUS_F_NORM, STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED,
+from .transfer import (STATUS_CONTACT, STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE,
+                       STATUS_OUTSIDE, STATUS_REMOVED, STATUS_F_NORM, STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED,
                        STATUS_WORK, TRANSFERS,
                        make_g2p, make_p2g)
 
@@ -95,6 +95,7 @@ class StepReport:
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
     removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
     max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (walls-only Lagrangian scenes; else None)
+    contact_nodes: int = 0  # body nodes whose bin was in contact in this step (the explicit pass, mpm.contact)
     positioned: bool = True  # the node positions were available (False: not summed, no condition could reach them)
 
     @property
@@ -230,9 +231,8 @@ class Solver:
                 n_global = model.n_nodes
                 self._cells = t.ivec(*model.cells)
                 self._global_strides = t.ivec(*model.strides)
-                self.contact_M = wp.zeros(nb * n_global, dtype=t.scalar)
+                self.contact_M = wp.zeros(nb * n_global, dtype=t.scalar)  # zero between steps
                 self.contact_P = wp.zeros(nb * n_global, dtype=t.vec)
-                self.contact_dV = wp.zeros(nb * n_global, dtype=t.vec)
                 self._rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
                                            dtype=t.scalar)
                 self._fill = t.scalar(model.scene.contact_fill)
@@ -497,22 +497,23 @@ class Solver:
             lay.lo_d, lay.shape_d, lay.offset_d, len(lay.lo), self._grid_offsets, self._dx, self._positions])
 
     def _resolve_contact(self):
-        """Frictionless contact between bodies on the global lattice."""
-        m, lay = self.model, self.layout
-        splat, resolve, gather = self._contact
-        n_global = m.n_nodes
-        self.contact_M.zero_()
-        self.contact_P.zero_()
-        self.contact_dV.zero_()
-        common = [lay.offset_d, self.n_bodies, self.model.kernel.n_grids, self._inv_dx, self._cells,
-                  self._global_strides, n_global]
-        self.launch(splat, lay.n_nodes, [
+        """Frictionless contact between bodies on the global lattice (its
+        bins are zero between steps: ``clear`` empties the ones ``splat`` filled)."""
+        splat, correct, clear = self._contact
+        common = self._contact_args()
+        self.launch(splat, self.layout.n_nodes, [
             self.grid_m, self.grid_v, self.grid_q, *common, self.contact_M, self.contact_P])
-        self.launch(resolve, n_global, [
-            self.n_bodies, self._cells, self._global_strides, n_global, self._rest_mass,
-            self._fill, self.contact_M, self.contact_P, self.contact_dV])
-        self.launch(gather, lay.n_nodes, [
-            self.grid_m, self.grid_q, *common, self.contact_dV, self.grid_v])
+        self.launch(correct, self.layout.n_nodes, [
+            self.grid_m, self.grid_q, *common, self._rest_mass, self._fill, self.contact_M, self.contact_P,
+            self.grid_v, self.status])
+        self.launch(clear, self.layout.n_nodes, [
+            self.grid_m, self.grid_q, *common, self.contact_M, self.contact_P])
+
+    def _contact_args(self) -> list:
+        """What every contact pass reads: the layout's node boxes, the body
+        count, the kernel's grids and the global lattice."""
+        return [self.layout.offset_d, self.n_bodies, self.model.kernel.n_grids, self._inv_dx, self._cells,
+                self._global_strides, self.model.n_nodes]
 
     def _apply_boundary(self):
         """Walls, after contact."""
@@ -629,7 +630,7 @@ class Solver:
             box_hi=box[1].copy(), body_speed=np.sqrt(field_[STATUS_SPEED]),
             min_F_stretch=np.sqrt(field_[STATUS_F_STRETCH]),
             max_F_norm=field_[STATUS_F_NORM].copy() if self._free_flight else None,
-            boundary_work=float(s[STATUS_WORK]),
+            boundary_work=float(s[STATUS_WORK]), contact_nodes=int(s[STATUS_CONTACT]),
             removed=np.zeros(nb, np.int64) if s[STATUS_REMOVED] > 0 else None,
             kinetic=float(s[STATUS_KINETIC]) if self.options.track_energy else float("nan"),
             potential=float(s[STATUS_POTENTIAL]) if self.options.track_energy else float("nan"))

@@ -47,10 +47,11 @@ pic: no affine term, force and F from the kernel gradient."""
 # header: the largest |v|^2, non-finite and outside counts, the work the boundary
 # conditions did on the grid (mpm.grid, mpm.implicit), the kinetic and potential
 # energy of the new state (G2P with ``track_energy``): for mpm.stability; the
-# particles removed at open walls in this step (G2P with ``removal``)
+# particles removed at open walls in this step (G2P with ``removal``), the body
+# nodes whose bin was in contact (mpm.contact)
 (STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL,
- STATUS_REMOVED) = range(7)
-STATUS_HEADER = 7
+ STATUS_REMOVED, STATUS_CONTACT) = range(8)
+STATUS_HEADER = 8
 STATUS_PER_BODY = 9  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
 #                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2,
 #                      smallest stretch^2 of F (``track_inversion``), largest |F^sn|_inf (lagrangian)
