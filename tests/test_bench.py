@@ -16,7 +16,7 @@ SMALL = ["scene=elastic_ball_2d", "scene.resolution=32", "scheme=empm", "detect.
 def test_a_step_launches_only_the_stages_the_scene_needs():
     """One body, explicit EMPM: P2G, grid update, G2P (which does the
     configuration update with the quadratic kernel; the compact kernel's is a
-    launch of its own). Two bodies with contact add splat, resolve, gather and
+    launch of its own). Two bodies with contact add splat, correct, clear and
     the boundary pass (mpm.solver.Solver.plan)."""
     launches, _ = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
     assert launches == 3
