@@ -227,12 +227,13 @@ def make_contact(t: Types):
         g = nearest(grid_q[i], inv_dx, cells, strides)
         dv = vec()
         present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
-        if not (present < 2 or volume < fill):
+        # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
+        if M[b * n_global + g] > S(0.0) and not (present < 2 or volume < fill):
             wp.atomic_add(status, STATUS_CONTACT, wp.float64(1.0))
             v_cm = p_tot / m_tot
             if present == 2:
                 # the normals are opposite and the two corrections' momenta cancel (to round-off)
-                dv, dp, hit = correction(b, g, n_bodies, cells, strides, n_global, M, P, v_cm)
+                dv, _dp, _hit = correction(b, g, n_bodies, cells, strides, n_global, M, P, v_cm)
             else:
                 # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
                 dp_sum = vec()
@@ -324,7 +325,7 @@ def make_contact_constraint(t: Types):
         b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
         present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
-        if present != 2 or volume < fill:
+        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
             return
         a = int(-1)
         c = int(-1)

@@ -36,7 +36,8 @@ from .scene import WALL_TYPES
 from .schemes import AULMPM, EMPM, scene_kind
 from .timestep import StepLimits, displacement_dt, step_limits
 from .transfer import (STATUS_CONTACT, STATUS_HEADER, STATUS_KINETIC, STATUS_MAX_V2, STATUS_NONFINITE,
-                       STATUS_OUTSIDE, STATUS_REMOVED, STATUS_F_NORM, STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED,
+                       STATUS_OUTSIDE, STATUS_REMOVED,
+                       STATUS_F_NORM, STATUS_F_STRETCH, STATUS_PER_BODY, STATUS_POTENTIAL, STATUS_SPEED,
                        STATUS_WORK, TRANSFERS,
                        make_g2p, make_p2g)
 

@@ -52,8 +52,8 @@ def particle_inputs(scene, model):
 
 
 def assert_no_contact(solver):
-    """The premise of the reference comparisons: no contact correction in
-    the last step (the status its G2P left)."""
+    """The premise of the reference comparisons: no bin in contact in the
+    last step (the status's count, mpm.contact), so no contact correction."""
     if solver.contact:
         assert solver.check().contact_nodes == 0, "bodies touched"
 
