@@ -40,6 +40,7 @@ class Recording:
     index: list = field(default_factory=list)  # per logged step: the particles' numbers (None: all of them)
     complete: bool = True  # False: the file has no footer (the writer was killed)
     end: tuple = (0, 0.0)  # the last step with a scalar row or particles, and its time [s]
+    clock: tuple = (np.zeros(0, np.int64), np.zeros(0))  # (steps, simulated times [s]) of the scalar rows
 
     @property
     def dim(self) -> int:
@@ -57,15 +58,20 @@ def _open(path: str | Path):
     return reader, not any("no footer" in str(w.message) for w in caught)
 
 
-def _load(path: str | Path):
-    """All chunks of an .rrd file in a store, and whether it has its footer."""
+def _load(path: str | Path, particles: bool = True):
+    """The chunks of an .rrd file in a store (without the particle frames
+    unless ``particles``), and whether it has its footer."""
     from rerun.chunk import RrdReader
+
+    def chunks(reader):
+        stream = reader.stream()
+        return (stream if particles else stream.drop(content="/particles/**")).collect()
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"no recording at {path}")
     reader, complete = _open(path)
     try:
-        return reader.stream().collect(), complete
+        return chunks(reader), complete
     except RuntimeError:
         if complete:
             raise
@@ -76,7 +82,7 @@ def _load(path: str | Path):
         repair(copy)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return RrdReader(str(copy)).stream().collect(), False
+            return chunks(RrdReader(str(copy))), False
 
 
 def is_complete(path: str | Path) -> bool:
@@ -98,8 +104,11 @@ def repair(path: str | Path) -> Path | None:
     return path.with_name(path.stem + ".backup.rrd")
 
 
-def read(path: str | Path) -> Recording:
-    data, complete = _load(path)
+def read(path: str | Path, particles: bool = True) -> Recording:
+    """A recording's contents; ``particles=False``: without its particle
+    frames (no positions, dJ or fields: the scalars, events, properties and
+    colliders of a recording too large to hold its frames in memory)."""
+    data, complete = _load(path, particles)
     parts = data.reader(index="step", contents="/particles").to_pandas()
     pos_col = next((c for c in parts.columns if c.endswith(":positions")), None)
     steps, times, positions, dJs, fields, index = [], [], [], [], [], []
@@ -136,6 +145,8 @@ def read(path: str | Path) -> Recording:
     scalars_df = data.reader(index="step", contents="/scalars/**").to_pandas()
     scalars = _series(scalars_df, "/scalars")
     end = _end(scalars_df, steps, times)
+    clock = ((scalars_df["step"].to_numpy(np.int64), scalars_df["sim_time"].dt.total_seconds().to_numpy())
+             if len(scalars_df) and "sim_time" in scalars_df.columns else (np.zeros(0, np.int64), np.zeros(0)))
     props_df = data.reader(index=None, contents="/__properties/**").to_pandas()
     props = {}
     for c in props_df.columns:
@@ -148,7 +159,7 @@ def read(path: str | Path) -> Recording:
     colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,
-                     *_timings(timings_path(path)), index, complete, end)
+                     *_timings(timings_path(path)), index, complete, end, clock)
 
 
 def _end(df, steps: list, times: list) -> tuple[int, float]:

@@ -736,12 +736,14 @@ def section_speed(jobs: list[Job], out: Path, style: dict) -> list[str]:
 
 
 def _time_axis(rec, steps: np.ndarray) -> np.ndarray | None:
-    """Simulated time [s] at ``steps``: the sim_time scalar, else interpolated
-    from the particle frames' times; None if neither covers the steps."""
-    if "sim_time" in rec.scalars:
-        s, t = rec.scalars["sim_time"]
+    """Simulated time [s] at ``steps``: the scalar rows' times (or a
+    sim_time scalar), else interpolated from the particle frames' times; None
+    if none covers the steps."""
+    for s, t in (getattr(rec, "clock", ((), ())), rec.scalars.get("sim_time", ((), ()))):
+        s = np.asarray(s)
         if len(s) and set(steps.tolist()) <= set(s.tolist()):
-            return np.interp(steps, s, t)
+            order = np.argsort(s)
+            return np.interp(steps, s[order], np.asarray(t)[order])
     fs, ft = np.asarray(rec.steps, dtype=np.float64), np.asarray(rec.times, dtype=np.float64)
     if len(fs) >= 2 and len(steps) and steps.min() >= fs.min() and steps.max() <= fs.max():
         order = np.argsort(fs)
@@ -801,7 +803,7 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
 
     for j in read_list:
         try:
-            rec = read(j.data_file("recording.rrd"))
+            rec = read(j.data_file("recording.rrd"), particles=False)  # scalars only: frames can be GBs
         except Exception as exc:
             failed.append(f"{j.rel} ({type(exc).__name__})")
             continue

@@ -115,6 +115,15 @@ def test_particles_are_logged_at_a_frame_rate_in_simulated_time(tmp_path):
         assert np.floor(t_of[s - 1] * fps * (1 + 1e-9)) < np.floor(t_of[s] * fps * (1 + 1e-9))
     assert len(frames) in (round(duration * fps) + 1, round(duration * fps) + 2)  # the last may land on one
     assert m["recording_estimate_mb"] > 0
+    # the scalar rows' clock: the simulated time after each step
+    assert np.allclose(np.interp(steps, *rec.clock), times, rtol=1e-6, atol=0)
+    # without the frames (what the reports read): the same scalars, properties and clock
+    light = recordings.read(tmp_path / "recording.rrd", particles=False)
+    assert light.positions == [] and len(light.steps) == 0
+    assert light.scalars.keys() == rec.scalars.keys() and light.properties == rec.properties
+    for name, (s, v) in rec.scalars.items():
+        assert np.array_equal(light.scalars[name][0], s) and np.array_equal(light.scalars[name][1], v)
+    assert np.array_equal(light.clock[0], rec.clock[0]) and light.end == rec.end
 
 
 def test_the_colour_map_spans_viridis_from_zero_to_the_top():
