@@ -295,7 +295,6 @@ def make_contact_constraint(t: Types):
     nearest = make_nearest(t)
     node_body = make_node_body(t)
     outward = make_outward(t)
-    occupancy = make_occupancy(t)
 
     @warp_kernel
     def couple(
@@ -324,17 +323,21 @@ def make_contact_constraint(t: Types):
             return
         b = node_body(i, offset, n_bodies, n_grids)
         g = nearest(grid_q[i], inv_dx, cells, strides)
-        present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
-        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
-            return
-        a = int(-1)
+        present = int(0)
+        volume = S(0.0)
+        a = int(-1)  # the first and second body present
         c = int(-1)
         for d in range(n_bodies):
-            if M[d * n_global + g] > S(0.0):
+            m = M[d * n_global + g]
+            if m > S(0.0):
+                present += 1
+                volume += m / rest_mass[d]
                 if a < 0:
                     a = d
                 else:
                     c = d
+        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
+            return
         n = outward(a, g, n_bodies, cells, strides, n_global, M)
         if wp.length(n) <= S(0.0):
             return

@@ -739,7 +739,7 @@ def _time_axis(rec, steps: np.ndarray) -> np.ndarray | None:
     """Simulated time [s] at ``steps``: the scalar rows' times (or a
     sim_time scalar), else interpolated from the particle frames' times; None
     if none covers the steps."""
-    for s, t in (getattr(rec, "clock", ((), ())), rec.scalars.get("sim_time", ((), ()))):
+    for s, t in (rec.clock, rec.scalars.get("sim_time", ((), ()))):
         s = np.asarray(s)
         if len(s) and set(steps.tolist()) <= set(s.tolist()):
             order = np.argsort(s)
