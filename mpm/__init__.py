@@ -1,18 +1,22 @@
 """Material Point Method solvers on NVIDIA Warp (no Hydra, no Rerun here).
 
 Build a :class:`Scene`, turn it into a :class:`Model` and initial
-:class:`State` with :func:`build`, and advance it with :class:`Solver`.
+:class:`State` with :func:`build`, and advance it with :class:`Solver`:
+step by step, or under the project's stability policy with a
+:class:`Driver` (mpm.driver), which reports to :class:`Observer` objects.
 """
 
 from . import analytic
 from .colliders import Collider
+from .driver import Driver, Event, Observer, Outcome, StepPolicy
 from .integrators import INTEGRATORS, Explicit, Implicit
 from .kernels import KERNELS, Kernel
 from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
 from .model import Model, SceneError, State, build
 from .scene import WALL_TYPES, Body, Box, Compound, Cylinder, KinematicRegion, Scene, Sphere
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
-from .solver import Solver, SolverOptions, StepReport
+from .solver import Solver, SolverOptions
+from .status import StepReport
 from .stability import DETECTION_ACTIONS, Detection, Detector
 from .timestep import cfl_dt
 
@@ -21,5 +25,6 @@ __all__ = [
     "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
     "KinematicRegion",
     "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
-    "StepReport", "cfl_dt", "DETECTION_ACTIONS", "Detection", "Detector",
+    "StepReport", "cfl_dt", "DETECTION_ACTIONS", "Detection", "Detector", "Driver", "Event", "Observer",
+    "Outcome", "StepPolicy",
 ]

@@ -177,3 +177,39 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
             cache.K[p] = moment_at(Xp, S(1.0) / dx, grid_offsets, dx)
 
     return update
+
+
+class References:
+    """The bodies' reference configurations on the device: their grids (the
+    boxes of ``layout``, whose nodal fields ``grid`` grows to fit) and the
+    update of their particles (one kernel per body, for its material's
+    projection). ``transform``: C <- C (F^sn)^-1 at an update; ``gradients``,
+    ``fused``, ``moment``: what the stencil cache holds (:func:`make_update`)."""
+
+    def __init__(self, model, launch, layout, grid, *, transform: bool, gradients: bool, fused: bool,
+                 moment: bool):
+        t, k = model.types, model.kernel
+        self.model, self.launch, self.layout, self.grid = model, launch, layout, grid
+        self.update = [make_update(t, k, b.material.project, transform, gradients=gradients, fused=fused,
+                                   moment=moment) for b in model.scene.bodies]
+
+    def kernels(self) -> list:
+        return list(self.update)
+
+    def fit(self, bodies, lo, hi) -> None:
+        """Grids for ``bodies`` covering every stencil of positions within
+        ``lo``/``hi`` [body, axis] [m]; the nodal fields grow to fit."""
+        for b in bodies:
+            self.layout.fit(b, lo[b], hi[b])
+        self.layout.commit()
+        self.grid.reserve(self.layout.n_nodes)
+
+    def move(self, state, bodies, const) -> None:
+        """X <- x for the particles of ``bodies`` (module docstring), in their
+        current grids."""
+        m, lay = self.model, self.layout
+        for b in bodies:
+            start, count = m.body_ranges[b]
+            self.launch(self.update[b], count, [
+                m.body, m.body_params, lay.lo_d, lay.shape_d, lay.offset_d, const.grid_offsets, const.dx,
+                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils])

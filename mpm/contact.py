@@ -51,7 +51,7 @@ import warp as wp
 
 from .launch import warp_kernel
 from .stencil import make_node_box
-from .transfer import STATUS_CONTACT
+from .status import StepStatus
 from .types import Types
 
 
@@ -218,7 +218,7 @@ def make_contact(t: Types):
         M: wp.array(dtype=S),
         P: wp.array(dtype=t.vec),
         grid_v: wp.array(dtype=t.vec),
-        status: wp.array(dtype=wp.float64),  # STATUS_CONTACT += 1 per node of a bin in contact
+        status: StepStatus,  # contact_nodes += 1 per node of a bin in contact
     ):
         i = wp.tid()
         if grid_m[i] <= S(0.0):
@@ -229,7 +229,7 @@ def make_contact(t: Types):
         present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
         # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
         if M[b * n_global + g] > S(0.0) and not (present < 2 or volume < fill):
-            wp.atomic_add(status, STATUS_CONTACT, wp.float64(1.0))
+            wp.atomic_add(status.contact_nodes, 0, wp.float64(1.0))
             v_cm = p_tot / m_tot
             if present == 2:
                 # the normals are opposite and the two corrections' momenta cancel (to round-off)
@@ -412,3 +412,55 @@ def make_contact_constraint(t: Types):
             wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
 
     return couple, sums, project
+
+
+class Contact:
+    """Contact between the bodies of ``model`` on the device: the bins (M
+    and P per body on the global lattice, zero between steps) and the passes
+    over the body nodes (:meth:`resolve`; :meth:`bin` and :meth:`unbin` for
+    the implicit solve's constraints, mpm.implicit)."""
+
+    def __init__(self, model, launch, implicit: bool):
+        t = model.types
+        self.model, self.launch = model, launch
+        self.splat, self.correct, self.clear = make_contact(t)
+        self.constraint = make_contact_constraint(t) if implicit else ()
+        n_bodies, n_global = len(model.scene.bodies), model.n_nodes
+        self.inv_dx = t.scalar(1.0 / model.dx)
+        self.cells, self.strides = t.ivec(*model.cells), t.ivec(*model.strides)
+        self.fill = t.scalar(model.scene.contact_fill)
+        with wp.ScopedDevice(model.device):
+            self.M = wp.zeros(n_bodies * n_global, dtype=t.scalar)
+            self.P = wp.zeros(n_bodies * n_global, dtype=t.vec)
+            self.rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
+                                      dtype=t.scalar)
+
+    def kernels(self) -> list:
+        return [self.splat, self.correct, self.clear, *self.constraint]
+
+    def common(self, layout) -> list:
+        """What every pass reads: the layout's node boxes, the body count,
+        the kernel's grids and the global lattice."""
+        m = self.model
+        return [layout.offset_d, len(m.scene.bodies), m.kernel.n_grids, self.inv_dx, self.cells,
+                self.strides, m.n_nodes]
+
+    def resolve(self, grid, layout, status) -> None:
+        """Frictionless contact on the grid velocities (module docstring)."""
+        common = self.common(layout)
+        self.launch(self.splat, layout.n_nodes, [grid.m, grid.v, grid.q, *common, self.M, self.P])
+        self.launch(self.correct, layout.n_nodes, [
+            grid.m, grid.q, *common, self.rest_mass, self.fill, self.M, self.P, grid.v, status])
+        self.launch(self.clear, layout.n_nodes, [grid.m, grid.q, *common, self.M, self.P])
+
+    def couple(self, grid, layout, cbin, coef) -> None:
+        """The implicit solve's constraints from the predictor in ``grid.v``:
+        per node its active bin ``cbin`` and coefficient ``coef``
+        (:func:`make_contact_constraint`; the bins are zero again after)."""
+        common = self.common(layout)
+        n = layout.n_nodes
+        dev = self.model.device
+        wp.launch(self.splat, n, device=dev, inputs=[grid.m, grid.v, grid.q, *common, self.M, self.P])
+        wp.launch(self.constraint[0], n, device=dev, inputs=[
+            grid.m, grid.q, *common, self.rest_mass, self.fill, self.M, self.P, cbin, coef])
+        wp.launch(self.clear, n, device=dev, inputs=[grid.m, grid.q, *common, self.M, self.P])

@@ -103,3 +103,50 @@ def make_fracture(t: Types):
             broken[k] = wp.uint8(0)
 
     return broken_pairs
+
+
+class FractureMeasure:
+    """The measure for one model: the initial neighbour pairs (taken by
+    :meth:`prepare`), the fraction broken per body (:meth:`measure`), the
+    pieces per body (:meth:`fragments`)."""
+
+    def __init__(self, model):
+        self.model = model
+        self.kernel = make_fracture(model.types)
+        self.pair_counts = np.zeros(len(model.scene.bodies), np.int64)
+
+    def prepare(self, x: np.ndarray) -> None:
+        """The pairs of the positions ``x`` [m] closer than 1.5 particle spacings."""
+        m = self.model
+        scene = m.scene
+        n_bodies = len(scene.bodies)
+        spacing = np.array([scene.particle_dx / (b.ppc or scene.ppc) ** (1.0 / m.dim) for b in scene.bodies])
+        body = m.body.numpy()
+        p, q = neighbour_pairs(x, body, 1.5 * spacing)
+        self.pair_counts = np.bincount(body[p], minlength=n_bodies)
+        dtype = np.float32 if m.types.precision == "float32" else np.float64
+        with wp.ScopedDevice(m.device):
+            self._p = wp.array(p, dtype=wp.int32)
+            self._q = wp.array(q, dtype=wp.int32)
+            self._offset = wp.array((x[q] - x[p]).astype(dtype), dtype=m.types.vec)
+            self._broken = wp.zeros(n_bodies, dtype=wp.float64)
+            self._pair_broken = wp.zeros(len(p), dtype=wp.uint8)
+
+    def measure(self, state) -> np.ndarray:
+        """Fraction of the initial pairs broken in ``state``, per body."""
+        m = self.model
+        self._broken.zero_()
+        if len(self._p):
+            wp.launch(self.kernel, len(self._p), device=m.device, inputs=[
+                self._p, self._q, self._offset, m.body, state.x, state.F0s, state.Fsn, m.types.scalar(m.dx),
+                self._broken, self._pair_broken])
+        return self._broken.numpy() / np.maximum(self.pair_counts, 1)
+
+    def fragments(self) -> np.ndarray:
+        """Pieces per body (connected components of its intact pairs) at the
+        last :meth:`measure`."""
+        m = self.model
+        intact = self._pair_broken.numpy() == 0
+        label = fragments(m.n_particles, self._p.numpy(), self._q.numpy(), intact)
+        body = m.body.numpy()
+        return np.array([len(np.unique(label[body == b])) for b in range(len(m.scene.bodies))])

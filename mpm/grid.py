@@ -19,9 +19,9 @@ conditions, evaluated at the node's current position q_i:
 Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
 
 The work of the conditions on a node, the positive part of J . v_bc with
-J = m_i (v_bc - v_i) their impulse, is summed into the status buffer (slot
-STATUS_WORK): static walls and colliders do none (J is normal to v_bc, or
-v_bc = 0; friction's is negative), moving colliders and regions do J . u,
+J = m_i (v_bc - v_i) their impulse, is summed into the step's status
+(``boundary_work``, mpm.status): static walls and colliders do none (J is
+normal to v_bc, or v_bc = 0; friction's is negative), moving colliders and regions do J . u,
 and mpm.stability counts it as energy put in.
 """
 
@@ -30,7 +30,7 @@ import functools
 import warp as wp
 
 from .launch import warp_kernel
-from .transfer import STATUS_WORK
+from .status import StepStatus
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
@@ -231,15 +231,14 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
 def make_work(t: Types):
     """``work(m, v, v_bc, status)``: add the positive part of the work
     J . v_bc [J] of the impulse J = m (v_bc - v) that turns v into v_bc (force
-    times the distance the node moves at v_bc) to the status buffer's
-    STATUS_WORK."""
+    times the distance the node moves at v_bc) to ``status.boundary_work``."""
     S = t.scalar
 
     @wp.func
-    def work(m: S, v: t.vec, v_bc: t.vec, status: wp.array(dtype=wp.float64)):
+    def work(m: S, v: t.vec, v_bc: t.vec, status: StepStatus):
         W = m * wp.dot(v_bc - v, v_bc)
         if W > S(0.0):
-            wp.atomic_add(status, STATUS_WORK, wp.float64(W))
+            wp.atomic_add(status.boundary_work, 0, wp.float64(W))
 
     return work
 
@@ -272,7 +271,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
         grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position (not lattice), out: position
-        status: wp.array(dtype=wp.float64),  # STATUS_WORK += the energy the conditions gave
+        status: StepStatus,  # boundary_work += the energy the conditions gave
         # the layout (lattice):
         lo: wp.array(dtype=t.ivec),
         shape: wp.array(dtype=t.ivec),
@@ -319,7 +318,7 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ())
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),
-        status: wp.array(dtype=wp.float64),  # STATUS_WORK += the energy the conditions gave
+        status: StepStatus,  # boundary_work += the energy the conditions gave
     ):
         i = wp.tid()
         m = grid_m[i]

@@ -52,10 +52,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .contact import make_contact_constraint
 from .grid import make_work
 from .kernels import Kernel
 from .launch import warp_kernel
+from .status import StepStatus
 from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
 from .stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
@@ -400,7 +400,7 @@ def make_node_kernels(t: Types):
 def make_boundary_work(t: Types):
     """Kernel: the work of the constraints on each node at the solution, the
     positive part of J . v with J = m reaction their impulse (v - reaction:
-    the velocity without it), into the status buffer's STATUS_WORK
+    the velocity without it), into the step's ``status.boundary_work``
     (mpm.grid ``make_work``, mpm.stability)."""
     S = t.scalar
     vec = t.vec
@@ -408,7 +408,7 @@ def make_boundary_work(t: Types):
 
     @warp_kernel
     def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
-                      status: wp.array(dtype=wp.float64)):
+                      status: StepStatus):
         i = wp.tid()
         if m[i] > S(0.0):
             work(m[i], v[i] - reaction[i], v[i], status)
@@ -461,10 +461,10 @@ class ImplicitSolve:
         self._friction = make_friction(t) if self.with_friction else None
         self._work = make_boundary_work(t)
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
-        self.contact = solver.contact
-        self._contact = make_contact_constraint(t) if self.contact else ()
+        self.contact = solver.contact  # mpm.contact.Contact, or None
+        self._contact = self.contact.constraint if self.contact is not None else ()
         with wp.ScopedDevice(m.device):
-            if self.contact:
+            if self.contact is not None:
                 self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
@@ -491,7 +491,7 @@ class ImplicitSolve:
             k = n if self._friction is not None else 1
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
-            k = n if self.contact else 1
+            k = n if self.contact is not None else 1
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
 
@@ -510,12 +510,12 @@ class ImplicitSolve:
         for kernel, g in self._evaluate:
             wp.launch(kernel, g.count, device=m.device, inputs=[
                 m.volume, m.body, m.body_params, s.layout.shape_d, state.F0s, state.Fsn, state.history,
-                state.stencils, v, s._dx, s._K, dt, g.start, self.tangent, self.visc, self.residual,
-                self.diag, self.acc])
+                state.stencils, v, s.const.dx, s.const.K, dt, g.start, self.tangent, self.visc,
+                self.residual, self.diag, self.acc])
         wp.launch(self._finish_residual, n, device=m.device, inputs=[
-            s.grid_m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.reaction,
-            self.cbin, int(self.contact), self.acc])
-        if self.contact:
+            s.grid.m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.reaction,
+            self.cbin, int(self.contact is not None), self.acc])
+        if self.contact is not None:
             self._project(1, self.residual)
         a = self._sum()
         self.momentum = float(np.sqrt(a[MOMENTUM2]))
@@ -530,8 +530,8 @@ class ImplicitSolve:
         self.acc.zero_()
         wp.launch(self._apply, m.n_particles, device=m.device, inputs=[
             m.volume, m.body, s.layout.shape_d, state.F0s, state.Fsn, state.stencils, self.tangent,
-            self.visc, dv, s._dx, s._K, dt, out])
-        wp.launch(self._finish_apply, n, device=m.device, inputs=[s.grid_m, dv, self.free, out, self.acc])
+            self.visc, dv, s.const.dx, s.const.K, dt, out])
+        wp.launch(self._finish_apply, n, device=m.device, inputs=[s.grid.m, dv, self.free, out, self.acc])
         return float(self._sum()[DOT_A])
 
     def _cg(self, state, dt, tol: float) -> int:
@@ -542,8 +542,8 @@ class ImplicitSolve:
         self.acc.zero_()
         wp.launch(self._cg_start, n, device=m.device, inputs=[
             self.residual, self.free, self.inv_diag, self.delta, self.r, self.z, self.d, self.cbin,
-            int(self.contact), self.acc])
-        if self.contact:
+            int(self.contact is not None), self.acc])
+        if self.contact is not None:
             self._project(2, self.r, self.z)
             wp.copy(self.d, self.z, count=n)
         rz = float(self._sum()[DOT_B])
@@ -557,8 +557,8 @@ class ImplicitSolve:
             self.acc.zero_()
             wp.launch(self._cg_step, n, device=m.device, inputs=[
                 S(alpha), self.d, self.Ad, self.free, self.inv_diag, self.delta, self.r, self.z, self.cbin,
-                int(self.contact), self.acc])
-            if self.contact:
+                int(self.contact is not None), self.acc])
+            if self.contact is not None:
                 self._project(2, self.r, self.z)
             a = self._sum()
             if np.sqrt(a[RESIDUAL2]) <= tol:
@@ -571,16 +571,8 @@ class ImplicitSolve:
         """The contact constraints of the step, from the constrained
         predictor in grid_v: the approaching two-body bins, each node's bin
         and coefficient c_i (mpm.contact; the bins are zero again after)."""
-        s, m = self.solver, self.solver.model
-        n = s.layout.n_nodes
-        splat, _, clear = s._contact
-        couple = self._contact[0]
-        common = s._contact_args()
-        wp.launch(splat, n, device=m.device, inputs=[s.grid_m, s.grid_v, s.grid_q, *common, s.contact_M,
-                                                     s.contact_P])
-        wp.launch(couple, n, device=m.device, inputs=[
-            s.grid_m, s.grid_q, *common, s._rest_mass, s._fill, s.contact_M, s.contact_P, self.cbin, self.coef])
-        wp.launch(clear, n, device=m.device, inputs=[s.grid_m, s.grid_q, *common, s.contact_M, s.contact_P])
+        s = self.solver
+        s.contact.couple(s.grid, s.layout, self.cbin, self.coef)
 
     def _project(self, mode: int, x, z=None) -> None:
         """Project x onto the contact constraints (mpm.contact
@@ -590,7 +582,7 @@ class ImplicitSolve:
         sums, project = self._contact[1:]
         self.contact_num.zero_()
         self.contact_den.zero_()
-        common = [mode, self.cbin, self.coef, self.free, s.grid_m, self.inv_diag]
+        common = [mode, self.cbin, self.coef, self.free, s.grid.m, self.inv_diag]
         wp.launch(sums, n, device=m.device, inputs=[*common, x, self.contact_num, self.contact_den])
         wp.launch(project, n, device=m.device, inputs=[
             *common, self.contact_num, self.contact_den, x, z if z is not None else x, self.acc,
@@ -601,16 +593,14 @@ class ImplicitSolve:
         projectors onto the free velocities (and the frictional contacts);
         with contact, the constraints between bodies and grid_v projected
         onto them."""
-        s, m = self.solver, self.solver.model
+        s = self.solver
         n = s.layout.n_nodes
-        self._grow(s._capacity)
-        wp.copy(self.v_star, s.grid_v, count=n)
-        wp.launch(s._constraints, n, device=m.device, inputs=[
-            s.grid_m, s.grid_q, s._time, s._boundary_data, s.grid_kin, s.grid_kin_id, s.grid_v,
-            self.free, self.friction, self.friction_u, self.friction_n])
-        if self.contact:
+        self._grow(s.grid.capacity)
+        wp.copy(self.v_star, s.grid.v, count=n)
+        s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n)
+        if self.contact is not None:
             self._activate()
-            self._project(0, s.grid_v)
+            self._project(0, s.grid.v)
 
     def finish(self) -> None:
         """The constraints' work (:func:`make_boundary_work`), then Coulomb
@@ -621,23 +611,23 @@ class ImplicitSolve:
         step's rule with the implicit normal impulse."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
-            s.grid_m, self.reaction, s.grid_v, s.status])
+            s.grid.m, self.reaction, s.grid.v, s.status.status])
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
-                s.grid_m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
-                s.grid_v])
+                s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
+                s.grid.v])
 
     # ------------------------------------------------------------ solve
     def solve(self, state, dt) -> NewtonReport:
-        """The grid velocities of the step: on entry ``solver.grid_v`` holds the
-        predictor v* (momentum / mass + dt g) and ``solver.grid_q`` the node
+        """The grid velocities of the step: on entry ``solver.grid.v`` holds the
+        predictor v* (momentum / mass + dt g) and ``solver.grid.q`` the node
         positions; on exit grid_v holds the solution, before the boundary
         conditions' friction and the explicit contact pass (mpm.solver)."""
         s, m, opt = self.solver, self.solver.model, self.options
         n = s.layout.n_nodes
         dtS = self.t.scalar(dt)
         self.begin()
-        v, v_try = s.grid_v, self.v_trial
+        v, v_try = s.grid.v, self.v_trial
         E, R = self._energy_residual(state, v, dtS)
         rep = NewtonReport(residual0=R)
         # the residual's round-off floor: F = (F^sn + dt D) F^0s carries eps, i.e. the
@@ -682,8 +672,8 @@ class ImplicitSolve:
             E, R = E_try, R_try
         # 0 when the predictor already solved the system to round-off
         rep.residual = R / rep.residual0 if rep.newton > 0 else 0.0
-        if v is not s.grid_v:
-            wp.copy(s.grid_v, v, count=n)
+        if v is not s.grid.v:
+            wp.copy(s.grid.v, v, count=n)
         if rep.converged:
             self.finish()
         return rep

@@ -89,3 +89,52 @@ class GridLayout:
         self.lo_d.assign(self.lo)
         self.shape_d.assign(self.shape)
         self.offset_d.assign(self.offset)
+
+
+class GridArrays:
+    """The nodal fields of every box of a :class:`GridLayout`, flat: mass
+    ``m``, momentum then velocity ``v``, mass-weighted then current node
+    position ``q``, and with kinematic regions the mass each node draws from
+    a region ``kin`` and the region's number ``kin_id``. The arrays grow
+    (by half again) when the layout no longer fits; :meth:`live` views the
+    layout's nodes."""
+
+    def __init__(self, t: Types, device, regions: bool):
+        self.t, self.device, self.regions = t, device, regions
+        self.capacity = 0
+        self.m = self.v = self.q = self.kin = self.kin_id = None
+        self._views = None  # (node count, m, views) of live()
+
+    def reserve(self, n: int) -> None:
+        """Room for ``n`` nodes (new arrays when it grows: views taken before are stale)."""
+        if n <= self.capacity:
+            return
+        t = self.t
+        self.capacity = int(1.5 * n) if self.capacity else n
+        with wp.ScopedDevice(self.device):
+            self.m = wp.zeros(self.capacity, dtype=t.scalar)
+            self.v = wp.zeros(self.capacity, dtype=t.vec)
+            self.q = wp.zeros(self.capacity, dtype=t.vec)
+            n_kin = self.capacity if self.regions else 1
+            self.kin = wp.zeros(n_kin, dtype=t.scalar)
+            self.kin_id = wp.zeros(n_kin, dtype=wp.int32)
+
+    def live(self, n: int) -> tuple:
+        """Views (m, v, q, kin, kin_id) of the first ``n`` nodes (kept while the
+        node count and the arrays stay: slicing a Warp array every step costs
+        more host time than zeroing the 2D ball's grid)."""
+        if self._views is None or self._views[0] != n or self._views[1] is not self.m:
+            arrays = (self.m, self.v, self.q, self.kin, self.kin_id)
+            self._views = (n, self.m, tuple(a[:n] if len(a) >= n else a for a in arrays))
+        return self._views[2]
+
+    def clear(self, n: int, positions: bool) -> None:
+        """Zero the first ``n`` nodes' fields (the positions only if ``positions``)."""
+        m, v, q, kin, kin_id = self.live(n)
+        m.zero_()
+        v.zero_()
+        if positions:
+            q.zero_()
+        if self.regions:
+            kin.zero_()
+            kin_id.zero_()

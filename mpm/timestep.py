@@ -75,3 +75,46 @@ def step_limits(dx: float, stretch: float, wave_speed: float, max_speed: float, 
     strain = STRAIN_STEP * cfl / rate if rate > 0 else math.inf
     return StepLimits(wave=wave(stretch), viscous=viscous(stretch), strain_rate=strain,
                       fresh=min(wave(1.0), viscous(1.0), strain))
+
+
+class StepRule:
+    """The step limits of one model's bodies after a step (the terms above,
+    from a step's figures, mpm.status.StepReport); ``collider_speed`` [m/s]
+    the fastest collider, which every particle may have to follow."""
+
+    def __init__(self, model, collider_speed: float):
+        self.model, self.collider_speed = model, collider_speed
+
+    def limits(self, cfl: float, report=None, max_speed: float = 0.0) -> list[StepLimits]:
+        """Per body, the terms of the step limit: the wave speed c(J_min) at
+        the most compressed particle (grown by a stiffening material's
+        factor), the narrowest reference cell s_min dx, viscous diffusion and
+        the strain rate; at rest (J = s = 1, no rate) without ``report``,
+        the particles at ``max_speed`` [m/s]."""
+        m = self.model
+        out = []
+        for b, body in enumerate(m.scene.bodies):
+            J, s, stiffening, rate = 1.0, 1.0, 1.0, 0.0
+            if report is not None:
+                J = float(report.min_J[b]) if math.isfinite(report.min_J[b]) else 1.0
+                s = float(report.min_stretch[b]) if math.isfinite(report.min_stretch[b]) else 1.0
+                if report.stiffening[b] > 0 and math.isfinite(report.stiffening[b]):
+                    stiffening = float(report.stiffening[b])
+                rate = float(report.max_rate[b])
+            speed = report.max_speed if report is not None else max_speed
+            speed = max(speed, self.collider_speed)
+            c = body.material.wave_speed(min(max(J, 1e-3), 1.0)) * math.sqrt(stiffening)
+            out.append(step_limits(m.dx, min(max(s, 1e-3), 1.0), c, speed, cfl,
+                                   body.material.kinematic_viscosity(), m.dim, rate))
+        return out
+
+    def stable_dt(self, cfl: float, report=None, max_speed: float = 0.0) -> float:
+        """The explicit step limit [s]: the smallest of :meth:`limits`."""
+        return min(lim.dt for lim in self.limits(cfl, report, max_speed))
+
+    def displacement_dt(self, fraction: float, report=None, max_speed: float = 0.0) -> float:
+        """The implicit integrator's step limit [s]: a particle moves at most
+        ``fraction`` of a cell per step at the speed of the last step (or
+        ``max_speed`` before the first), the colliders' included."""
+        speed = report.max_speed if report is not None else max_speed
+        return displacement_dt(self.model.dx, max(speed, self.collider_speed), fraction)

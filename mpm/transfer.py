@@ -1,551 +1,113 @@
 """Particle-to-grid and grid-to-particle transfers, in each body's reference
-configuration, on every grid of the kernel.
+configuration, on every grid of the kernel: P2G in mpm.p2g, G2P in mpm.g2p,
+and :class:`Transfers`, which compiles them for a model and launches them.
 
-Notation (REFERENCE.md §1, A-ULMPM paper eq. 10-33): ``X_p`` reference
+Notation (A-ULMPM paper, eq. 10-33): ``X_p`` reference
 particle positions, ``X_i`` reference node positions, ``r = X_i - X_p``,
 ``W_ip`` kernel weights (cached at the last configuration update),
 ``K_p = I / (moment dx^2)`` the MLS moment inverse, ``F^{0s}`` the deformation
 gradient at the last update, ``F^{sn}`` the deformation since then,
 ``F^{0n} = F^{sn} F^{0s}``.
-
-P2G (eq. 10-12, 20, 23), on every grid g of the kernel, which receives the
-particle's full mass (for plastic models after the return mapping, with
-F_E = F^sn F^0s in place of F^{0n}: mpm.materials.plastic):
-    m_i      = sum_p W_ip m_p
-    m_i v_i  = sum_p W_ip [m_p v_p + m_p C_p r] - dt V_p^0 P(F^{0n}) F^{0s,T} grad_ip
-    m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
-with grad_ip = K_p r W_ip for the MLS transfer (force and momentum fused as in
-MLS-MPM) and the kernel's own weight gradient for APIC and PIC (no affine
-term for PIC). After division by m_i the nodal velocity holds the internal-
-force impulse. The stored energy sum_p V_p^0 psi(F^{0n}_p) of the state the
-step starts from is accumulated on the way (one decomposition of F for
-stress and energy).
-
-G2P (eq. 28, 30, 31), averaged over the G grids:
-    v_p = 1/G sum_g sum_i W_ip v_i,   C_p = 1/G sum_g sum_i W_ip v_i r^T K_p (MLS, APIC),
-    x_p += dt v_p,   F^{sn} += dt grad v,   dJ_p = |det F^{sn} - 1|,
-grad v = C_p for MLS, 1/G sum v_i grad_ip^T for APIC and PIC.
 """
 
-import functools
+from dataclasses import dataclass
 
+import numpy as np
 import warp as wp
 
-from .configuration import make_committed, make_moment_at
-from .kernels import Kernel
-from .launch import warp_kernel
-from .materials.plastic import make_plastic_update
-from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
-from .types import Types
+from .g2p import make_g2p
+from .p2g import make_p2g
+from .scene import WALL_TYPES
 
 TRANSFERS = ("mls", "apic", "pic")
 """mls: affine momentum with C, MLS force K_p r w (Hu et al. 2018); apic:
 affine momentum, force and F from the kernel gradient (Jiang et al. 2015);
 pic: no affine term, force and F from the kernel gradient."""
 
-# layout of the per-step status buffer (float64): see Solver.check
-# header: the largest |v|^2, non-finite and outside counts, the work the boundary
-# conditions did on the grid (mpm.grid, mpm.implicit), the kinetic and potential
-# energy of the new state (G2P with ``track_energy``): for mpm.stability; the
-# particles removed at open walls in this step (G2P with ``removal``), the body
-# nodes whose bin was in contact (mpm.contact)
-(STATUS_MAX_V2, STATUS_NONFINITE, STATUS_OUTSIDE, STATUS_WORK, STATUS_KINETIC, STATUS_POTENTIAL,
- STATUS_REMOVED, STATUS_CONTACT) = range(8)
-STATUS_HEADER = 8
-STATUS_PER_BODY = 9  # marked count, largest dJ, smallest J, smallest stretch^2 of F^sn, largest |L|^2,
-#                      largest stiffening factor (P2G, plastic models that harden), largest |v|^2,
-#                      smallest stretch^2 of F (``track_inversion``), largest |F^sn|_inf (lagrangian)
-STATUS_STIFFENING = 5
-STATUS_SPEED = 6
-STATUS_F_STRETCH = 7
-STATUS_F_NORM = 8
+
+@dataclass(frozen=True)
+class GridConstants:
+    """The discretisation's constants as the kernels take them (Warp values)."""
+
+    dx: object  # [m] cell width
+    inv_dx: object  # [1/m]
+    K: object  # MLS moment inverse 1 / (moment dx^2) [1/m^2] (0: per particle)
+    grid_offsets: object  # per kernel grid, its offset [cells]
+    gravity: object  # [m/s^2]
+
+    @classmethod
+    def of(cls, model) -> "GridConstants":
+        t, k = model.types, model.kernel
+        S = t.scalar
+        return cls(dx=S(model.dx), inv_dx=S(1.0 / model.dx),
+                   K=S(1.0 / (k.moment * model.dx**2) if k.moment is not None else 0.0),
+                   grid_offsets=wp.types.vector(k.n_grids, S)(*k.grids), gravity=t.vec(*model.gravity))
 
 
-@functools.cache
-def make_min_stretch2(t: Types):
-    """``min_stretch2(F)``: the square of the smallest singular value of F,
-    exact in 2D (the stable root 2 det^2 / (|F|^2 + sqrt(|F|^4 - 4 det^2)));
-    in 3D the lower bound 3 det^2 / |cof F|^2, equal to 1 at F = I and never
-    below a third of the true value."""
-    S = t.scalar
+class Transfers:
+    """P2G for every material group of ``model`` and one G2P, compiled for
+    what the run needs, and launched on the solver's grid.
 
-    @wp.func
-    def min_stretch2(F: t.mat):
-        d = wp.determinant(F)
-        if wp.static(t.dim == 2):
-            f2 = wp.ddot(F, F)
-            return S(2.0) * d * d / wp.max(f2 + wp.sqrt(wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))),
-                                           S(1.0e-30))
-        else:
-            G = wp.transpose(wp.inverse(F)) * d  # cofactor matrix
-            return wp.min(S(3.0) * d * d / wp.max(wp.ddot(G, G), S(1.0e-30)), S(1.0))
+    ``lagrangian``: the reference may lag behind the particles (not EMPM);
+    ``fused``: stencils located in the transfers instead of cached
+    (mpm.stencil.fuse); ``commit``: G2P does the configuration update too;
+    ``with_stress`` False: P2G leaves the stress to the implicit solve;
+    ``forcing``: a manufactured solution's body force (mpm.analytic);
+    ``bound_reach``: G2P bounds |F^sn|_inf (walls-only Lagrangian scenes);
+    ``removal``: particles leave at open faces; ``marks``: count dJ >=
+    epsilon; ``epsilon``: the criterion's threshold."""
 
-    return min_stretch2
+    def __init__(self, model, launch, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
+                 with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
+                 track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None):
+        t, k = model.types, model.kernel
+        self.model, self.launch = model, launch
+        self.forcing = forcing
+        self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, forcing is not None, lagrangian=lagrangian,
+                              with_stress=with_stress, fused=fused), g) for g in model.groups]
+        self.g2p = make_g2p(t, k, transfer, record_dJ, marks, lagrangian=lagrangian,
+                            track_compression=any(b.material.stiffens for b in model.scene.bodies),
+                            track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
+                            bound_reach=bound_reach, commit=commit, project=project)
+        margin = k.margin * model.dx
+        open_code = WALL_TYPES.index("open")
+        self.inside_lo = t.vec(*([margin] * t.dim))
+        self.inside_hi = t.vec(*[L - margin for L in model.domain])
+        self.open_lo = t.vec(*[float(c == open_code) for c in model.wall_codes[0]])
+        self.open_hi = t.vec(*[float(c == open_code) for c in model.wall_codes[1]])
+        self.epsilon = t.scalar(epsilon if np.isfinite(epsilon) else 0.0)
+        with wp.ScopedDevice(model.device):
+            self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy of the state P2G starts from [J]
+            # body force per unit mass [m/s^2] of a manufactured solution, set every step
+            self.body_force = wp.zeros(model.n_particles if forcing else 1, dtype=t.vec)
 
+    def kernels(self) -> list:
+        return [k for k, _ in self.p2g] + [self.g2p]
 
-def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-             with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
-             fused: bool = False):
-    """P2G for the particles of one material model: see :func:`_make_p2g`
-    (``lagrangian`` False, the Eulerian scheme: no node positions, which sit
-    on the lattice, and F^sn = I in the return mapping; ``fused``: stencils
-    located from the reference positions, mpm.stencil.fuse)."""
-    return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian or not material.plastic, with_stress, fused, positions=lagrangian)
+    def apply_forcing(self, X0: np.ndarray, time: float) -> None:
+        """The manufactured solution's body force at the initial positions
+        ``X0`` [m] and ``time`` [s] (host)."""
+        b = self.forcing.body_force(X0, time)
+        self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
 
+    def rasterize(self, state, grid, layout, const, dt, status, write: bool, positions: int) -> None:
+        """P2G: the plastic return mapping (stored when ``write``), mass,
+        momentum with the stress impulse, node positions (``positions``), the
+        elastic energy into ``energy``."""
+        m = self.model
+        self.energy.zero_()
+        for kernel, g in self.p2g:
+            self.launch(kernel, g.count, [
+                m.mass, m.volume, m.body, m.body_params, layout.shape_d, state.x, state.v, state.C,
+                state.F0s, state.Fsn, self.body_force, state.history, state.stencils, const.dx, const.K, dt,
+                g.start, int(write), positions, grid.m, grid.v, grid.q, m.region, grid.kin, grid.kin_id,
+                self.energy, status])
 
-@functools.cache
-def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
-              with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False,
-              positions: bool = True):
-    """P2G for the particles of one material model (``material`` is its class);
-    ``with_regions``: also the mass each node draws from kinematic regions;
-    ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
-    force b [m/s^2] (a manufactured solution's) to the node momenta.
-
-    A plastic model's return mapping runs first (mpm.materials.plastic): the
-    trial F_E = F^sn F^0s is returned, the stress is that of the returned F_E,
-    and, when ``write`` is set (a step, not a stress evaluation between
-    steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored;
-    ``lagrangian`` False (EMPM) knows F^sn = I here and stores F_E as it is.
-    A model that hardens records its largest stiffening factor per body in
-    ``status`` (for the time step). ``with_stress`` False leaves the stress
-    impulse out (the implicit integrator adds the stress of the step's end,
-    mpm.implicit); the return mapping and the energy stay. ``sum_positions``
-    0 (at run time) leaves the node positions out in a step where no
-    boundary condition can reach the body (mpm.solver)."""
-    f64 = wp.float64
-    S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    node = make_node(t, kernel)
-    node_gradient = make_node_gradient(t, kernel)
-    Cache = make_stencil_cache(t, kernel)
-    needs_L = material.needs_velocity_gradient
-    per_particle_K = kernel.moment is None
-    mls = transfer == "mls" and not kernel.gradient_affine
-    affine = transfer != "pic"
-    reference, cached = make_cached(t, kernel, not mls, fused)
-    plastic = material.plastic
-    plastic_update = stiffening = stress_energy = None
-    if plastic:
-        plastic_update = make_plastic_update(t, material)
-        stiffening = material.stiffening(t) if material.stiffening is not None else None
-    else:
-        stress_energy = material.stress_energy(t)
-
-    @wp.func
-    def next_index(p: t.vec, q: t.vec, dCT: t.mat, dFT: t.mat, k: int):
-        """The affine momentum p and the position term q one stencil index
-        further along axis k (dCT, dFT: the transposed steps)."""
-        p_next = p
-        q_next = q
-        if wp.static(affine):
-            p_next = p + dCT[k]
-        if wp.static(positions):
-            q_next = q + dFT[k]
-        return p_next, q_next
-
-    @warp_kernel
-    def p2g(
-        # Model:
-        mass: wp.array(dtype=S),
-        volume: wp.array(dtype=S),
-        body: wp.array(dtype=wp.int32),
-        body_params: wp.array(dtype=t.params),
-        shape: wp.array(dtype=t.ivec),
-        # State in:
-        x: wp.array(dtype=t.vec),
-        v: wp.array(dtype=t.vec),
-        C: wp.array(dtype=t.mat),
-        F0s: wp.array(dtype=t.mat),
-        Fsn: wp.array(dtype=t.mat),
-        body_force: wp.array(dtype=t.vec),
-        history: wp.array(dtype=t.history),  # plastic models: in/out, with F0s (``write``)
-        # Stencil cache:
-        cache: Cache,
-        # Step:
-        dx: S,
-        K: S,
-        dt: S,
-        start: int,
-        write: int,
-        sum_positions: int,  # 0: no boundary condition can reach a node this step (positions unused)
-        # Grid out:
-        grid_m: wp.array(dtype=S),
-        grid_mv: wp.array(dtype=t.vec),
-        grid_mq: wp.array(dtype=t.vec),
-        region: wp.array(dtype=wp.int32),
-        grid_kin: wp.array(dtype=S),
-        grid_kin_id: wp.array(dtype=wp.int32),
-        # Diagnostics out:
-        energy: wp.array(dtype=f64),
-        status: wp.array(dtype=f64),
-        n_bodies: int,
-    ):
-        p = wp.tid() + start
-        b = body[p]
-        m = mass[p]
-        xp = x[p]
-        Cp = C[p]
-        Fs = Fsn[p]
-        F0 = F0s[p]
-        P = t.mat()
-        psi = S(0.0)
-        if wp.static(plastic):
-            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
-            if wp.static(lagrangian):
-                F0 = wp.inverse(Fs) * FE
-            else:
-                F0 = FE
-            if write != 0:
-                F0s[p] = F0
-                history[p] = h
-            if wp.static(stiffening is not None):
-                wp.atomic_max(status, STATUS_HEADER + STATUS_STIFFENING * n_bodies + b,
-                              f64(stiffening(body_params[b], h)))
-        else:
-            L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
-            if wp.static(needs_L):
-                L = Cp * wp.inverse(Fs)
-            P, psi = stress_energy(Fs * F0, L, body_params[b])
-        wp.atomic_add(energy, 0, f64(volume[p] * psi))
-        stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
-        if wp.static(not with_stress):
-            stress = t.mat()
-        mv = m * v[p]
-        if wp.static(with_body_force):
-            mv = mv + (m * dt) * body_force[p]
-        mC = m * Cp
-        if wp.static(mls):
-            if wp.static(per_particle_K):
-                mC = mC - stress * cache.K[p]
-            else:
-                mC = mC - K * stress
-        rid = int(0)
-        if wp.static(with_regions):
-            rid = region[p]
-        # the affine momentum mv + mC r and the mass-weighted node position m (x_p + F^sn r) are
-        # linear in the offset r = (index - fx) dx: evaluated at the stencil's first node, then
-        # stepped by a column of dx mC (or m dx F^sn) per index step (no matrix product per node)
-        mCdx = t.mat()
-        dCT = t.mat()
-        if wp.static(affine):
-            mCdx = dx * mC
-            dCT = wp.transpose(mCdx)
-        mFdx = t.mat()
-        dFT = t.mat()
-        if wp.static(positions):
-            mFdx = (m * dx) * Fs
-            dFT = wp.transpose(mFdx)
-        u0, ph = reference(p, cache)
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            pa = mv
-            if wp.static(affine):
-                pa = mv - mCdx * fx
-            qa = t.vec()
-            if wp.static(positions):
-                qa = m * xp - mFdx * fx
-            for a in range(Ks):
-                pb = pa
-                qb = qa
-                for bb in range(Ks):
-                    pc = pb
-                    qc = qb
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        wp.atomic_add(grid_m, i, w * m)
-                        if wp.static(mls):
-                            wp.atomic_add(grid_mv, i, w * pc)
-                        else:
-                            wp.atomic_add(grid_mv, i, w * pc - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
-                        if wp.static(positions):
-                            if sum_positions != 0:
-                                wp.atomic_add(grid_mq, i, w * qc)
-                        if wp.static(with_regions):
-                            if rid > 0:
-                                wp.atomic_add(grid_kin, i, w * m)
-                                wp.atomic_max(grid_kin_id, i, rid)
-                        if wp.static(dim == 3):
-                            pc, qc = next_index(pc, qc, dCT, dFT, 2)
-                    pb, qb = next_index(pb, qb, dCT, dFT, 1)
-                pa, qa = next_index(pa, qa, dCT, dFT, 0)
-
-    return p2g
-
-
-@functools.cache
-def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
-             lagrangian: bool, track_compression: bool, track_energy: bool = False,
-             track_inversion: bool = False, removal: bool = False, fused: bool = False,
-             bound_reach: bool = False, commit: bool = False, project=None):
-    """G2P for all particles.
-
-    ``removal`` (a domain with open faces): a particle that crosses the
-    interior's bound on an open face (``open_lo``/``open_hi`` 1 per axis) is
-    removed: its mass and volume become 0 (so no transfer sees it again), it
-    stays where it crossed, clamped to the interior, at rest, and G2P skips
-    it from then on; ``status[STATUS_REMOVED]`` counts the removals. A
-    particle crossing a closed face still counts as outside (unstable).
-    ``fused``: stencils located from the reference positions (mpm.stencil.fuse);
-    ``commit`` (with it: the Eulerian scheme, whose reference follows the
-    particles every step): G2P also does the configuration update
-    (mpm.configuration) that would otherwise be a pass of its own: X <- x,
-    F^0s <- project(F^sn F^0s) (``project``: the bodies' common projection
-    factory, or None), F^sn <- I (the Eulerian scheme keeps C as it is), and
-    K_p at the new position where the kernel's moment varies: the same
-    arithmetic, so every step that completes ends as with the separate update,
-    bit for bit. (A failed step - non-finite, outside - has moved the
-    references too, where the separate update would not run; the run stops
-    there. The massless particles of a body whose particles were all removed
-    keep being committed in place.)
-
-    ``lagrangian``: the reference may lag behind (not EMPM), so track the
-    narrowest current cell and take the velocity gradient as C (F^sn)^-1 (for
-    EMPM F^sn = I at the start of every step: it is C); ``bound_reach`` (with
-    it): the largest |F^sn|_inf, the largest absolute row sum, which bounds
-    how far a node sits from its particles (mpm.solver);
-    ``track_compression``: a material stiffens under compression (a fluid);
-    ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
-    potential energy -m g . x [J], and each body's largest |v_p|^2
-    (mpm.stability; no extra pass);
-    ``track_inversion``: the smallest J and the smallest stretch of F (its
-    smallest singular value, squared; in 3D a lower bound, see
-    :func:`make_min_stretch2`) per body (mpm.stability).
-
-    ``status`` accumulates [max |v_p|^2, non-finite count, outside count],
-    then per body the marked count (``count_marked``: dJ_p >= epsilon), the
-    largest dJ_p, the smallest J = det F^{0n} (for the time step of materials
-    that stiffen under compression), the smallest stretch of F^sn (a
-    reference cell of width dx is sigma_min(F^sn) dx wide now, and the time
-    step must shrink with it), the largest velocity gradient |L| (the strain
-    increment dt |L| of a step must stay small), the largest speed
-    (``track_energy``), the smallest stretch of F (``track_inversion``), the
-    largest |F^sn|_inf (``bound_reach``), and the bounding box of the new
-    positions (min per axis, then max per axis).
-    """
-    S = t.scalar
-    f64 = wp.float64
-    vec, mat = t.vec, t.mat
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    node = make_node(t, kernel)
-    node_gradient = make_node_gradient(t, kernel)
-    Cache = make_stencil_cache(t, kernel)
-    min_stretch2 = make_min_stretch2(t)
-    per_particle_K = kernel.moment is None
-    mls = transfer == "mls" and not kernel.gradient_affine
-    affine = transfer != "pic"
-    affine_from_gradient = affine and kernel.gradient_affine
-    with_B = affine and not affine_from_gradient  # B = sum w v r^T for C
-    reference, cached = make_cached(t, kernel, not mls, fused)
-    inv_G = 1.0 / G
-    committed = make_committed(t, project)
-    moment_at = make_moment_at(t, kernel, not mls)
-    commit_K = commit and per_particle_K and affine  # the update's K_p (the affine transfers read it)
-
-    @wp.func
-    def commit_reference(p: int, Xp: vec, Fs: mat, F0: mat, params: t.params, F0s: wp.array(dtype=mat),
-                         Fsn: wp.array(dtype=mat), cache: Cache, dx: S):
-        """The reference configuration moves to Xp (``commit``)."""
-        cache.X[p] = Xp
-        F0s[p] = committed(Fs, F0, params)
-        Fsn[p] = wp.identity(n=dim, dtype=S)
-        if wp.static(commit_K):
-            cache.K[p] = moment_at(Xp, S(1.0) / dx, cache.grid_offsets, dx)
-
-    @wp.func
-    def slab(col: vec, r: S, v: vec):
-        """A column of B / dx takes in a slab's weighted velocity v at offset
-        r = index - fx; the next slab's offset."""
-        col_next = col
-        if wp.static(with_B):
-            col_next = col + r * v
-        return col_next, r + S(1.0)
-
-    @wp.func
-    def row_sum_norm(F: mat):
-        """|F|_inf = max_d sum_k |F_dk|: |(F r)_d| <= |F|_inf max_k |r_k|."""
-        n = S(0.0)
-        for d in range(wp.static(dim)):
-            row = S(0.0)
-            for k in range(wp.static(dim)):
-                row += wp.abs(F[d, k])
-            n = wp.max(n, row)
-        return n
-
-    @wp.func
-    def grow_box(status: wp.array(dtype=f64), b: int, n_bodies: int, xp: t.vec):
-        """Body b's bounding box of the new positions (the next reference grids) takes in xp."""
-        box = STATUS_HEADER + STATUS_PER_BODY * n_bodies + b * dim
-        for d in range(wp.static(dim)):
-            wp.atomic_min(status, box + d, f64(xp[d]))
-            wp.atomic_max(status, box + n_bodies * dim + d, f64(xp[d]))
-
-    @warp_kernel
-    def g2p(
-        # Model:
-        body: wp.array(dtype=wp.int32),
-        shape: wp.array(dtype=t.ivec),
-        n_bodies: int,
-        # Grid in:
-        grid_v: wp.array(dtype=t.vec),
-        # Stencil cache:
-        cache: Cache,
-        # Step:
-        dx: S,
-        K: S,
-        dt: S,
-        epsilon: S,
-        inside_lo: t.vec,
-        inside_hi: t.vec,
-        # State in/out:
-        x: wp.array(dtype=t.vec),
-        v: wp.array(dtype=t.vec),
-        C: wp.array(dtype=t.mat),
-        Fsn: wp.array(dtype=t.mat),
-        F0s: wp.array(dtype=t.mat),
-        dJ: wp.array(dtype=S),
-        status: wp.array(dtype=f64),
-        # with track_energy or removal:
-        mass: wp.array(dtype=S),
-        gravity: t.vec,
-        # with removal:
-        volume: wp.array(dtype=S),
-        open_lo: t.vec,
-        open_hi: t.vec,
-        # with commit:
-        body_params: wp.array(dtype=t.params),
-    ):
-        p = wp.tid()
-        b = body[p]
-        if wp.static(removal):
-            if mass[p] == S(0.0):  # removed: parked inside, still in its body's reference box
-                grow_box(status, b, n_bodies, x[p])
-                if wp.static(commit):
-                    commit_reference(p, x[p], Fsn[p], F0s[p], body_params[b], F0s, Fsn, cache, dx)
-                return
-        vp = vec()
-        B = mat()
-        grad_v = mat()
-        u0, ph = reference(p, cache)
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            # B = sum w v_i r^T with r = (index - fx) dx: per axis, the weighted velocities summed over
-            # the stencil's slabs, times the slab's offset index - fx (no outer product per node)
-            col0 = vec()
-            col1 = vec()
-            col2 = vec()
-            ra = -fx[0]  # the slabs' offsets r / dx
-            for a in range(Ks):
-                va = vec()
-                rb = -fx[1]
-                for bb in range(Ks):
-                    vb = vec()
-                    rc = -fx[dim - 1]
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        vi = grid_v[i]
-                        wv = w * vi
-                        vb += wv
-                        if wp.static(dim == 3):
-                            col2, rc = slab(col2, rc, wv)
-                        if wp.static(not mls):
-                            grad_v += wp.outer(vi, node_gradient(a, bb, c, W, dW, S(1.0) / dx))
-                    va += vb
-                    col1, rb = slab(col1, rb, vb)
-                vp += va
-                col0, ra = slab(col0, ra, va)
-            if wp.static(with_B):
-                if wp.static(dim == 3):
-                    B += dx * wp.matrix_from_cols(col0, col1, col2)
-                else:
-                    B += dx * wp.matrix_from_cols(col0, col1)
-        vp = S(inv_G) * vp
-        Cp = mat()
-        if wp.static(mls):
-            if wp.static(per_particle_K):
-                Cp = S(inv_G) * B * cache.K[p]
-            else:
-                Cp = (S(inv_G) * K) * B
-            grad_v = Cp
-        else:
-            grad_v = S(inv_G) * grad_v
-            if wp.static(affine_from_gradient):
-                Cp = grad_v
-            elif wp.static(affine):
-                if wp.static(per_particle_K):
-                    Cp = S(inv_G) * B * cache.K[p]
-                else:
-                    Cp = (S(inv_G) * K) * B
-        xp = x[p] + dt * vp
-        Fsn_old = Fsn[p]
-        Fs = Fsn_old + dt * grad_v
-        if wp.static(removal):
-            gone = False
-            for d in range(wp.static(dim)):
-                if (xp[d] < inside_lo[d] and open_lo[d] > S(0.0)) or (xp[d] > inside_hi[d] and open_hi[d] > S(0.0)):
-                    gone = True
-            if gone and wp.isfinite(xp):
-                for d in range(wp.static(dim)):
-                    xp[d] = wp.clamp(xp[d], inside_lo[d], inside_hi[d])
-                x[p] = xp
-                v[p] = vec()
-                C[p] = mat()
-                mass[p] = S(0.0)
-                volume[p] = S(0.0)
-                wp.atomic_add(status, STATUS_REMOVED, f64(1.0))
-                grow_box(status, b, n_bodies, xp)
-                if wp.static(commit):  # F^sn was not advanced for a removed particle
-                    commit_reference(p, xp, Fsn_old, F0s[p], body_params[b], F0s, Fsn, cache, dx)
-                return
-        x[p] = xp
-        v[p] = vp
-        C[p] = Cp
-        if wp.static(not commit):
-            Fsn[p] = Fs
-        dj = wp.abs(wp.determinant(Fs) - S(1.0))
-        if wp.static(record_dJ):
-            dJ[p] = dj
-        if wp.static(count_marked):
-            if dj >= epsilon:
-                wp.atomic_add(status, STATUS_HEADER + b, f64(1.0))
-            wp.atomic_max(status, STATUS_HEADER + n_bodies + b, f64(dj))
-        if wp.static(track_compression or track_inversion):
-            wp.atomic_min(status, STATUS_HEADER + 2 * n_bodies + b,
-                          f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
-        if wp.static(track_inversion):
-            wp.atomic_min(status, STATUS_HEADER + STATUS_F_STRETCH * n_bodies + b,
-                          f64(min_stretch2(Fs * F0s[p])))
-        # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1
-        # (for EMPM F^sn was I: L = grad_v); a singular F^sn makes it non-finite
-        rate2 = wp.ddot(grad_v, grad_v)
-        if wp.static(lagrangian):
-            s2 = min_stretch2(Fs)
-            wp.atomic_min(status, STATUS_HEADER + 3 * n_bodies + b, f64(s2))
-            if wp.static(bound_reach):
-                wp.atomic_max(status, STATUS_HEADER + STATUS_F_NORM * n_bodies + b, f64(row_sum_norm(Fs)))
-            L = grad_v * wp.inverse(Fsn_old)
-            rate2 = wp.ddot(L, L)
-        wp.atomic_max(status, STATUS_HEADER + 4 * n_bodies + b, f64(rate2))
-
-        # stability monitor and bounding box of the new positions
-        v2 = f64(wp.dot(vp, vp))
-        wp.atomic_max(status, STATUS_MAX_V2, v2)
-        if wp.static(track_energy):
-            wp.atomic_add(status, STATUS_KINETIC, f64(0.5) * f64(mass[p]) * v2)
-            wp.atomic_add(status, STATUS_POTENTIAL, -f64(mass[p]) * f64(wp.dot(gravity, xp)))
-            wp.atomic_max(status, STATUS_HEADER + STATUS_SPEED * n_bodies + b, v2)
-        if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
-            wp.atomic_add(status, STATUS_NONFINITE, f64(1.0))
-        else:
-            outside = False
-            for d in range(wp.static(dim)):
-                if xp[d] < inside_lo[d] or xp[d] > inside_hi[d]:
-                    outside = True
-            grow_box(status, b, n_bodies, xp)
-            if outside:
-                wp.atomic_add(status, STATUS_OUTSIDE, f64(1.0))
-        if wp.static(commit):
-            commit_reference(p, xp, Fs, F0s[p], body_params[b], F0s, Fsn, cache, dx)
-
-    return g2p
+    def interpolate(self, state, grid, layout, const, dt, status) -> None:
+        """G2P: velocities, affine matrices, positions, F^sn, the criterion and
+        the step's figures."""
+        m = self.model
+        self.launch(self.g2p, m.n_particles, [
+            m.body, layout.shape_d, grid.v, state.stencils, const.dx, const.K, dt, self.epsilon,
+            self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, status,
+            m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params])

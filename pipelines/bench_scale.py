@@ -110,7 +110,7 @@ def _solver(spec):
     solver = mpm.Solver(model, spec.scheme, solver_options(spec))
     solver.load()
     solver.prepare(state)
-    dt = solver.stable_dt(spec.run.cfl)
+    dt = solver.timestep.stable_dt(spec.run.cfl)
     solver.advance(state, dt)
     return solver, state, dt
 

@@ -245,8 +245,9 @@ def compare(a: Recording, b: Recording) -> dict:
             mismatch.append(f"scalar {name} missing or on other steps")
             continue
         vb = b.scalars[name][1]
-        both_nan = np.isnan(va) & np.isnan(vb)
-        dev = float(np.max(np.where(both_nan, 0.0, np.abs(va - vb)))) if len(va) else 0.0
+        same = (va == vb) | (np.isnan(va) & np.isnan(vb))  # infinities included
+        with np.errstate(invalid="ignore"):
+            dev = float(np.max(np.where(same, 0.0, np.abs(va - vb)))) if len(va) else 0.0
         largest[f"scalar:{name}"] = dev
     match = not mismatch and all(v == 0.0 for v in largest.values())
     return {"match": match, "problems": mismatch,

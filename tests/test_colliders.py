@@ -178,7 +178,7 @@ def _track(scene, scheme, duration, direction, integrator=None, dt_factor=1.0):
     x0 = m @ state.x.numpy() / m.sum()
     t, report, ts, vs = 0.0, None, [], []
     while t < duration:
-        dt = min(dt_factor * solver.stable_dt(0.4, report), 1e-3 * dt_factor)
+        dt = min(dt_factor * solver.timestep.stable_dt(0.4, report), 1e-3 * dt_factor)
         report = solver.advance(state, dt)
         assert report.reason is None, report.reason
         t += dt
@@ -199,7 +199,7 @@ def test_block_slides_down_a_wedge_at_coulomb_acceleration(scheme, mu):
     ts, vs, _, solver, state = _incline(mu, scheme)
     expected = G * (np.sin(THETA) - mu * np.cos(THETA))
     assert _acceleration(ts, vs) == pytest.approx(expected, rel=0.02)
-    assert solver.inside_colliders(state).tolist() == [0]
+    assert solver.conditions.inside_colliders(state.x, solver.time).tolist() == [0]
 
 
 def test_block_stays_put_when_friction_exceeds_the_slope():
@@ -230,7 +230,7 @@ def test_moving_collider_drags_a_block_by_friction():
     assert np.polyfit(ts[sliding], vs[sliding], 1)[0] == pytest.approx(mu * G, rel=0.02)
     assert vs[ts > 1.5 * slip_end].mean() == pytest.approx(u, rel=0.01)
     # the collider's speed enters the time step's speed term
-    assert solver.step_limits(0.4)[0].wave == pytest.approx(solver.step_limits(0.4, max_speed=u)[0].wave)
+    assert solver.timestep.limits(0.4)[0].wave == pytest.approx(solver.timestep.limits(0.4, max_speed=u)[0].wave)
 
 
 def test_sphere_container_holds_a_splashing_fluid():
@@ -245,12 +245,12 @@ def test_sphere_container_holds_a_splashing_fluid():
     solver.prepare(state)
     t, report, worst = 0.0, None, 0.0
     while t < 0.5:
-        dt = min(solver.stable_dt(0.4, report), 1e-3)
+        dt = min(solver.timestep.stable_dt(0.4, report), 1e-3)
         report = solver.advance(state, dt)
         assert report.reason is None
         t += dt
         worst = max(worst, np.linalg.norm(state.x.numpy() - c, axis=1).max())
-        assert solver.inside_colliders(state)[0] == 0
+        assert solver.conditions.inside_colliders(state.x, solver.time)[0] == 0
     # particles stop within a cell of the wall (the nodes inside the solid hold them)
     assert worst < R + 1.0 / res
 
@@ -260,13 +260,13 @@ def test_only_the_scene_colliders_compile():
     plain = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=[body])
     model, _ = mpm.build(plain, mpm.KERNELS["quadratic"])
     solver = mpm.Solver(model)
-    assert solver.collider_kinds == () and all(k.key.find("inside") < 0 for k in solver.kernels())
+    assert solver.conditions.collider_kinds == () and all(k.key.find("inside") < 0 for k in solver.kernels())
     cols = [Collider("sphere", center=(0.5, 0.5), radius=0.45, inside=True),
             Collider("half_space", point=(0.5, 0.2), normal=(0.0, 1.0))]
     assert kinds_of(cols) == ("half_space", "sphere")
     model, _ = mpm.build(mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=[body], colliders=cols),
                          mpm.KERNELS["quadratic"])
-    assert mpm.Solver(model).collider_kinds == ("half_space", "sphere")
+    assert mpm.Solver(model).conditions.collider_kinds == ("half_space", "sphere")
 
 
 # ------------------------------------------------------------------ drawing

@@ -36,13 +36,13 @@ def test_mass_momentum_angular_momentum_conserved(dim, precision, device):
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, device)
     solver = mpm.Solver(model)
     solver.prepare(state)
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     before = solver.measure(state)
     steps = 60 if dim == 2 else 25
     dt = 0.5 * mpm.cfl_dt(model.dx, model.wave_speed(), 2.0, 0.5)
     for _ in range(steps):
         solver.advance(state, dt)
-    assert solver.check().reason is None
+    assert solver.report().reason is None
     after = solver.measure(state)
     s = state.numpy()
     m = model.mass.numpy().astype(np.float64)
@@ -104,14 +104,14 @@ def test_elastic_block_settles_on_the_floor(floor, device):
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", device)
     solver = mpm.Solver(model)
     solver.prepare(state)
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     dt = mpm.cfl_dt(model.dx, model.wave_speed(), 0.0, 0.4)
     x0 = state.x.numpy().mean(axis=0)
     steps = int(0.6 / dt)
     ys, kes = [], []
     for k in range(steps):
         solver.advance(state, dt)
-        assert solver.check().reason is None, f"step {k}"
+        assert solver.report().reason is None, f"step {k}"
         d = solver.measure(state)
         ys.append(state.x.numpy()[:, 1].mean())
         kes.append(d[names.index("kinetic_energy")])
@@ -138,7 +138,7 @@ def test_angular_momentum_is_measured_about_the_centre_of_mass(dim):
         L = sum m (x - c) x v + m axial(C D F^sn,T),  c = sum m x / sum m,
     (recomputed here in NumPy from the particles), and the run's drift is
     |L(t) - L(0)| / |L(0)|, not diluted by the orbital m c x v."""
-    from pipelines.runner import Drift
+    from pipelines.run_metrics import Drift
 
     centre = (0.7, 0.6) if dim == 2 else (0.7, 0.6, 0.55)
     w = 5.0 if dim == 2 else (1.0, 2.0, 4.0)
@@ -151,7 +151,7 @@ def test_angular_momentum_is_measured_about_the_centre_of_mass(dim):
     model, state = mpm.build(scene, mpm.KERNELS["compact"], "float64", DEVICE)
     solver = mpm.Solver(model)
     solver.prepare(state)
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     iL = [i for i, n in enumerate(names) if n.startswith("angular_momentum") and not n.endswith("scale")]
     m = model.mass.numpy()
 

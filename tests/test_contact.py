@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import mpm
-from mpm.transfer import STATUS_CONTACT
 from test_conservation import colliding_scene
 
 DEVICE = "cpu"
@@ -77,25 +76,25 @@ def test_contact_matches_the_lattice_rule(scheme, kernel):
     solver = mpm.Solver(model, scheme)
     solver.prepare(state)
     G = model.kernel.n_grids
-    rest_mass = solver._rest_mass.numpy()
-    inv_dx, cells, strides = float(solver._inv_dx), np.asarray(model.cells), np.asarray(model.strides)
+    rest_mass = solver.contact.rest_mass.numpy()
+    inv_dx, cells, strides = float(solver.contact.inv_dx), np.asarray(model.cells), np.asarray(model.strides)
     contact = solver._resolve_contact
     seen = []
 
     def checked():
         n = solver.layout.n_nodes
-        m, v, q = (a.numpy()[:n].copy() for a in (solver.grid_m, solver.grid_v, solver.grid_q))
-        before = solver.status.numpy()[STATUS_CONTACT]
+        m, v, q = (a.numpy()[:n].copy() for a in (solver.grid.m, solver.grid.v, solver.grid.q))
+        before = solver.status.read()["contact_nodes"][0]
         contact()
         offset = solver.layout.offset
         body = (np.searchsorted(offset, np.arange(n), side="right") - 1) // G
         want, in_contact, crowded = reference_contact(m, v, q, body, G, inv_dx, cells, strides, rest_mass,
-                                             float(solver._fill))
-        got = solver.grid_v.numpy()[:n]
+                                             float(solver.contact.fill))
+        got = solver.grid.v.numpy()[:n]
         scale = np.abs(v).max()
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * scale)
-        assert solver.status.numpy()[STATUS_CONTACT] - before == in_contact.sum()
-        assert not solver.contact_M.numpy().any() and not solver.contact_P.numpy().any()
+        assert solver.status.read()["contact_nodes"][0] - before == in_contact.sum()
+        assert not solver.contact.M.numpy().any() and not solver.contact.P.numpy().any()
         seen.append((int(in_contact.sum()), int((np.abs(want - v) > 0).any(axis=1).sum()), crowded))
 
     solver._resolve_contact = checked

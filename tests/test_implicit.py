@@ -45,7 +45,7 @@ def make(scene, scheme, integrator, precision="float64", kernel="quadratic", tra
 
 
 def total_energy(solver, state):
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     d = solver.measure(state)
     return sum(d[names.index(k)] for k in ("kinetic_energy", "elastic_energy", "potential_energy"))
 
@@ -95,7 +95,7 @@ def test_newton_step_solves_numpy_assembled_system(scheme):
     lo, shape, offset = lay.lo_d.numpy()[0], lay.shape_d.numpy()[0], lay.offset_d.numpy()[0]
     strides = np.array([shape[1], 1])
     flat = [offset + int(np.dot(np.array(n) - lo, strides)) for n in system.nodes]
-    v_solver = solver2.grid_v.numpy()[flat]
+    v_solver = solver2.grid.v.numpy()[flat]
     assert np.linalg.norm(system.residual(v_solver)) <= 1e-8 * np.linalg.norm(R)
 
 
@@ -138,7 +138,7 @@ def test_backward_euler_never_gains_energy(scheme):
     scene = ball_scene(resolution=24, gravity=False)
     solver, state = make(scene, scheme, Implicit(newton_tol=1e-8))
     stretch(state, 3.0, (0.5, 0.5))
-    dt = 8 * solver.stable_dt(0.4, max_speed=0.5)
+    dt = 8 * solver.timestep.stable_dt(0.4, max_speed=0.5)
     E = [total_energy(solver, state)]
     for _ in range(30):
         assert solver.advance(state, dt).reason is None
@@ -159,7 +159,7 @@ def test_stiff_ball_bounces_at_fifty_times_the_explicit_step(scheme):
     scene = ball_scene(E=1e9, resolution=24, walls="slip", center=(0.5, 0.3), radius=0.12)
     solver, state = make(scene, scheme, Implicit(), precision="float32")
     state.v.assign(state.v.numpy() + np.array([0.0, -1.0], np.float32))
-    dt = 50 * solver.stable_dt(0.4, max_speed=1.0)
+    dt = 50 * solver.timestep.stable_dt(0.4, max_speed=1.0)
     assert dt > 5e-4
     mass = solver.model.mass.numpy()
     vy = []
@@ -169,7 +169,7 @@ def test_stiff_ball_bounces_at_fifty_times_the_explicit_step(scheme):
         vy.append(float(mass @ state.v.numpy()[:, 1] / mass.sum()))
     print(f"{scheme.name}: dt {dt:.3g} s, centre of mass velocity {min(vy):.3f} .. {max(vy):.3f} m/s")
     assert min(vy) < -1.2 and max(vy) > 0.05, f"{min(vy):.3f} .. {max(vy):.3f}"
-    assert solver.fracture(state).max() < 0.01
+    assert solver.fracture.measure(state).max() < 0.01
 
 
 @pytest.mark.bitwise
@@ -261,11 +261,11 @@ def test_residual_and_hessian_are_derivatives_of_the_potential(dim, kernel, tran
     solver._clear()
     solver._rasterize(state, S(dt))
     solver._update_grid(S(dt))
-    sol = solver._solve
+    sol = solver.implicit
     sol.begin()
     n = solver.layout.n_nodes
     vec = solver.model.types.vec
-    v = solver.grid_v.numpy()[:n].copy()
+    v = solver.grid.v.numpy()[:n].copy()
     rng = np.random.default_rng(0)
     free = sol.free.numpy()[:n]
     d = np.einsum("nab,nb->na", free, rng.standard_normal(v.shape))
@@ -320,7 +320,7 @@ def test_implicit_block_slides_down_a_wedge_at_coulomb_acceleration(mu):
 
     ts, vs, _, solver, state = _incline(mu, integrator=Implicit(), dt_factor=10.0)
     assert _acceleration(ts, vs) == pytest.approx(G * (np.sin(THETA) - mu * np.cos(THETA)), rel=0.03)
-    assert solver.inside_colliders(state).tolist() == [0]
+    assert solver.conditions.inside_colliders(state.x, solver.time).tolist() == [0]
 
 
 def test_kinematic_region_is_dirichlet_in_the_implicit_solve():
@@ -335,7 +335,7 @@ def test_kinematic_region_is_dirichlet_in_the_implicit_solve():
                       walls=("slip",) * 4, regions=[top, bottom], ppc=4)
     solver, state = make(scene, mpm.TLMPM(), Implicit())
     x0 = state.x.numpy().copy()
-    dt = 20 * solver.stable_dt(0.4, max_speed=0.2)
+    dt = 20 * solver.timestep.stable_dt(0.4, max_speed=0.2)
     steps = int(0.2 / dt)
     for _ in range(steps):
         assert solver.advance(state, dt).reason is None
@@ -376,13 +376,14 @@ def contact_kkt(solver, state, dt, scene):
         flat = [offset + int(np.dot(np.array(n) - lo, [shape[1], 1])) for n in system.nodes]
         systems.append(system)
         nodes.append(flat)
-    solver.contact = False  # the solve's velocities, without the explicit contact pass after it
+    # the solve's velocities, without the explicit contact pass after it
+    solver.contact.resolve = lambda *args: None
     try:
         report = solver.step(state, dt)
     finally:
-        solver.contact = True
+        del solver.contact.resolve
     assert report.converged
-    grid_v = solver.grid_v.numpy()
+    grid_v = solver.grid.v.numpy()
     M = [dict(zip(sy.nodes, sy.m)) for sy in systems]
     V = [dict(zip(sy.nodes, sy.v_star)) for sy in systems]
     R = [dict(zip(sy.nodes, sy.residual(grid_v[f]))) for sy, f in zip(systems, nodes)]
@@ -398,7 +399,7 @@ def contact_kkt(solver, state, dt, scene):
         normal = grad / np.linalg.norm(grad)
         if np.dot(V[0][n] - V[1][n], normal) > 0:
             active[n] = normal
-    cbin = solver._solve.cbin.numpy()
+    cbin = solver.implicit.cbin.numpy()
     assert sorted(n for f in nodes for n in f if cbin[n] >= 0) == sorted(
         f for sy, fl in zip(systems, nodes) for n, f in zip(sy.nodes, fl) if n in active)
     for b in range(2):
@@ -426,12 +427,12 @@ def test_two_bodies_in_contact_keep_their_momentum():
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, ppc=4, gravity=(0.0, 0.0),
                       walls=("open",) * 4, bodies=bodies)
     solver, state = make(scene, mpm.EMPM(), Implicit(newton_tol=1e-10))
-    assert solver.contact and solver._solve.contact
+    assert solver.contact and solver.implicit.contact
     mass, body = solver.model.mass.numpy(), solver.model.body.numpy()
-    dt = 5 * solver.stable_dt(0.4, max_speed=1.0)
+    dt = 5 * solver.timestep.stable_dt(0.4, max_speed=1.0)
     checked = []
     for _ in range(int(0.15 / dt)):
-        if len(checked) < 2 and solver._solve._capacity and (solver._solve.cbin.numpy() >= 0).any():
+        if len(checked) < 2 and solver.implicit._capacity and (solver.implicit.cbin.numpy() >= 0).any():
             # the last step had contact
             checked.append(contact_kkt(solver, state, dt, scene))
         assert solver.advance(state, dt).reason is None

@@ -52,12 +52,12 @@ def test_spinning_plate_keeps_angular_momentum_within_a_few_percent(scheme, affi
     model, state = mpm.build(spec.scene, spec.kernel, "float64", DEVICE)
     solver = mpm.Solver(model, spec.scheme)
     solver.prepare(state)
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     L0 = solver.measure(state, elastic=False)[names.index("angular_momentum")]
     t, report, updates = 0.0, None, 0
     T = 2 * 2 * np.pi / 15.0  # two revolutions at 15 rad/s
     while t < T:
-        dt = min(1e-3, solver.stable_dt(0.4, report, 3.0))
+        dt = min(1e-3, solver.timestep.stable_dt(0.4, report, 3.0))
         report = solver.advance(state, dt)
         assert report.reason is None
         updates += len(report.updated)
@@ -80,7 +80,7 @@ def test_linear_momentum_conserved_by_every_scheme(scheme):
     sch = {"empm": mpm.EMPM(), "tlmpm": mpm.TLMPM(), "aulmpm": mpm.AULMPM(epsilon=0.01, eta=0.05)}[scheme]
     solver = mpm.Solver(model, sch)
     solver.prepare(state)
-    names = solver.diagnostic_names()
+    names = solver.diagnostics.names
     before = solver.measure(state, elastic=False)
     steps, dt = 60, 2.5e-4
     updates = sum(len(solver.advance(state, dt).updated) for _ in range(steps))
@@ -195,7 +195,7 @@ def test_colliding_discs_neither_interpenetrate_nor_stick(scheme):
     body = model.body.numpy()
     gap, t, report = np.inf, 0.0, None
     while t < 0.3:
-        dt = solver.stable_dt(0.4, report, 1.0)
+        dt = solver.timestep.stable_dt(0.4, report, 1.0)
         report = solver.advance(state, dt)
         t += dt
         x = state.x.numpy()
@@ -236,7 +236,7 @@ def test_water_drop_on_an_elastic_block(scheme):
     body = model.body.numpy()
     t, report, gap, k = 0.0, None, np.inf, 0
     while t < 0.4:
-        dt = min(1e-3, solver.stable_dt(0.4, report, 2.0))
+        dt = min(1e-3, solver.timestep.stable_dt(0.4, report, 2.0))
         report = solver.advance(state, dt)
         assert report.reason is None
         t, k = t + dt, k + 1
@@ -280,11 +280,11 @@ def test_node_positions_summed_only_near_a_wall(scheme):
     def run(skip: bool):
         model, state = mpm.build(spec.scene, spec.kernel, "float64", DEVICE, spec.seed)
         solver = mpm.Solver(model, spec.scheme)
-        solver._free_flight = solver._free_flight and skip
+        solver.free_flight = solver.free_flight and skip
         solver.prepare(state)
         positioned, y_min, report = [], [], None
         for _ in range(260):
-            report = solver.advance(state, solver.stable_dt(0.4, report))
+            report = solver.advance(state, solver.timestep.stable_dt(0.4, report))
             assert report.reason is None
             positioned.append(report.positioned)
             y_min.append(report.box_lo[0][1])

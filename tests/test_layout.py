@@ -85,8 +85,8 @@ def test_eulerian_nodes_sit_where_the_particles_put_them(dim, kernel):
         solver.prepare(state)
         solver.step(state, 1e-4)
         n = solver.layout.n_nodes
-        has_mass = solver.grid_m.numpy()[:n] > 0
-        q.append(solver.grid_q.numpy()[:n][has_mass])
+        has_mass = solver.grid.m.numpy()[:n] > 0
+        q.append(solver.grid.q.numpy()[:n][has_mass])
     assert len(solver.layout.lo) == len(scene.bodies) * mpm.KERNELS[kernel].n_grids > 1
     assert len(q[0]) > 50
     np.testing.assert_allclose(q[0], q[1], rtol=0, atol=1e-13)

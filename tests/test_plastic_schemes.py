@@ -138,7 +138,7 @@ def shear_wave_viscosity(overrides, dt_factor=1.0):
         return state.v.numpy()[middle, 0] @ profile / (profile @ profile)
 
     T = 0.25
-    n = int(np.ceil(T / (dt_factor * solver.stable_dt(0.4, None, sol.amplitude))))
+    n = int(np.ceil(T / (dt_factor * solver.timestep.stable_dt(0.4, None, sol.amplitude))))
     t, a = [0.0], [amplitude()]
     for k in range(n):
         assert solver.advance(state, T / n).reason is None
@@ -180,7 +180,7 @@ def test_every_material_runs_with_every_scheme_and_kernel(material, kernel):
         mass0 = solver.measure(state, elastic=False)[0]
         report = None
         for _ in range(25):
-            report = solver.advance(state, solver.stable_dt(0.4, report, 4.5))
+            report = solver.advance(state, solver.timestep.stable_dt(0.4, report, 4.5))
             assert report.reason is None, (scheme.name, report.reason)
         assert solver.measure(state, elastic=False)[0] == pytest.approx(mass0, rel=1e-12)
         if mat.plastic:

@@ -55,7 +55,7 @@ def assert_no_contact(solver):
     """The premise of the reference comparisons: no bin in contact in the
     last step (the status's count, mpm.contact), so no contact correction."""
     if solver.contact:
-        assert solver.check().contact_nodes == 0, "bodies touched"
+        assert solver.report().contact_nodes == 0, "bodies touched"
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -75,7 +75,7 @@ def test_eulerian_step_matches_numpy_reference(dim, device):
         solver.advance(state, dt)
         assert_no_contact(solver)
         assert_state_matches(state, x, v, C, F, k, C_atol=1e-7)
-    assert solver.check().reason is None
+    assert solver.report().reason is None
     # the bodies really deformed and moved: the comparison is not trivial
     assert np.abs(F - np.eye(dim)).max() > 1e-3
 
@@ -91,7 +91,7 @@ def test_elastic_energy_bookkeeping(dim, device):
     solver = mpm.Solver(model)
     solver.prepare(state)
     body, vol = model.body.numpy(), model.volume.numpy()
-    i = solver.diagnostic_names().index("elastic_energy")
+    i = solver.diagnostics.names.index("elastic_energy")
     for _ in range(3):
         F = state.F0s.numpy()
         expected = sum(vol[p] * energy(scene.bodies[b].material.name, F[p],

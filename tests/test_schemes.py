@@ -174,7 +174,7 @@ def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer, bodies
         model, state = mpm.build(scene, mpm.KERNELS[kernel], "float32", DEVICE)
         solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(transfer=transfer, fuse=fuse))
         assert solver.fused == fuse
-        assert solver._g2p_commits == (fuse and bodies != "mixed")
+        assert solver.g2p_commits == (fuse and bodies != "mixed")
         solver.prepare(state)
         for _ in range(steps):
             solver.advance(state, dt)

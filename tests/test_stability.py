@@ -94,12 +94,12 @@ def test_work_of_a_kinematic_region_is_not_a_blow_up(integrator):
     limit."""
     scene, model, solver, state = pulled_bar(integrator)
     options = mpm.Detection()
-    detector = mpm.Detector(options, scene, solver.boundary_speed(), 0.0, model.kernel.n_grids,
+    detector = mpm.Detector(options, scene, solver.conditions.speed(), 0.0, model.kernel.n_grids,
                             float(model.mass.numpy().sum()))
-    blind = mpm.Detector(options, scene, solver.boundary_speed(), 0.0, model.kernel.n_grids,
+    blind = mpm.Detector(options, scene, solver.conditions.speed(), 0.0, model.kernel.n_grids,
                          float(model.mass.numpy().sum()))
-    names = solver.diagnostic_names()
-    dt = (1.0 if integrator.name == "explicit" else 10.0) * solver.stable_dt(0.4, max_speed=0.2)
+    names = solver.diagnostics.names
+    dt = (1.0 if integrator.name == "explicit" else 10.0) * solver.timestep.stable_dt(0.4, max_speed=0.2)
     blind_trips = []
     for _ in range(int(0.5 / dt)):
         d = solver.measure(state)

@@ -1,0 +1,123 @@
+"""The boundary conditions of a model on the device: walls, kinematic regions
+and rigid colliders (their rules: mpm.grid, mpm.colliders).
+
+:class:`Conditions` packs them once and launches the passes that apply them:
+inside the grid update (:meth:`update_grid`), as a pass of their own after
+contact or the implicit solve (:meth:`apply`), and as the implicit solve's
+constraints (:meth:`constrain`). Only what the scene holds is compiled: no
+regions, no colliders, no separate pass unless needed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .colliders import INSIDE_DEPTH, build_meshes, kinds_of, make_inside_count, pack
+from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
+from .scene import WALL_TYPES
+
+OPEN = WALL_TYPES.index("open")
+
+
+class Conditions:
+    """``model``'s walls, regions and colliders. ``separate``: they act after
+    contact or the implicit solve rather than in the grid update;
+    ``implicit``: also compile the solve's constraints; ``lattice``: the
+    nodes sit on the lattice (the Eulerian scheme; no summed positions)."""
+
+    def __init__(self, model, launch, separate: bool, implicit: bool, lattice: bool):
+        t, scene = model.types, model.scene
+        self.model, self.launch = model, launch
+        self.regions = len(scene.regions) > 0
+        self.collider_kinds = kinds_of(scene.colliders)
+        self.band = (scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
+        self.closed = (np.array(model.wall_codes[0]) != OPEN, np.array(model.wall_codes[1]) != OPEN)
+        self.open = not (self.closed[0].all() and self.closed[1].all())  # particles leave at open faces
+        self.grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
+                                            lattice=lattice, n_grids=model.kernel.n_grids)
+        self.boundary = make_boundary(t, self.regions, self.collider_kinds) if separate else None
+        self.constraints = (make_constraints(t, self.regions, self.collider_kinds,
+                                             any(c.friction > 0 for c in scene.colliders))
+                            if implicit else None)
+        self.inside = make_inside_count(t, self.collider_kinds) if scene.colliders else None
+        self.collider_speed = max([c.speed() for c in scene.colliders], default=0.0)  # [m/s]
+        with wp.ScopedDevice(model.device):
+            self._meshes = build_meshes(scene.colliders, model.device)  # kept alive for their ids
+            self.data = self._pack()
+            self._inside_counts = wp.zeros(max(len(scene.colliders), 1), dtype=wp.int32)
+
+    def kernels(self) -> list:
+        return [k for k in (self.grid_update, self.boundary, self.constraints, self.inside) if k is not None]
+
+    def _pack(self):
+        """Walls and kinematic regions (velocity, velocity gradient, centre,
+        (start, end) per region) and the colliders, for the kernels."""
+        m = self.model
+        t, d = m.types, m.dim
+        rows = [(tuple(reg.velocity or (0.0,) * d), reg.gradient(d),
+                 tuple(reg.center if reg.center is not None else 0.5 * np.add(*reg.select.bounds())),
+                 (reg.start, reg.end)) for reg in m.scene.regions]
+        if not rows:  # placeholders: the kernels compile the regions out
+            rows = [((0.0,) * d, np.zeros((d, d)), (0.0,) * d, (0.0, 0.0))]
+        data = make_boundary_data(t)()
+        data.domain = t.vec(*m.domain)
+        data.band = t.scalar(self.band)
+        data.wall_lo = t.ivec(*m.wall_codes[0])
+        data.wall_hi = t.ivec(*m.wall_codes[1])
+        dtype = np.float32 if t.precision == "float32" else np.float64
+        tables = [wp.array(np.array([r[k] for r in rows], dtype=dtype), dtype=T)
+                  for k, T in enumerate(region_types(t))]
+        data.region_u, data.region_gradient, data.region_center, data.region_window = tables
+        data.colliders = pack(m.scene.colliders, t, self._meshes, m.device)
+        return data
+
+    def speed(self) -> float:
+        """The fastest collider or kinematic region [m/s] (a region's rotation
+        and stretch bounded over the domain's diagonal)."""
+        scene = self.model.scene
+        diagonal = float(np.linalg.norm(scene.domain))
+        regions = [float(np.linalg.norm(r.velocity if r.velocity is not None else 0.0))
+                   + float(np.linalg.norm(r.gradient(scene.dim), 2)) * diagonal for r in scene.regions]
+        return max([self.collider_speed] + regions)
+
+    # ------------------------------------------------------------ passes
+    def update_grid(self, grid, layout, const, dt, time, status, positioned: int) -> None:
+        """Grid momentum to velocity, gravity, and (unless separate) the
+        conditions at the nodes' current positions."""
+        self.launch(self.grid_update, layout.n_nodes, [
+            grid.m, const.gravity, dt, time, self.data, grid.kin, grid.kin_id, grid.v, grid.q, status,
+            layout.lo_d, layout.shape_d, layout.offset_d, len(layout.lo), const.grid_offsets, const.dx,
+            positioned])
+
+    def apply(self, grid, layout, time, status) -> None:
+        """The conditions as a pass of their own (after contact)."""
+        self.launch(self.boundary, layout.n_nodes, [
+            grid.m, grid.q, time, self.data, grid.kin, grid.kin_id, grid.v, status])
+
+    def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n) -> None:
+        """The implicit solve's constraints on the first ``n`` nodes: the
+        constrained velocity in ``grid.v``, the projector onto the free
+        velocities in ``free`` and, with friction, its coefficient, the
+        collider's velocity and normal per node (mpm.grid.make_constraints)."""
+        wp.launch(self.constraints, n, device=self.model.device, inputs=[
+            grid.m, grid.q, time, self.data, grid.kin, grid.kin_id, grid.v, free, friction, friction_u,
+            friction_n])
+
+    def inside_colliders(self, x, time: float) -> np.ndarray:
+        """Per collider, the particles of ``x`` deeper inside it than
+        INSIDE_DEPTH cells at ``time`` [s]."""
+        m = self.model
+        if self.inside is None:
+            return np.zeros(0, np.int64)
+        self._inside_counts.zero_()
+        wp.launch(self.inside, m.n_particles, device=m.device, inputs=[
+            x, m.types.scalar(time), m.types.scalar(INSIDE_DEPTH * m.dx), self.data.colliders,
+            self._inside_counts])
+        return self._inside_counts.numpy()[:len(m.scene.colliders)].astype(np.int64)
+
+    def near_wall(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Per row of boxes [row, axis], whether it reaches the wall band of a closed face."""
+        band = self.band + 1e-3 * self.model.dx  # with room for round-off
+        domain = np.asarray(self.model.domain, float)
+        return ((lo < band) & self.closed[0] | (hi > domain - band) & self.closed[1]).any(axis=-1)

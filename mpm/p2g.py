@@ -1,0 +1,216 @@
+"""Particle to grid (P2G), in each body's reference configuration, on every
+grid of the kernel (A-ULMPM paper, eq. 10-12, 20, 23; notation: mpm.transfer).
+
+Every grid g of the kernel receives the particle's full mass (for plastic
+models after the return mapping, with F_E = F^sn F^0s in place of F^{0n}:
+mpm.materials.plastic):
+    m_i      = sum_p W_ip m_p
+    m_i v_i  = sum_p W_ip [m_p v_p + m_p C_p r] - dt V_p^0 P(F^{0n}) F^{0s,T} grad_ip
+    m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
+with grad_ip = K_p r W_ip for the MLS transfer (force and momentum fused as in
+MLS-MPM) and the kernel's own weight gradient for APIC and PIC (no affine
+term for PIC). After division by m_i the nodal velocity holds the internal-
+force impulse. The stored energy sum_p V_p^0 psi(F^{0n}_p) of the state the
+step starts from is accumulated on the way (one decomposition of F for
+stress and energy).
+"""
+
+import functools
+
+import warp as wp
+
+from .kernels import Kernel
+from .launch import warp_kernel
+from .materials.plastic import make_plastic_update
+from .status import StepStatus
+from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
+from .types import Types
+
+
+def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
+             with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
+             fused: bool = False):
+    """P2G for the particles of one material model: see :func:`_make_p2g`
+    (``lagrangian`` False, the Eulerian scheme: no node positions, which sit
+    on the lattice, and F^sn = I in the return mapping; ``fused``: stencils
+    located from the reference positions, mpm.stencil.fuse)."""
+    return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
+                     lagrangian or not material.plastic, with_stress, fused, positions=lagrangian)
+
+
+@functools.cache
+def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
+              with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False,
+              positions: bool = True):
+    """P2G for the particles of one material model (``material`` is its class);
+    ``with_regions``: also the mass each node draws from kinematic regions;
+    ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
+    force b [m/s^2] (a manufactured solution's) to the node momenta.
+
+    A plastic model's return mapping runs first (mpm.materials.plastic): the
+    trial F_E = F^sn F^0s is returned, the stress is that of the returned F_E,
+    and, when ``write`` is set (a step, not a stress evaluation between
+    steps), F^0s <- (F^sn)^-1 F_E and the history variables are stored;
+    ``lagrangian`` False (EMPM) knows F^sn = I here and stores F_E as it is.
+    A model that hardens records its largest stiffening factor per body in
+    ``status`` (for the time step). ``with_stress`` False leaves the stress
+    impulse out (the implicit integrator adds the stress of the step's end,
+    mpm.implicit); the return mapping and the energy stay. ``sum_positions``
+    0 (at run time) leaves the node positions out in a step where no
+    boundary condition can reach the body (mpm.solver)."""
+    f64 = wp.float64
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    node = make_node(t, kernel)
+    node_gradient = make_node_gradient(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
+    needs_L = material.needs_velocity_gradient
+    per_particle_K = kernel.moment is None
+    mls = transfer == "mls" and not kernel.gradient_affine
+    affine = transfer != "pic"
+    reference, cached = make_cached(t, kernel, not mls, fused)
+    plastic = material.plastic
+    plastic_update = stiffening = stress_energy = None
+    if plastic:
+        plastic_update = make_plastic_update(t, material)
+        stiffening = material.stiffening(t) if material.stiffening is not None else None
+    else:
+        stress_energy = material.stress_energy(t)
+
+    @wp.func
+    def next_index(p: t.vec, q: t.vec, dCT: t.mat, dFT: t.mat, k: int):
+        """The affine momentum p and the position term q one stencil index
+        further along axis k (dCT, dFT: the transposed steps)."""
+        p_next = p
+        q_next = q
+        if wp.static(affine):
+            p_next = p + dCT[k]
+        if wp.static(positions):
+            q_next = q + dFT[k]
+        return p_next, q_next
+
+    @warp_kernel
+    def p2g(
+        # Model:
+        mass: wp.array(dtype=S),
+        volume: wp.array(dtype=S),
+        body: wp.array(dtype=wp.int32),
+        body_params: wp.array(dtype=t.params),
+        shape: wp.array(dtype=t.ivec),
+        # State in:
+        x: wp.array(dtype=t.vec),
+        v: wp.array(dtype=t.vec),
+        C: wp.array(dtype=t.mat),
+        F0s: wp.array(dtype=t.mat),
+        Fsn: wp.array(dtype=t.mat),
+        body_force: wp.array(dtype=t.vec),
+        history: wp.array(dtype=t.history),  # plastic models: in/out, with F0s (``write``)
+        # Stencil cache:
+        cache: Cache,
+        # Step:
+        dx: S,
+        K: S,
+        dt: S,
+        start: int,
+        write: int,
+        sum_positions: int,  # 0: no boundary condition can reach a node this step (positions unused)
+        # Grid out:
+        grid_m: wp.array(dtype=S),
+        grid_mv: wp.array(dtype=t.vec),
+        grid_mq: wp.array(dtype=t.vec),
+        region: wp.array(dtype=wp.int32),
+        grid_kin: wp.array(dtype=S),
+        grid_kin_id: wp.array(dtype=wp.int32),
+        # Diagnostics out:
+        energy: wp.array(dtype=f64),
+        status: StepStatus,
+    ):
+        p = wp.tid() + start
+        b = body[p]
+        m = mass[p]
+        xp = x[p]
+        Cp = C[p]
+        Fs = Fsn[p]
+        F0 = F0s[p]
+        P = t.mat()
+        psi = S(0.0)
+        if wp.static(plastic):
+            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
+            if wp.static(lagrangian):
+                F0 = wp.inverse(Fs) * FE
+            else:
+                F0 = FE
+            if write != 0:
+                F0s[p] = F0
+                history[p] = h
+            if wp.static(stiffening is not None):
+                wp.atomic_max(status.stiffening, b, f64(stiffening(body_params[b], h)))
+        else:
+            L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
+            if wp.static(needs_L):
+                L = Cp * wp.inverse(Fs)
+            P, psi = stress_energy(Fs * F0, L, body_params[b])
+        wp.atomic_add(energy, 0, f64(volume[p] * psi))
+        stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
+        if wp.static(not with_stress):
+            stress = t.mat()
+        mv = m * v[p]
+        if wp.static(with_body_force):
+            mv = mv + (m * dt) * body_force[p]
+        mC = m * Cp
+        if wp.static(mls):
+            if wp.static(per_particle_K):
+                mC = mC - stress * cache.K[p]
+            else:
+                mC = mC - K * stress
+        rid = int(0)
+        if wp.static(with_regions):
+            rid = region[p]
+        # the affine momentum mv + mC r and the mass-weighted node position m (x_p + F^sn r) are
+        # linear in the offset r = (index - fx) dx: evaluated at the stencil's first node, then
+        # stepped by a column of dx mC (or m dx F^sn) per index step (no matrix product per node)
+        mCdx = t.mat()
+        dCT = t.mat()
+        if wp.static(affine):
+            mCdx = dx * mC
+            dCT = wp.transpose(mCdx)
+        mFdx = t.mat()
+        dFT = t.mat()
+        if wp.static(positions):
+            mFdx = (m * dx) * Fs
+            dFT = wp.transpose(mFdx)
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            pa = mv
+            if wp.static(affine):
+                pa = mv - mCdx * fx
+            qa = t.vec()
+            if wp.static(positions):
+                qa = m * xp - mFdx * fx
+            for a in range(Ks):
+                pb = pa
+                qb = qa
+                for bb in range(Ks):
+                    pc = pb
+                    qc = qb
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        wp.atomic_add(grid_m, i, w * m)
+                        if wp.static(mls):
+                            wp.atomic_add(grid_mv, i, w * pc)
+                        else:
+                            wp.atomic_add(grid_mv, i, w * pc - stress * node_gradient(a, bb, c, W, dW, S(1.0) / dx))
+                        if wp.static(positions):
+                            if sum_positions != 0:
+                                wp.atomic_add(grid_mq, i, w * qc)
+                        if wp.static(with_regions):
+                            if rid > 0:
+                                wp.atomic_add(grid_kin, i, w * m)
+                                wp.atomic_max(grid_kin_id, i, rid)
+                        if wp.static(dim == 3):
+                            pc, qc = next_index(pc, qc, dCT, dFT, 2)
+                    pb, qb = next_index(pb, qb, dCT, dFT, 1)
+                pa, qa = next_index(pa, qa, dCT, dFT, 0)
+
+    return p2g

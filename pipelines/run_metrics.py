@@ -1,0 +1,154 @@
+"""What a run's ``metrics.json`` summarises besides its steps: conserved
+quantities' drift, the plastic fields, the implicit solve, spilled fluid,
+the error against a reference run, and the final state kept for later
+comparison."""
+
+from __future__ import annotations
+
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import mpm
+from mpm import analytic
+from mpm.diagnostics import relative_drift, spilled_fraction
+
+
+class Drift:
+    """Relative drift of conserved quantities between the first and last
+    measurement: against the first value, or the largest scale seen when the
+    first is near zero (mpm.diagnostics.relative_drift; angular momentum is
+    about the centre of mass)."""
+
+    def __init__(self, names: list[str]):
+        self.names = names
+        self.p_idx = [i for i, n in enumerate(names) if n.startswith("momentum_") and n != "momentum_scale"]
+        self.L_idx = [i for i, n in enumerate(names)
+                      if n.startswith("angular_momentum") and n != "angular_momentum_scale"]
+        self.first: np.ndarray | None = None
+        self.last: np.ndarray | None = None
+        self.p_scale = self.L_scale = 0.0
+
+    def add(self, d: np.ndarray) -> None:
+        if self.first is None:
+            self.first = d.copy()
+        self.last = d
+        self.p_scale = max(self.p_scale, d[self.names.index("momentum_scale")])
+        self.L_scale = max(self.L_scale, d[self.names.index("angular_momentum_scale")])
+
+    def _rel(self, idx: list[int], scale: float) -> float:
+        return relative_drift(self.first[idx], self.last[idx], scale)
+
+    def energy(self, d: np.ndarray) -> float:
+        return float(sum(d[self.names.index(k)] for k in ("kinetic_energy", "elastic_energy",
+                                                          "potential_energy")))
+
+    def summary(self) -> dict:
+        if self.first is None:
+            return {}
+        m0, m1 = self.first[0], self.last[0]
+        return {
+            "mass_drift": abs(m1 - m0) / m0 if m0 else 0.0,
+            "momentum_drift": self._rel(self.p_idx, self.p_scale),
+            "angular_momentum_drift": self._rel(self.L_idx, self.L_scale),
+            "energy_initial": self.energy(self.first),
+            "energy_final": self.energy(self.last),
+            "kinetic_energy_final": float(self.last[self.names.index("kinetic_energy")]),
+            "elastic_energy_final": float(self.last[self.names.index("elastic_energy")]),
+        }
+
+
+def peak_rss_mb() -> float | None:
+    """The process's peak resident memory [MB] so far (None where the OS does not say)."""
+    try:
+        import resource
+    except ImportError:  # not a Unix
+        return None
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / 1e6 if sys.platform == "darwin" else kb / 1e3  # macOS counts bytes
+
+
+def median(xs: list[float]) -> float | None:
+    return statistics.median(xs) if xs else None
+
+
+def plastic_fields(model, state) -> dict[str, np.ndarray]:
+    """Named per-particle fields of the plastic bodies (mpm.materials.Plastic.fields)
+    as the last return mapping left them; NaN on the particles of other bodies."""
+    if not model.plastic:
+        return {}
+    history = state.history.numpy()
+    J_E = np.linalg.det(state.Fsn.numpy() @ state.F0s.numpy())
+    n = model.n_particles
+    out: dict[str, np.ndarray] = {}
+    for body, (start, count) in zip(model.scene.bodies, model.body_ranges):
+        if body.material.plastic:
+            rows = slice(start, start + count)
+            for name, values in body.material.fields(history[rows], J_E[rows]).items():
+                out.setdefault(name, np.full(n, np.nan, np.float32))[start:start + count] = values
+    return out
+
+
+def plastic_summary(model, state) -> dict:
+    """metrics.json ``plastic``: per plastic body, min / mean / max of each field."""
+    fields = plastic_fields(model, state)
+    out = {}
+    for body, (start, count) in zip(model.scene.bodies, model.body_ranges):
+        if body.material.plastic:
+            rows = {k: v[start:start + count] for k, v in fields.items()}
+            out[body.name] = {k: {"min": float(np.min(v)), "mean": float(np.mean(v)), "max": float(np.max(v))}
+                              for k, v in rows.items() if np.isfinite(v).all()}
+    return out
+
+
+def implicit_summary(integrator, newton: list[tuple[int, int, float]], halvings: int) -> dict:
+    """metrics.json ``implicit``: Newton and CG iterations per step (``newton``:
+    per step the Newton and CG iterations and the residual)."""
+    out = {"newton_max": integrator.newton_max, "newton_tol": integrator.newton_tol,
+           "cg_max": integrator.cg_max, "cg_tol": integrator.cg_tol, "halvings": halvings}
+    if newton:
+        a = np.array(newton, dtype=float)
+        out.update(newton_mean=float(a[:, 0].mean()), newton_max_seen=int(a[:, 0].max()),
+                   cg_mean=float(a[:, 1].mean()), cg_max_seen=int(a[:, 1].max()),
+                   cg_per_newton=float(a[:, 1].sum() / max(a[:, 0].sum(), 1.0)),
+                   residual_max=float(a[:, 2].max()))
+    return out
+
+
+def spilled(model, state) -> dict:
+    """Per fluid body and bowl-shaped body, the fraction of the fluid below
+    the bowl's rim plane outside it (mpm.diagnostics.spilled_fraction)."""
+    bodies = model.scene.bodies
+    bowls = [b for b in bodies if isinstance(b.shape, mpm.scene.Bowl)]
+    fluids = [(i, b) for i, b in enumerate(bodies) if b.material.fluid]
+    if not bowls or not fluids:
+        return {}
+    x, body = state.x.numpy().astype(np.float64), model.body.numpy()
+    return {f"{b.name}/{bowl.name}": spilled_fraction(x[body == i], bowl.shape)
+            for i, b in fluids for bowl in bowls}
+
+
+def reference_errors(path: str, state, X0: np.ndarray, t: float) -> dict:
+    """RMS difference of the final positions and velocities to a reference
+    run's final state with the same particles (the A-ULMPM paper's eq. 36);
+    ``problem`` says why there is none."""
+    ref = np.load(path)
+    out = {"solution": "reference", "reference": path}
+    if ref["X0"].shape != X0.shape or not np.allclose(ref["X0"], X0, rtol=0, atol=1e-9):
+        return {**out, "problem": "the reference has other particles (scene.particle_resolution "
+                                  "fixes the particle set across grids)"}
+    if abs(float(ref["time"]) - t) > 1e-9 * max(1.0, t):
+        return {**out, "problem": f"the reference ends at t = {float(ref['time']):.6g} s, this run at {t:.6g} s"}
+    x, v = state.x.numpy().astype(np.float64), state.v.numpy().astype(np.float64)
+    return {"displacement": analytic.rms(x, ref["x"].astype(np.float64)),
+            "velocity": analytic.rms(v, ref["v"].astype(np.float64)), **out}
+
+
+def save_final_state(path: Path, model, state, X0: np.ndarray, step: int, t: float) -> None:
+    """``final_state.npz``: positions x, velocities v, initial positions X0
+    and masses of the last state (self-convergence and trade-off studies
+    compare these)."""
+    np.savez(path, x=state.x.numpy(), v=state.v.numpy(), X0=X0, mass=model.mass.numpy(),
+             body=model.body.numpy(), step=step, time=t)
