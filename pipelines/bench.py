@@ -63,7 +63,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import bench_scale, schema
+from . import bench_scale
+from .config import schema
 from .bench_runs import QUIET, interleaved, loop_s, spec_for, timed
 from .runner import execute
 from .warp_setup import init_warp

@@ -10,7 +10,7 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 
 from .runner import execute
-from .validate import resolve
+from .config.validate import resolve
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 QUIET = ["log.every=0", "log.scalars=false", "log.progress=false"]  # step only

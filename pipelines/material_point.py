@@ -109,9 +109,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from hydra import compose, initialize_config_dir
 
-    from . import schema
-    from .errors import describe
-    from .validate import make_material
+    from .config import schema
+    from .config.errors import describe
+    from .config.validate import make_material
     from .warp_setup import init_warp
 
     schema.register()

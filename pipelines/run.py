@@ -24,9 +24,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from . import provenance, schema
-from .errors import EXIT_CODES, EXIT_CONFIG, describe
-from .validate import ConfigError, check_memory, resolve
+from . import provenance
+from .config import schema
+from .config.errors import EXIT_CODES, EXIT_CONFIG, describe
+from .config.validate import ConfigError, check_memory, resolve
 from .warp_setup import init_warp
 
 schema.register()

@@ -27,7 +27,7 @@ from . import provenance
 from .progress import Progress
 from .rerun_sink import RerunSink
 from .sinks import RunMeta, Sink
-from .validate import RunSpec
+from .config.validate import RunSpec
 
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]

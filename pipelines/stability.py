@@ -36,7 +36,7 @@ import mpm
 
 from .runner import execute, write_metrics
 from .sinks import Sink
-from .validate import MapSpec
+from .config.validate import MapSpec
 
 MAP_KEY = "stability_map"
 # the letter after a failure step in the heat maps

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from pipelines import schema
-from pipelines.validate import resolve
+from pipelines.config import schema
+from pipelines.config.validate import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"

@@ -10,7 +10,7 @@ import pytest
 import mpm
 from helpers import ROOT, run_cli, spec_for
 from mpm.analytic import VibratingBar, Vortex
-from pipelines.validate import ConfigError
+from pipelines.config.validate import ConfigError
 
 MU, LAM, RHO = 384.6, 576.9, 1.0
 

@@ -13,7 +13,7 @@ from helpers import compose_cfg
 from pipelines.granular import deposit, lajeunesse_height, lube_runout, nearest
 from pipelines.report import Job
 from pipelines.runner import execute
-from pipelines.validate import resolve
+from pipelines.config.validate import resolve
 
 
 # the heaps are at rest by these times (kinetic energy below 1e-6 of the initial energy)

@@ -13,7 +13,7 @@ import mpm
 from helpers import DEVICE, compose_cfg, spec_for
 from mpm.integrators import Implicit
 from pipelines.runner import execute
-from pipelines.validate import resolve
+from pipelines.config.validate import resolve
 from reference_mpm import ImplicitSystem
 
 

@@ -8,7 +8,7 @@ import mpm
 from helpers import compose_cfg
 from pipelines import recordings
 from pipelines.runner import execute
-from pipelines.validate import resolve
+from pipelines.config.validate import resolve
 
 KERNELS = list(mpm.KERNELS)
 SCHEMES = ["empm", "tlmpm", "aulmpm"]

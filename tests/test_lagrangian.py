@@ -10,7 +10,7 @@ import mpm
 from helpers import DEVICE, compose_cfg, spec_for
 from pipelines import recordings
 from pipelines.runner import execute
-from pipelines.validate import resolve
+from pipelines.config.validate import resolve
 
 
 def run_scene(overrides, tmp_path, name):

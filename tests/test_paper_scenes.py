@@ -9,7 +9,7 @@ import pytest
 from helpers import compose_cfg, group_options, spec_for
 from pipelines.provenance import config_hash
 from pipelines.runner import execute
-from pipelines.validate import ConfigError
+from pipelines.config.validate import ConfigError
 
 SIZED = [s for s in group_options("scene") if compose_cfg([f"scene={s}"]).scene.sizes]
 PAPER_SCENES = {"snow_bunnies", "water_bunny", "bowl_fsi", "viscous_cup", "falling_bodies", "dam_break",

@@ -12,7 +12,7 @@ from omegaconf import OmegaConf
 
 from helpers import compose_cfg
 from pipelines import recordings
-from pipelines.validate import resolve
+from pipelines.config.validate import resolve
 from pipelines.runner import execute
 
 

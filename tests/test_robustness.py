@@ -10,7 +10,7 @@ import pytest
 from helpers import DEVICE, compose_cfg, spec_for
 from pipelines.runner import execute
 from pipelines.sinks import Sink
-from pipelines.validate import ConfigError, memory_estimate, resolve
+from pipelines.config.validate import ConfigError, memory_estimate, resolve
 
 # (overrides, the key the one-line message names, a fragment of the message)
 REFUSED = [
@@ -54,7 +54,7 @@ def test_bad_input_is_refused_in_one_line_naming_the_key(overrides, key, fragmen
 def test_runs_that_cannot_fit_are_refused_with_the_estimate(override, key):
     """A valid config too large for this machine's memory (24 GiB here):
     refused before sampling, with the estimate and the limit."""
-    from pipelines.validate import check_memory
+    from pipelines.config.validate import check_memory
 
     spec = spec_for([override])
     with pytest.raises(ConfigError) as err:

@@ -11,7 +11,7 @@ from helpers import DEVICE, compose_cfg, group_options, spec_for
 from mpm.integrators import Implicit
 from pipelines.runner import execute
 from pipelines.sinks import Sink
-from pipelines.validate import ConfigError, resolve
+from pipelines.config.validate import ConfigError, resolve
 
 BALL = ["scene.resolution=24", "log.every=0"]  # the default elastic ball (slip walls, gravity), small
 
@@ -161,7 +161,7 @@ def test_map_job_runs_its_points(tmp_path):
     metrics are not jobs of the sweep."""
     from pipelines.report import load_jobs
     from pipelines.stability import largest_stable, run_map
-    from pipelines.validate import MapSpec
+    from pipelines.config.validate import MapSpec
 
     spec = spec_for(["scene=stability_ball_2d"])
     m = run_map(spec, MapSpec(E=[1e4, 1e8], dt_cfl=[0.5, 5.0], steps=10), tmp_path, {"config_hash": "h"})

@@ -94,7 +94,7 @@ def test_named_experiments_compose(name, scale):
     params = OmegaConf.to_container(cfg.hydra.sweeper.params, resolve=True)
     assert params and all(isinstance(v, str) and v for v in params.values())
     assert cfg.hydra.sweep.dir == f"multirun/{name}/{scale}"
-    from pipelines.validate import resolve
+    from pipelines.config.validate import resolve
 
     cfg_job = compose_cfg([f"+experiment={name}", f"scale={scale}"])
     resolve(cfg_job)  # the experiment's own settings are valid

@@ -738,7 +738,7 @@ def _known_keys(cfg) -> None:
 
 
 def resolve(cfg) -> RunSpec:
-    """Validate a composed :class:`pipelines.schema.Config`."""
+    """Validate a composed :class:`pipelines.config.schema.Config`."""
     _known_keys(cfg)
     run = make_run(cfg.run)
     scheme = make_scheme(cfg.scheme)
