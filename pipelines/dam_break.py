@@ -29,7 +29,7 @@ MARTIN_MOYCE_Z = np.array([1.11, 1.22, 1.44, 1.67, 1.89, 2.11, 2.33, 2.56, 2.78,
 
 def front(job: Job) -> tuple[np.ndarray, np.ndarray] | None:
     """(T, Z) of the job's surge front from its recording, or None."""
-    from . import recordings
+    from .recording import recordings
 
     cfg = job.config or {}
     try:

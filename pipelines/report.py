@@ -799,7 +799,7 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
         return lines
     read_list = with_rec[:MAX_RECORDINGS]
     series, failed = [], []
-    from .recordings import read
+    from .recording.recordings import read
 
     for j in read_list:
         try:

@@ -25,8 +25,8 @@ from mpm.diagnostics import relative_drift, spilled_fraction
 
 from . import provenance
 from .progress import Progress
-from .rerun_sink import RerunSink
-from .sinks import RunMeta, Sink
+from .recording.rerun_sink import RerunSink
+from .recording.sinks import RunMeta, Sink
 from .config.validate import RunSpec
 
 

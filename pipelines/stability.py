@@ -35,7 +35,7 @@ import numpy as np
 import mpm
 
 from .runner import execute, write_metrics
-from .sinks import Sink
+from .recording.sinks import Sink
 from .config.validate import MapSpec
 
 MAP_KEY = "stability_map"

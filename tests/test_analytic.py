@@ -110,7 +110,7 @@ def test_vortex_run_measures_a_converging_error(tmp_path):
     """TLMPM on the manufactured vortex for 0.05 s: the displacement error
     against the exact motion falls by more than 2x from 32^2 to 64^2, and is
     recorded every step in the recording."""
-    from pipelines.recordings import read
+    from pipelines.recording.recordings import read
 
     errs = []
     for r in (32, 64):
@@ -197,7 +197,7 @@ def test_bad_solution_settings_name_the_key(overrides, key):
 def test_error_against_a_reference_run(tmp_path):
     """run.reference: the run measures E = sqrt(sum |phi - phi_ref|^2 / n_p)
     against a finer run's final state with the same particles (paper eq. 36)."""
-    from pipelines.recordings import read
+    from pipelines.recording.recordings import read
 
     common = ["scene=rotating_plate_2d", "scene.particle_resolution=32", "run.steps=20", "run.dt=1e-4",
               "run.precision=float64", "log.every=0"]

@@ -285,7 +285,7 @@ def test_drawn_surfaces_lie_on_the_collider(collider):
     """Every vertex of the recording's surface is on the zero level set of
     the collider's signed distance; in 2D the unbounded shapes are drawn as
     the outline of their solid within the domain (on or inside the solid)."""
-    from pipelines.surfaces import outline_2d, surface_3d
+    from pipelines.recording.surfaces import outline_2d, surface_3d
 
     v, f = surface_3d(collider, np.zeros(3), np.ones(3))
     assert len(v) >= 4 and len(f) >= 2 and f.max() < len(v)

@@ -6,7 +6,7 @@ import pytest
 
 import mpm
 from helpers import compose_cfg
-from pipelines import recordings
+from pipelines.recording import recordings
 from pipelines.runner import execute
 from pipelines.config.validate import resolve
 

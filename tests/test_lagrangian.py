@@ -8,7 +8,7 @@ import pytest
 
 import mpm
 from helpers import DEVICE, compose_cfg, spec_for
-from pipelines import recordings
+from pipelines.recording import recordings
 from pipelines.runner import execute
 from pipelines.config.validate import resolve
 
@@ -30,7 +30,7 @@ def test_rotating_plate_fractures_only_with_the_eulerian_scheme(tmp_path):
         assert m[s]["fracture"]["total"] == 0.0 and m[s]["fragments"]["total"] == 1, s
     assert m["aulmpm"]["config_updates"]["total"] < m["aulmpm"]["steps"] / 20
     # the recording carries the pieces beside the broken fraction, ending on metrics.json's count
-    from pipelines.recordings import read
+    from pipelines.recording.recordings import read
 
     scalars = read(tmp_path / "empm" / "recording.rrd").scalars
     assert scalars["fragments"][1][-1] == m["empm"]["fragments"]["total"]

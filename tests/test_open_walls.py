@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from helpers import spec_for
-from pipelines import recordings
+from pipelines.recording import recordings
 from pipelines.runner import execute
 
 # a ball translating at v = 4 m/s towards the open x_hi face, no gravity: a

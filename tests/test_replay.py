@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from helpers import ROOT, run_cli
-from pipelines import recordings
+from pipelines.recording import recordings
 
 
 @pytest.mark.bitwise

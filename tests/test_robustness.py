@@ -9,7 +9,7 @@ import pytest
 
 from helpers import DEVICE, compose_cfg, spec_for
 from pipelines.runner import execute
-from pipelines.sinks import Sink
+from pipelines.recording.sinks import Sink
 from pipelines.config.validate import ConfigError, memory_estimate, resolve
 
 # (overrides, the key the one-line message names, a fragment of the message)

@@ -10,7 +10,7 @@ import mpm
 from helpers import DEVICE, compose_cfg, group_options, spec_for
 from mpm.integrators import Implicit
 from pipelines.runner import execute
-from pipelines.sinks import Sink
+from pipelines.recording.sinks import Sink
 from pipelines.config.validate import ConfigError, resolve
 
 BALL = ["scene.resolution=24", "log.every=0"]  # the default elastic ball (slip walls, gravity), small

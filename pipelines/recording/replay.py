@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import provenance, recordings, runner
+from . import recordings
+from .. import provenance, runner
 
 
 def rerun_executable() -> str:

@@ -3,7 +3,7 @@
 ``recording.rrd`` holds the physics and how to reproduce it: two identical
 runs give recordings that ``rerun rrd compare --unordered`` finds equal (rows
 are sent as chunks of their own, so chunking does not depend on timing).
-``recording.timings.rrd`` (:func:`pipelines.sinks.timings_path`) holds the wall-clock side:
+``recording.timings.rrd`` (:func:`pipelines.recording.sinks.timings_path`) holds the wall-clock side:
 step and update times, start time, host and command line. Both carry the same
 recording id, so the viewer merges them when opened together.
 
