@@ -2,7 +2,7 @@
 ``python -m pipelines.bench``.
 
 Everything runs through the same code path as ``pipelines.run``
-(:func:`pipelines.runner.execute`), after a warm-up run, in one process:
+(:func:`pipelines.run.runner.execute`), after a warm-up run, in one process:
 
 1. speed (EMPM): the 2D elastic ball (128^2 grid) and a 3D elastic sphere
    (64^3), each twice: step only (no particles, no scalars) and logged
@@ -66,8 +66,8 @@ from pathlib import Path
 from . import bench_scale
 from .config import schema
 from .bench_runs import QUIET, interleaved, loop_s, spec_for, timed
-from .runner import execute
-from .warp_setup import init_warp
+from .run.runner import execute
+from .run.warp_setup import init_warp
 
 CASES = {
     "ball_2d": ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated"],

@@ -1,5 +1,5 @@
 """What every bench table runs on: a configuration composed like the command
-line's, run through :func:`pipelines.runner.execute`, and interleaved rounds
+line's, run through :func:`pipelines.run.runner.execute`, and interleaved rounds
 that keep each configuration's fastest run (a drift of the machine's speed
 hits every configuration alike; its noise only ever adds time)."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from .runner import execute
+from .run.runner import execute
 from .config.validate import resolve
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

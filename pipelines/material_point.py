@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     from .config import schema
     from .config.errors import describe
     from .config.validate import make_material
-    from .warp_setup import init_warp
+    from .run.warp_setup import init_warp
 
     schema.register()
     conf = Path(__file__).resolve().parents[1] / "conf"

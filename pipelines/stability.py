@@ -34,7 +34,7 @@ import numpy as np
 
 import mpm
 
-from .runner import execute, write_metrics
+from .run.runner import execute, write_metrics
 from .recording.sinks import Sink
 from .config.validate import MapSpec
 

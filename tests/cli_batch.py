@@ -20,7 +20,7 @@ def one(args: list[str]) -> tuple[int, str]:
     runs afresh as __main__: Hydra finds conf/ from its file)."""
     GlobalHydra.instance().clear()
     report.SWEEPS.clear()
-    sys.argv = ["pipelines/run.py", *args]
+    sys.argv = ["pipelines/run/__main__.py", *args]
     err = io.StringIO()
     code = 0
     with contextlib.redirect_stderr(err):

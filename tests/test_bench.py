@@ -7,7 +7,7 @@ import mpm
 from helpers import DEVICE, spec_for
 from mpm.memory import array_bytes
 from pipelines import bench_scale
-from pipelines.runner import execute, solver_options
+from pipelines.run.runner import execute, solver_options
 from pipelines.recording.sinks import Sink
 
 SMALL = ["scene=elastic_ball_2d", "scene.resolution=32", "scheme=empm", "detect.action=off"]

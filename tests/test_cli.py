@@ -255,7 +255,7 @@ def test_a_signal_landing_in_a_finaliser_is_not_lost():
     """Python ignores an exception raised in __del__; Warp arrays die every
     step. In the step loop a signal is therefore remembered and raised at the
     next step boundary; a second one raises at once."""
-    from pipelines.runner import Interrupts
+    from pipelines.run.runner import Interrupts
 
     interrupts = Interrupts()
     interrupts.deferred = True

@@ -6,7 +6,7 @@ import json
 import pytest
 
 from helpers import compose_cfg, group_options, spec_for
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 
 SCENES = group_options("scene")
 MATERIALS = group_options("material")

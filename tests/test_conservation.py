@@ -138,7 +138,7 @@ def test_angular_momentum_is_measured_about_the_centre_of_mass(dim):
         L = sum m (x - c) x v + m axial(C D F^sn,T),  c = sum m x / sum m,
     (recomputed here in NumPy from the particles), and the run's drift is
     |L(t) - L(0)| / |L(0)|, not diluted by the orbital m c x v."""
-    from pipelines.runner import Drift
+    from pipelines.run.runner import Drift
 
     centre = (0.7, 0.6) if dim == 2 else (0.7, 0.6, 0.55)
     w = 5.0 if dim == 2 else (1.0, 2.0, 4.0)

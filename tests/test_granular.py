@@ -12,7 +12,7 @@ import pytest
 from helpers import compose_cfg
 from pipelines.granular import deposit, lajeunesse_height, lube_runout, nearest
 from pipelines.report import Job
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
 
 

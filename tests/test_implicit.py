@@ -12,7 +12,7 @@ import warp as wp
 import mpm
 from helpers import DEVICE, compose_cfg, spec_for
 from mpm.integrators import Implicit
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
 from reference_mpm import ImplicitSystem
 

@@ -7,7 +7,7 @@ import pytest
 import mpm
 from helpers import compose_cfg
 from pipelines.recording import recordings
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
 
 KERNELS = list(mpm.KERNELS)

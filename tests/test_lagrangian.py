@@ -9,7 +9,7 @@ import pytest
 import mpm
 from helpers import DEVICE, compose_cfg, spec_for
 from pipelines.recording import recordings
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
 
 

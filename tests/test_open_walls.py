@@ -6,7 +6,7 @@ import pytest
 
 from helpers import spec_for
 from pipelines.recording import recordings
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 
 # a ball translating at v = 4 m/s towards the open x_hi face, no gravity: a
 # rigid translation, which every scheme reproduces exactly (zero stress, the

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from helpers import compose_cfg, group_options, spec_for
-from pipelines.provenance import config_hash
-from pipelines.runner import execute
+from pipelines.run.provenance import config_hash
+from pipelines.run.runner import execute
 from pipelines.config.validate import ConfigError
 
 SIZED = [s for s in group_options("scene") if compose_cfg([f"scene={s}"]).scene.sizes]

@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 from helpers import compose_cfg
 from pipelines.recording import recordings
 from pipelines.config.validate import resolve
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 
 
 def run_twice(tmp_path, overrides):

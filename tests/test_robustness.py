@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from helpers import DEVICE, compose_cfg, spec_for
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.recording.sinks import Sink
 from pipelines.config.validate import ConfigError, memory_estimate, resolve
 
@@ -118,7 +118,7 @@ def test_a_failed_build_keeps_its_reason_in_metrics(tmp_path, monkeypatch):
 
 
 def test_material_override_on_a_scene_with_its_own_materials_is_said():
-    from pipelines.run import unused_overrides
+    from pipelines.run.__main__ import unused_overrides
 
     own = spec_for(["scene=rotating_plate_2d", "material.E=5"])
     notes = unused_overrides(own, ["scene=rotating_plate_2d", "material.E=5"])

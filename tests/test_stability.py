@@ -9,7 +9,7 @@ import pytest
 import mpm
 from helpers import DEVICE, compose_cfg, group_options, spec_for
 from mpm.integrators import Implicit
-from pipelines.runner import execute
+from pipelines.run.runner import execute
 from pipelines.recording.sinks import Sink
 from pipelines.config.validate import ConfigError, resolve
 

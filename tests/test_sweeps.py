@@ -8,7 +8,7 @@ import pytest
 
 from helpers import ROOT, compose_cfg, group_options, run_cli
 from omegaconf import OmegaConf
-from pipelines import provenance
+from pipelines.run import provenance
 
 TINY = ["scene=rotating_plate_2d", "scene.resolution=16", "run.steps=3", "log.every=0"]
 REPORT_FILES = ["report.md", "runs.csv", "speed.csv", "speed.png", "fracture.csv", "fracture.png",

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from . import recordings
-from .. import provenance, runner
+from ..run import provenance, runner
 
 
 def rerun_executable() -> str:

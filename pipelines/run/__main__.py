@@ -2,7 +2,7 @@
 
 Hydra composes the config from ``conf/`` (groups scheme, kernel, material,
 scene; settings run and log), the run is validated before anything is
-compiled or allocated, and :func:`pipelines.runner.execute` writes
+compiled or allocated, and :func:`pipelines.run.runner.execute` writes
 ``recording.rrd`` and ``metrics.json`` into the Hydra run directory.
 
 Exit codes: 0 completed, 1 failed (exception), 2 bad configuration,
@@ -25,9 +25,9 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from . import provenance
-from .config import schema
-from .config.errors import EXIT_CODES, EXIT_CONFIG, describe
-from .config.validate import ConfigError, check_memory, resolve
+from ..config import schema
+from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
+from ..config.validate import ConfigError, check_memory, resolve
 from .warp_setup import init_warp
 
 schema.register()
@@ -77,7 +77,7 @@ def run(cfg: DictConfig) -> dict:
             _last_status.append(done["status"])
             return done
     if spec.stability_map is not None:  # a stability map: its points in this process
-        from .stability import run_map
+        from ..stability import run_map
 
         metrics = run_map(spec, spec.stability_map, out_dir, identity)
     else:
@@ -131,7 +131,7 @@ def _remove_if_empty(run_dir: Path) -> None:
         shutil.rmtree(run_dir, ignore_errors=True)
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path="../../conf", config_name="config")
 def _main(cfg: DictConfig):
     return run(cfg)
 
@@ -157,7 +157,7 @@ def main() -> None:
         _config_errors.append(message)
     if _config_errors:  # run() has printed its own
         sys.exit(EXIT_CONFIG)
-    from .report import SWEEPS
+    from ..report import SWEEPS
 
     if SWEEPS:  # a multirun: the worst outcome of any job (the summary line is printed)
         statuses = {s for outcome in SWEEPS for s in outcome}

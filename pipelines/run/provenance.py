@@ -12,7 +12,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("warp-lang", "numpy", "rerun-sdk", "hydra-core", "omegaconf", "aulmpm-toolkit")
 
 

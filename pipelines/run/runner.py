@@ -25,9 +25,9 @@ from mpm.diagnostics import relative_drift, spilled_fraction
 
 from . import provenance
 from .progress import Progress
-from .recording.rerun_sink import RerunSink
-from .recording.sinks import RunMeta, Sink
-from .config.validate import RunSpec
+from ..recording.rerun_sink import RerunSink
+from ..recording.sinks import RunMeta, Sink
+from ..config.validate import RunSpec
 
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
