@@ -1,4 +1,4 @@
-"""The bench's accounting (pipelines.bench_scale, mpm.memory): launches per
+"""The bench's accounting (pipelines.bench.scale, mpm.memory): launches per
 step, the arrays a run holds. Speed itself is measured by the bench, not here."""
 
 import warp as wp
@@ -6,7 +6,7 @@ import warp as wp
 import mpm
 from helpers import DEVICE, spec_for
 from mpm.memory import array_bytes
-from pipelines import bench_scale
+from pipelines.bench import scale as bench_scale
 from pipelines.run.runner import execute, solver_options
 from pipelines.recording.sinks import Sink
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from .run.runner import execute
-from .config.validate import resolve
+from ..run.runner import execute
+from ..config.validate import resolve
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(__file__).resolve().parents[2] / "conf"
 QUIET = ["log.every=0", "log.scalars=false", "log.progress=false"]  # step only
 REPEATS = 5  # timed runs of each configuration; the fastest median is reported
 WARM = ["run.steps=3"]  # a warm-up run compiles (or loads) the kernels first

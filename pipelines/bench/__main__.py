@@ -44,11 +44,11 @@ Everything runs through the same code path as ``pipelines.run``
    fused path for the quadratic and cubic kernels).
 8. stages: the 2D ball with one optional stage added at a time, and the
    launches per step; profile: where a step's time goes, per kernel and
-   host work, on the 2D ball and the 3D sphere (pipelines.bench_scale).
+   host work, on the 2D ball and the 3D sphere (pipelines.bench.scale).
 
 ``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
 and ``--scaling`` the growth of cost and memory from about 10K to 1M
-particles (pipelines.bench_scale; minutes each); ``--only`` picks tables.
+particles (pipelines.bench.scale; minutes each); ``--only`` picks tables.
 
 Each timed configuration runs five times and the fastest median counts
 (the machine's noise only ever adds time). ``--cold`` compiles into an empty
@@ -63,11 +63,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import bench_scale
-from .config import schema
-from .bench_runs import QUIET, interleaved, loop_s, spec_for, timed
-from .run.runner import execute
-from .run.warp_setup import init_warp
+from . import scale
+from ..config import schema
+from .runs import QUIET, interleaved, loop_s, spec_for, timed
+from ..run.runner import execute
+from ..run.warp_setup import init_warp
 
 CASES = {
     "ball_2d": ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated"],
@@ -216,7 +216,7 @@ SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel",
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m pipelines.bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
     p.add_argument("--steps", type=int, default=None, help="steps per timed run")
     p.add_argument("--cold", action="store_true", help="compile into an empty kernel cache")
@@ -258,10 +258,10 @@ def main(argv=None) -> None:
         materials = bench_materials(Path(tmp), 40) if args.materials else []
         integrators = bench_integrators(Path(tmp)) if args.integrators else []
         fused = bench_fused(Path(tmp), 40) if args.fused else []
-        stages = bench_scale.bench_stages(Path(tmp)) if args.stages else []
-        profile = bench_scale.profile() if args.profile else []
-        paper = bench_scale.bench_paper(Path(tmp)) if args.paper else []
-        scaling = bench_scale.bench_scaling(Path(tmp)) if args.scaling else []
+        stages = scale.bench_stages(Path(tmp)) if args.stages else []
+        profile = scale.profile() if args.profile else []
+        paper = scale.bench_paper(Path(tmp)) if args.paper else []
+        scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
@@ -324,13 +324,13 @@ def main(argv=None) -> None:
             print(f"{r['case']:<26} {r['particles']:>9,} {r['fused_ms']:>9.3f} {r['cached_ms']:>10.3f} "
                   f"{r['cached_ms'] / r['fused_ms']:>8.2f}x")
     if stages:
-        bench_scale.print_stages(stages)
+        scale.print_stages(stages)
     if profile:
-        bench_scale.print_profile(profile)
+        scale.print_profile(profile)
     if paper:
-        bench_scale.print_paper(paper)
+        scale.print_paper(paper)
     if scaling:
-        bench_scale.print_scaling(scaling)
+        scale.print_scaling(scaling)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,

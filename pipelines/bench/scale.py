@@ -26,8 +26,8 @@ import warp as wp
 import mpm
 from mpm.launch import Launches, kernel_name
 
-from .bench_runs import QUIET, interleaved, spec_for, step_ms, timed
-from .run.runner import execute, solver_options
+from .runs import QUIET, interleaved, spec_for, step_ms, timed
+from ..run.runner import execute, solver_options
 
 # A-ULMPM Table 2 (journal version): scene label, overrides, seconds per step, machine, particles
 PAPER_TABLE2 = [
