@@ -1,7 +1,7 @@
 """Granular column collapse (Drucker-Prager sand, 40 deg, rough floor): the
 deposit follows the published scaling of dry column collapse within 25 %.
 
-Reference (pipelines.granular): run-out (L_inf - L0)/L0 = 1.2 a (a < 1.8),
+Reference (pipelines.report.sections.granular): run-out (L_inf - L0)/L0 = 1.2 a (a < 1.8),
 1.9 a^(2/3) (a > 2.8) (Lube et al. 2005; both branches in between, the
 nearest counts); final height H_inf / L0 = a^(1/3) (Lajeunesse et al. 2005,
 2D). A-ULMPM on the tall column, whose flow is the largest (its a = 2
@@ -10,7 +10,7 @@ deposit and TLMPM's are in RESULTS.md: TLMPM takes 4-6 times the steps)."""
 import pytest
 
 from helpers import compose_cfg
-from pipelines.granular import deposit, lajeunesse_height, lube_runout, nearest
+from pipelines.report.sections.granular import deposit, lajeunesse_height, lube_runout, nearest
 from pipelines.report import Job
 from pipelines.run.runner import execute
 from pipelines.config.validate import resolve

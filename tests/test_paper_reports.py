@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from helpers import ROOT, run_cli
-from pipelines.dam_break import MARTIN_MOYCE_T, MARTIN_MOYCE_Z
+from pipelines.report.sections.dam_break import MARTIN_MOYCE_T, MARTIN_MOYCE_Z
 from pipelines.report import write_report
 from test_report import _job, _metrics
 
@@ -61,7 +61,7 @@ def test_dam_break_front_against_the_experiment(tmp_path):
     p = run_cli(["scene=dam_break_2d", "run.duration=0.06", "log.every=20",
                  f"hydra.run.dir={sweep / 'empm'}"], cwd=ROOT)
     assert p.returncode == 0, p.stderr
-    from pipelines.dam_break import front
+    from pipelines.report.sections.dam_break import front
     from pipelines.report import load_jobs
 
     jobs, _ = load_jobs(sweep)

@@ -154,13 +154,13 @@ def test_every_extreme_case_resolves(case, scale):
 
 
 def test_map_job_runs_its_points(tmp_path):
-    """A stability-map job (pipelines.stability.run_map): every point runs at
+    """A stability-map job (pipelines.sweeps.stability.run_map): every point runs at
     k times the CFL limit of its stiffness; below the limit the point
     completes, far above it the point stops unstable with its step and
     criterion; the job's metrics.json holds the map and the points' own
     metrics are not jobs of the sweep."""
     from pipelines.report import load_jobs
-    from pipelines.stability import largest_stable, run_map
+    from pipelines.sweeps.stability import largest_stable, run_map
     from pipelines.config.validate import MapSpec
 
     spec = spec_for(["scene=stability_ball_2d"])

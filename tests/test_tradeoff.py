@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pipelines.report import write_report
-from pipelines.tradeoff import center_of_mass, mass_distribution, shape_error
+from pipelines.report.sections.tradeoff import center_of_mass, mass_distribution, shape_error
 from test_report import _job, _metrics
 
 
@@ -83,7 +83,7 @@ def test_report_reads_a_tradeoff_sweep(tmp_path):
 def test_report_reads_a_stiff_integration_sweep(tmp_path):
     """Reference, explicit and implicit points: RMS errors against the
     reference (same particles), the cheapest point per error target, the plot."""
-    from pipelines.integration import cheapest, rms
+    from pipelines.report.sections.integration import cheapest, rms
 
     rng = np.random.default_rng(3)
     x_ref = rng.uniform(0.3, 0.7, size=(500, 2))

@@ -62,8 +62,8 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
     }
 
 
-# pipeline modules that read results but never shape a run
-POST_PROCESSING = {"report.py", "replay.py", "recordings.py", "bench.py", "bench_runs.py", "bench_scale.py"}
+# pipeline code that reads results but never shapes a run (paths below pipelines/, folders ending in /)
+POST_PROCESSING = ("report/", "bench/", "recording/recordings.py", "recording/replay.py", "replay.py")
 
 
 def code_hash(root: Path = REPO) -> str:
@@ -72,7 +72,7 @@ def code_hash(root: Path = REPO) -> str:
     h = hashlib.sha256()
     for pkg in ("mpm", "pipelines"):
         for f in sorted((root / pkg).rglob("*.py")):
-            if pkg == "pipelines" and f.name in POST_PROCESSING:
+            if pkg == "pipelines" and f.relative_to(root / pkg).as_posix().startswith(POST_PROCESSING):
                 continue
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())

@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
 def section_granular(jobs: list, out) -> list[str]:
     """Report section: the deposit of every column-collapse job (scenes
     ``column_collapse*``) against the published scaling (granular.csv)."""
-    from .report import _absent, _md_table, _write_csv
+    from .. import _absent, _md_table, _write_csv
 
     title = "Granular column collapse"
     have = [j for j in jobs if j.scene.startswith("column_collapse")]
@@ -160,7 +160,7 @@ def section_granular(jobs: list, out) -> list[str]:
 def section_plastic(jobs: list, out) -> list[str]:
     """Report section: the plastic fields every job with a plastic body left
     (metrics.json ``plastic``: min, mean and max per field), plastic.csv."""
-    from .report import _absent, _md_table, _write_csv
+    from .. import _absent, _md_table, _write_csv
 
     title = "Plastic state"
     rows = []

@@ -34,9 +34,9 @@ import numpy as np
 
 import mpm
 
-from .run.runner import execute, write_metrics
-from .recording.sinks import Sink
-from .config.validate import MapSpec
+from ..run.runner import execute, write_metrics
+from ..recording.sinks import Sink
+from ..config.validate import MapSpec
 
 MAP_KEY = "stability_map"
 # the letter after a failure step in the heat maps
@@ -159,7 +159,7 @@ def heat_maps(path: Path, scene: str, maps: list[tuple[tuple, dict]]) -> None:
     their failure step (log scale) with the step and the criterion's initial."""
     from matplotlib.colors import LogNorm
 
-    from .report import _pyplot
+    from ..report import _pyplot
 
     plt = _pyplot()
     n = len(maps)
@@ -205,7 +205,7 @@ def heat_maps(path: Path, scene: str, maps: list[tuple[tuple, dict]]) -> None:
 def section_stability(jobs: list, out: Path) -> list[str]:
     """Stability maps: stability.csv, one heat-map image per scene and the
     table of the largest stable step multiple per combination and stiffness."""
-    from .report import _absent, _fmt, _md_table, _write_csv
+    from ..report import _absent, _fmt, _md_table, _write_csv
 
     title = "Stability maps: the largest stable time step"
     have = [j for j in jobs if isinstance(j.metrics.get(MAP_KEY), dict)]
@@ -251,7 +251,7 @@ EXTREME_KEY = "extreme"  # the suite's config group (conf/extreme/)
 def section_extreme(jobs: list, out: Path) -> list[str]:
     """The extreme-case suite: per case and scheme the outcome against the
     expectation written in the case's file (extreme.csv)."""
-    from .report import _absent, _fmt, _md_table, _num, _write_csv
+    from ..report import _absent, _fmt, _md_table, _num, _write_csv
 
     title = "Extreme cases"
     have = [j for j in jobs if EXTREME_KEY in j.overrides]

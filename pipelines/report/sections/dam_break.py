@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import Job, _absent, _image, _md_table, _pyplot, _write_csv
+from .. import Job, _absent, _image, _md_table, _pyplot, _write_csv
 
 MARTIN_MOYCE_T = np.array([0.41, 0.84, 1.19, 1.43, 1.63, 1.83, 1.98, 2.20, 2.32, 2.51, 2.65, 2.83, 2.98,
                            3.11, 3.33])
@@ -29,7 +29,7 @@ MARTIN_MOYCE_Z = np.array([1.11, 1.22, 1.44, 1.67, 1.89, 2.11, 2.33, 2.56, 2.78,
 
 def front(job: Job) -> tuple[np.ndarray, np.ndarray] | None:
     """(T, Z) of the job's surge front from its recording, or None."""
-    from .recording import recordings
+    from ...recording import recordings
 
     cfg = job.config or {}
     try:

@@ -799,7 +799,7 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
         return lines
     read_list = with_rec[:MAX_RECORDINGS]
     series, failed = [], []
-    from .recording.recordings import read
+    from ..recording.recordings import read
 
     for j in read_list:
         try:
@@ -903,12 +903,12 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
     sweep_dir = Path(sweep_dir)
     out = Path(out) if out is not None else sweep_dir
     out.mkdir(parents=True, exist_ok=True)
-    from .dam_break import section_dam_break
-    from .granular import section_granular, section_plastic  # experiment families of their own
-    from .integration import section_integration
-    from .paper_tables import section_table3, section_table4
-    from .stability import section_extreme, section_stability, write_stability_md
-    from .tradeoff import section_tradeoff
+    from ..sweeps.stability import section_extreme, section_stability, write_stability_md
+    from .sections.dam_break import section_dam_break
+    from .sections.granular import section_granular, section_plastic  # experiment families of their own
+    from .sections.integration import section_integration
+    from .sections.paper_tables import section_table3, section_table4
+    from .sections.tradeoff import section_tradeoff
 
     jobs, duplicates = load_jobs(sweep_dir)
     lines = ["# Sweep report", "", f"Sweep: `{sweep_dir}`", ""]

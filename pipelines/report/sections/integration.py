@@ -32,7 +32,7 @@ def cheapest(points: list[tuple[str, float, float]], target: float) -> tuple[str
 def section_integration(jobs: list, out) -> list[str]:
     """Report section of a stiff-integration sweep (override +stiff):
     integration.csv and integration.png."""
-    from .report import _absent, _md_table, _pyplot, _write_csv, pareto_front
+    from .. import _absent, _md_table, _pyplot, _write_csv, pareto_front
 
     title = "Explicit against implicit: error against run time"
     have = [j for j in jobs if POINT_KEY in j.overrides]

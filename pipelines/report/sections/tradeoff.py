@@ -67,7 +67,7 @@ def center_of_mass(x, mass) -> np.ndarray:
 def section_tradeoff(jobs: list, out) -> list[str]:
     """Report section for the jobs of a trade-off sweep (override +tradeoff):
     tradeoff.csv and tradeoff.png."""
-    from .report import _absent, _config_value, _md_table, _pyplot, _write_csv
+    from .. import _absent, _config_value, _md_table, _pyplot, _write_csv
 
     title = "A-ULMPM trade-off: error against run time"
     have = [j for j in jobs if POINT_KEY in j.overrides]
@@ -106,7 +106,7 @@ def section_tradeoff(jobs: list, out) -> list[str]:
     _write_csv(out / "tradeoff.csv", headers, rows)
     lines += _md_table(headers, rows)
     if plots:
-        from .report import pareto_front
+        from .. import pareto_front
 
         plt = _pyplot()
         fig, axes = plt.subplots(1, len(plots), figsize=(6.5 * len(plots), 5), squeeze=False)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .report import Job, _absent, _md_table, _positive, _write_csv
+from .. import Job, _absent, _md_table, _positive, _write_csv
 
 # Table 3: updates per 1e4 steps (A-ULMPM) and the update cost per step (A-ULMPM, EMPM)
 PAPER_TABLE3 = {"snow_bunnies": (24.33, 0.112, 0.479), "water_bunny": (3.31, 0.021, 0.662)}

@@ -1,0 +1,1 @@
+"""Sweeps: the stability-map jobs (``stability``)."""
