@@ -12,14 +12,14 @@ import traceback
 
 from hydra.core.global_hydra import GlobalHydra
 
-from pipelines import report
+from pipelines.sweeps import callback
 
 
 def one(args: list[str]) -> tuple[int, str]:
     """One command line, as ``python -m pipelines.run`` runs it (the module
     runs afresh as __main__: Hydra finds conf/ from its file)."""
     GlobalHydra.instance().clear()
-    report.SWEEPS.clear()
+    callback.SWEEPS.clear()
     sys.argv = ["pipelines/run/__main__.py", *args]
     err = io.StringIO()
     code = 0

@@ -11,7 +11,7 @@ import pytest
 
 from helpers import compose_cfg
 from pipelines.report.sections.granular import deposit, lajeunesse_height, lube_runout, nearest
-from pipelines.report import Job
+from pipelines.report.jobs import Job
 from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
 

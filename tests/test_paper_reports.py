@@ -62,7 +62,7 @@ def test_dam_break_front_against_the_experiment(tmp_path):
                  f"hydra.run.dir={sweep / 'empm'}"], cwd=ROOT)
     assert p.returncode == 0, p.stderr
     from pipelines.report.sections.dam_break import front
-    from pipelines.report import load_jobs
+    from pipelines.report.jobs import load_jobs
 
     jobs, _ = load_jobs(sweep)
     T, Z = front(jobs[0])

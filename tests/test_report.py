@@ -12,7 +12,11 @@ import pytest
 
 from omegaconf import OmegaConf
 
-from pipelines.report import ReportCallback, assign_labels, fit_slope, load_jobs, pareto_front, write_report
+from pipelines.report import write_report
+from pipelines.report.common import pareto_front
+from pipelines.report.jobs import assign_labels, load_jobs
+from pipelines.report.sections.convergence import fit_slope
+from pipelines.sweeps.callback import ReportCallback
 
 ROOT = Path(__file__).resolve().parents[1]
 N_PARTICLES = 40

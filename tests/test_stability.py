@@ -159,8 +159,9 @@ def test_map_job_runs_its_points(tmp_path):
     completes, far above it the point stops unstable with its step and
     criterion; the job's metrics.json holds the map and the points' own
     metrics are not jobs of the sweep."""
-    from pipelines.report import load_jobs
-    from pipelines.sweeps.stability import largest_stable, run_map
+    from pipelines.report.jobs import load_jobs
+    from pipelines.report.sections.stability import largest_stable
+    from pipelines.sweeps.stability import run_map
     from pipelines.config.validate import MapSpec
 
     spec = spec_for(["scene=stability_ball_2d"])

@@ -19,7 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import Job, _absent, _image, _md_table, _pyplot, _write_csv
+from ...recording import recordings
+from ..common import absent, add_image, md_table, pyplot, write_csv
+from ..jobs import Job
+from ..registry import section
 
 MARTIN_MOYCE_T = np.array([0.41, 0.84, 1.19, 1.43, 1.63, 1.83, 1.98, 2.20, 2.32, 2.51, 2.65, 2.83, 2.98,
                            3.11, 3.33])
@@ -29,8 +32,6 @@ MARTIN_MOYCE_Z = np.array([1.11, 1.22, 1.44, 1.67, 1.89, 2.11, 2.33, 2.56, 2.78,
 
 def front(job: Job) -> tuple[np.ndarray, np.ndarray] | None:
     """(T, Z) of the job's surge front from its recording, or None."""
-    from ...recording import recordings
-
     cfg = job.config or {}
     try:
         scene = cfg["scene"]
@@ -52,6 +53,7 @@ def front(job: Job) -> tuple[np.ndarray, np.ndarray] | None:
     return rec.times * np.sqrt(2.0 * g / a), z / a
 
 
+@section(order=140)
 def section_dam_break(jobs: list[Job], out: Path) -> list[str]:
     """dam_break.csv and dam_break.png: the surge front Z(T) against Martin & Moyce."""
     title = "Dam break against Martin & Moyce (1952)"
@@ -71,10 +73,10 @@ def section_dam_break(jobs: list[Job], out: Path) -> list[str]:
         rows.append([j.label, j.resolution, j.rel, int(inside.sum()), float(np.mean(rel)),
                      float(np.max(np.abs(rel))), float(np.interp(3.0, T, Z)) if T.max() >= 3.0 else None])
     if not rows:
-        return _absent(title, "no dam_break_2d job has a readable recording")
-    _write_csv(out / "dam_break.csv", ["label", "resolution", "dir", "points", "mean_relative_deviation",
-                                       "max_relative_deviation", "Z_at_T3"], rows)
-    plt = _pyplot()
+        return absent(title, "no dam_break_2d job has a readable recording")
+    write_csv(out / "dam_break.csv", ["label", "resolution", "dir", "points", "mean_relative_deviation",
+                                      "max_relative_deviation", "Z_at_T3"], rows)
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     ax.plot(MARTIN_MOYCE_T, MARTIN_MOYCE_Z, "ko", label="Martin & Moyce 1952 (n² = 2)")
     for (label, res), (T, Z) in curves.items():
@@ -91,7 +93,7 @@ def section_dam_break(jobs: list[Job], out: Path) -> list[str]:
              "Surge front Z = z/a against T = t √(2g/a) for the column of width a and height 2a, with "
              "Martin & Moyce's measurements; deviations are relative, at their measured times "
              "([dam_break.csv](dam_break.csv)).", ""]
-    _image(lines, "dam_break.png", "dam-break surge front")
-    lines += _md_table(["label", "cells", "points", "mean deviation", "largest deviation", "Z at T = 3"],
-                       [[r[0], r[1], r[3], r[4], r[5], r[6]] for r in rows])
+    add_image(lines, "dam_break.png", "dam-break surge front")
+    lines += md_table(["label", "cells", "points", "mean deviation", "largest deviation", "Z at T = 3"],
+                      [[r[0], r[1], r[3], r[4], r[5], r[6]] for r in rows])
     return lines

@@ -30,6 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..common import absent, md_table, write_csv
+from ..registry import section
+
 
 @dataclass
 class Deposit:
@@ -129,15 +132,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+@section(order=80)
 def section_granular(jobs: list, out) -> list[str]:
     """Report section: the deposit of every column-collapse job (scenes
     ``column_collapse*``) against the published scaling (granular.csv)."""
-    from .. import _absent, _md_table, _write_csv
-
     title = "Granular column collapse"
     have = [j for j in jobs if j.scene.startswith("column_collapse")]
     if not have:
-        return _absent(title, "no column-collapse job")
+        return absent(title, "no column-collapse job")
     rows = []
     for j in sorted(have, key=lambda j: (j.scene, j.label)):
         s = j.final_state()
@@ -147,34 +149,14 @@ def section_granular(jobs: list, out) -> list[str]:
         d = deposit(s["x"].astype(float), s["X0"].astype(float))
         rows.append([j.scene, j.label, j.status, *deposit_row(d), j.num("updates_per_1e4_steps")])
     headers = ["scene", "label", "status", *DEPOSIT_HEADERS, "updates per 1e4"]
-    _write_csv(out / "granular.csv", headers, rows)
+    write_csv(out / "granular.csv", headers, rows)
     lines = [f"## {title}", "",
              "Deposit of each column at the end of the run ([granular.csv](granular.csv)): run-out "
              "(L_inf - L0) / L0, final height H_inf / L0 and surface slope (pipelines.granular), with "
              "the published scaling (pipelines.granular; Lube et al. 2005: the branch nearest the "
              "result where a lies between the branches). An unstable run's deposit is where its "
              "particles were when it stopped.", ""]
-    return lines + _md_table(headers, rows)
-
-
-def section_plastic(jobs: list, out) -> list[str]:
-    """Report section: the plastic fields every job with a plastic body left
-    (metrics.json ``plastic``: min, mean and max per field), plastic.csv."""
-    from .. import _absent, _md_table, _write_csv
-
-    title = "Plastic state"
-    rows = []
-    for j in sorted(jobs, key=lambda j: (j.scene, j.label)):
-        for body, fields in (j.metrics.get("plastic") or {}).items():
-            for name, v in fields.items():
-                rows.append([j.scene, j.label, j.status, body, name, v["min"], v["mean"], v["max"]])
-    if not rows:
-        return _absent(title, "no job with a plastic body")
-    headers = ["scene", "label", "status", "body", "field", "min", "mean", "max"]
-    _write_csv(out / "plastic.csv", headers, rows)
-    return [f"## {title}", "", "Per-particle plastic fields at the end of each run: J_P (plastic "
-            "volume ratio), density_ratio (rho / rho0), hardening factor, equivalent plastic strain, ... "
-            "([plastic.csv](plastic.csv)).", ""] + _md_table(headers, rows)
+    return lines + md_table(headers, rows)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..common import absent, md_table, pareto_front, pyplot, write_csv
+from ..registry import section
+
 POINT_KEY = "stiff"  # the sweep's config group (conf/stiff/)
 REFERENCE_POINT = "reference"
 EXPLICIT_POINT = "explicit"
@@ -29,15 +32,14 @@ def cheapest(points: list[tuple[str, float, float]], target: float) -> tuple[str
     return min(ok, key=lambda p: p[1]) if ok else None
 
 
+@section(order=150)
 def section_integration(jobs: list, out) -> list[str]:
     """Report section of a stiff-integration sweep (override +stiff):
     integration.csv and integration.png."""
-    from .. import _absent, _md_table, _pyplot, _write_csv, pareto_front
-
     title = "Explicit against implicit: error against run time"
     have = [j for j in jobs if POINT_KEY in j.overrides]
     if not have:
-        return _absent(title, "no job of a stiff-integration sweep (+stiff=...)")
+        return absent(title, "no job of a stiff-integration sweep (+stiff=...)")
     lines = [f"## {title}", "",
              f"RMS particle position and velocity error against the point `{REFERENCE_POINT}` (fine "
              "explicit) at the same end time, against the wall time spent stepping "
@@ -77,13 +79,13 @@ def section_integration(jobs: list, out) -> list[str]:
                         f"point's {explicit[1]:.3g} s)" if best else "no point")
                 notes.append(f"{scene}: position error <= {target:.2g} m "
                              f"({factor:g}x the explicit point's): fastest {what}.")
-    _write_csv(out / "integration.csv", headers, rows)
-    lines += _md_table(headers, rows)
+    write_csv(out / "integration.csv", headers, rows)
+    lines += md_table(headers, rows)
     for text in notes:
         lines += [text, ""]
     plots = {k: v for k, v in plots.items() if v}
     if plots:
-        plt = _pyplot()
+        plt = pyplot()
         fig, axes = plt.subplots(1, len(plots), figsize=(6.5 * len(plots), 5), squeeze=False)
         for ax, (scene, pts) in zip(axes[0], sorted(plots.items())):
             t = np.array([p[1] for p in pts])

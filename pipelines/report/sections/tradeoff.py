@@ -26,6 +26,10 @@ import math
 
 import numpy as np
 
+from ..common import absent, md_table, pareto_front, pyplot, write_csv
+from ..jobs import config_value
+from ..registry import section
+
 BINS = 16  # bins along the domain's first side
 POINT_KEY = "tradeoff"  # the sweep's config group (conf/tradeoff/)
 PAPER_POINT = "paper"  # the A-ULMPM paper's criterion with epsilon = eta = 0.01
@@ -64,15 +68,14 @@ def center_of_mass(x, mass) -> np.ndarray:
     return (m[:, None] * x).sum(0) / m.sum()
 
 
+@section(order=100)
 def section_tradeoff(jobs: list, out) -> list[str]:
     """Report section for the jobs of a trade-off sweep (override +tradeoff):
     tradeoff.csv and tradeoff.png."""
-    from .. import _absent, _config_value, _md_table, _pyplot, _write_csv
-
     title = "A-ULMPM trade-off: error against run time"
     have = [j for j in jobs if POINT_KEY in j.overrides]
     if not have:
-        return _absent(title, "no job of a trade-off sweep (+tradeoff=...)")
+        return absent(title, "no job of a trade-off sweep (+tradeoff=...)")
     lines = [f"## {title}", "",
              f"Shape error (total-variation distance between the mass distributions on bins of "
              f"1/{BINS} of the domain, pipelines.tradeoff) and centre-of-mass error against the "
@@ -83,7 +86,7 @@ def section_tradeoff(jobs: list, out) -> list[str]:
         members = [j for j in have if j.scene == scene]
         refs = [j for j in members if j.overrides[POINT_KEY] == REFERENCE_POINT and j.completed]
         ref = refs[0].final_state() if refs else None
-        domain = _config_value(refs[0].config, "scene", "domain") if refs else None
+        domain = config_value(refs[0].config, "scene", "domain") if refs else None
         if ref is not None and domain is not None:  # binned once per scene
             f_ref = mass_distribution(ref["x"], ref.get("mass"), domain)
             c_ref = center_of_mass(ref["x"], ref.get("mass"))
@@ -103,12 +106,10 @@ def section_tradeoff(jobs: list, out) -> list[str]:
             lines += [f"{scene}: no completed `{REFERENCE_POINT}` job, no errors.", ""]
     headers = ["scene", "point", "scheme", "status", "steps", "run time [s]", "updates / 1e4 steps",
                "dt / fresh dt", "shape error", "centre-of-mass error [m]"]
-    _write_csv(out / "tradeoff.csv", headers, rows)
-    lines += _md_table(headers, rows)
+    write_csv(out / "tradeoff.csv", headers, rows)
+    lines += md_table(headers, rows)
     if plots:
-        from .. import pareto_front
-
-        plt = _pyplot()
+        plt = pyplot()
         fig, axes = plt.subplots(1, len(plots), figsize=(6.5 * len(plots), 5), squeeze=False)
         for ax, (scene, pts) in zip(axes[0], sorted(plots.items())):
             t = np.array([p[1] for p in pts])
