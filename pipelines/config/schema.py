@@ -203,7 +203,7 @@ class Config:
     detect: Detection = field(default_factory=Detection)  # blow-up detection (mpm.stability)
     seed: int = 0
     scale: Any = None  # sizes of the named experiments (conf/scale), read by conf/experiment
-    stability_map: Optional[Any] = None  # {E, dt_cfl, steps}: the job is a stability map (pipelines.stability)
+    stability_map: Optional[Any] = None  # {E, dt_cfl, steps}: the job is a stability map (pipelines.sweeps.stability)
     expected: Optional[str] = None  # the outcome a case of the extreme suite should have (conf/extreme)
 
 

@@ -70,7 +70,7 @@ class LogSettings:
 
 @dataclass
 class MapSpec:
-    """The points of a stability map (pipelines.stability)."""
+    """The points of a stability map (pipelines.sweeps.stability)."""
 
     E: list[float]  # stiffness [Pa]: Young's modulus (a fluid's bulk modulus)
     dt_cfl: list[float]  # fixed step [multiples of the explicit CFL limit]
@@ -106,7 +106,7 @@ class RunSpec:
     seed: int
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
     detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
-    stability_map: MapSpec | None = None  # the job is a stability map (pipelines.stability)
+    stability_map: MapSpec | None = None  # the job is a stability map (pipelines.sweeps.stability)
     material_used: bool = True  # some body takes the material group (else every body brings its own)
 
     @property
