@@ -6,13 +6,18 @@ list of argument lists; OUT gets [exit code, stderr] per list."""
 import contextlib
 import io
 import json
+import os
 import runpy
 import sys
 import traceback
 
-from hydra.core.global_hydra import GlobalHydra
+# the working directory first on the path, as for ``python -m pipelines.run`` (run from the
+# checkout's root: its pipelines, not an installed copy nor anything beside this script)
+sys.path[0] = os.getcwd()
 
-from pipelines.sweeps import callback
+from hydra.core.global_hydra import GlobalHydra  # noqa: E402
+
+from pipelines.sweeps import callback  # noqa: E402
 
 
 def one(args: list[str]) -> tuple[int, str]:
