@@ -32,12 +32,23 @@ end of a multirun when listed under ``hydra.callbacks``.
 from __future__ import annotations
 
 import argparse
+import importlib
+import pkgutil
 import sys
 from pathlib import Path
 
+from . import sections
 from .common import is_absent, label_styles
 from .jobs import assign_errors, assign_labels, load_jobs
-from .registry import all_sections
+from .registry import Section, registered
+
+
+def load_sections() -> list[Section]:
+    """Every section of :mod:`pipelines.report.sections` (each of its modules
+    imported: they register their sections), in report order."""
+    for module in pkgutil.iter_modules(sections.__path__):
+        importlib.import_module(f"{sections.__name__}.{module.name}")
+    return registered()
 
 
 def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
@@ -55,7 +66,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         assign_errors(jobs)
         style = label_styles(sorted({j.label for j in jobs}))
         documents: dict[str, list[str]] = {}  # markdown files of their own: the sections they hold
-        for section in all_sections():
+        for section in load_sections():
             part = section(jobs=jobs, out=out, style=style, duplicates=duplicates)
             if section.document is not None and part and not is_absent(part):
                 documents.setdefault(section.document, []).extend(part)

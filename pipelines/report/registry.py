@@ -9,9 +9,9 @@ directory and returns its lines of ``report.md``. It takes, by name, any of
     duplicates  the number of jobs merged as copies of an identical configuration
 
 and registers itself with :func:`section`; ``report.md`` lists the sections by
-increasing ``order``. Every module of :mod:`pipelines.report.sections` is
-imported by :func:`all_sections`, so that an experiment's section is one
-module there::
+increasing ``order``. The report imports every module of
+:mod:`pipelines.report.sections` (:func:`pipelines.report.load_sections`), so
+that an experiment's section is one module there::
 
     @section(order=75)
     def section_bounce(jobs, out):
@@ -20,9 +20,7 @@ module there::
 
 from __future__ import annotations
 
-import importlib
 import inspect
-import pkgutil
 from dataclasses import dataclass
 from typing import Callable
 
@@ -68,10 +66,6 @@ def section(order: float, document: str | None = None):
     return register
 
 
-def all_sections() -> list[Section]:
-    """Every section of :mod:`pipelines.report.sections`, in report order."""
-    from . import sections
-
-    for module in pkgutil.iter_modules(sections.__path__):
-        importlib.import_module(f"{sections.__name__}.{module.name}")
+def registered() -> list[Section]:
+    """The sections registered so far, in report order."""
     return sorted(_SECTIONS.values(), key=lambda s: s.order)
