@@ -18,7 +18,7 @@ from pipelines.report.jobs import assign_labels, load_jobs
 from pipelines.report.sections.convergence import fit_slope
 from pipelines.sweeps.callback import ReportCallback
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 N_PARTICLES = 40
 
 
