@@ -164,3 +164,12 @@ def test_solver_imports_neither_hydra_omegaconf_nor_rerun():
            if module.split(".")[0] in NOT_IN_THE_SOLVER]
     assert not bad, "\n".join(bad)
 
+
+def test_solver_package_imports_neither_hydra_nor_rerun():
+    import subprocess
+    import sys
+
+    code = ("import sys, mpm; bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('hydra', 'omegaconf', 'rerun')]; print(bad); sys.exit(1 if bad else 0)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stdout + p.stderr

@@ -10,7 +10,6 @@ import pytest
 import mpm
 from helpers import ROOT, run_cli, spec_for
 from mpm.analytic import VibratingBar, Vortex
-from pipelines.config.validate import ConfigError
 
 MU, LAM, RHO = 384.6, 576.9, 1.0
 
@@ -177,52 +176,3 @@ def test_particle_resolution_fixes_the_particle_set():
         np.testing.assert_array_equal(x, got[0][0])
         np.testing.assert_array_equal(V, got[0][1])
     assert got[0][2] == 4 * got[2][2]
-
-
-@pytest.mark.parametrize("overrides, key", [
-    (["scene=vibrating_bar_2d", "scene.bodies.0.material.nu=0.3"], "scene.bodies[0].material"),
-    (["scene=vibrating_bar_2d", "scene.gravity=[0,-9.81]"], "scene.gravity"),
-    (["scene=vibrating_bar_2d", "scene.solution.mode=0"], "scene.solution.mode"),
-    (["scene=vibrating_bar_2d", "+scene.solution.speed=1"], "scene.solution.speed"),
-    (["scene=vortex_2d", "scene.bodies.0.material.model=fixed_corotated"], "scene.bodies[0].material.model"),
-    (["scene=vortex_2d", "scene.bodies.0.shape.inner_radius=null"], "scene.bodies[0].shape"),
-    (["scene=vortex_2d", "scene.solution.type=wave"], "scene.solution.type"),
-])
-def test_bad_solution_settings_name_the_key(overrides, key):
-    with pytest.raises(ConfigError) as e:
-        spec_for(overrides)
-    assert e.value.key == key, str(e.value)
-
-
-def test_error_against_a_reference_run(tmp_path):
-    """run.reference: the run measures E = sqrt(sum |phi - phi_ref|^2 / n_p)
-    against a finer run's final state with the same particles (paper eq. 36)."""
-    from pipelines.recording.recordings import read
-
-    common = ["scene=rotating_plate_2d", "scene.particle_resolution=32", "run.steps=20", "run.dt=1e-4",
-              "run.precision=float64", "log.every=0"]
-    ref, coarse = tmp_path / "ref", tmp_path / "coarse"
-    p = run_cli(common + ["scene.resolution=32", f"hydra.run.dir={ref}"], cwd=ROOT)
-    assert p.returncode == 0, p.stderr
-    p = run_cli(common + ["scene.resolution=16", f"run.reference={ref}", f"hydra.run.dir={coarse}"], cwd=ROOT)
-    assert p.returncode == 0, p.stderr
-    err = json.loads((coarse / "metrics.json").read_text())["error"]
-    a, b = np.load(coarse / "final_state.npz"), np.load(ref / "final_state.npz")
-    expected = np.sqrt(np.sum((a["x"] - b["x"]) ** 2) / len(a["x"]))
-    assert err["solution"] == "reference" and err["displacement"] == pytest.approx(expected, rel=1e-12)
-    assert 0 < err["displacement"] < 1e-3 and err["velocity"] > 0
-    steps, values = read(coarse / "recording.rrd").scalars["error/velocity"]
-    assert steps[-1] == 20 and values[-1] == pytest.approx(err["velocity"], rel=1e-12)
-    # another particle set: no error, a reason
-    other = tmp_path / "other"
-    p = run_cli(common[:1] + common[2:] + ["scene.resolution=16", f"run.reference={ref}",
-                                          f"hydra.run.dir={other}"], cwd=ROOT)
-    assert p.returncode == 0, p.stderr
-    err = json.loads((other / "metrics.json").read_text())["error"]
-    assert "displacement" not in err and "other particles" in err["problem"]
-
-
-def test_missing_reference_is_a_config_error(tmp_path):
-    with pytest.raises(ConfigError) as e:
-        spec_for([f"run.reference={tmp_path}"])
-    assert e.value.key == "run.reference"

@@ -7,11 +7,10 @@ import numpy as np
 import pytest
 
 import mpm
-from helpers import DEVICE, compose_cfg, group_options, spec_for
+from helpers import DEVICE, spec_for
 from mpm.integrators import Implicit
 from pipelines.run.runner import execute
 from pipelines.recording.sinks import Sink
-from pipelines.config.validate import ConfigError, resolve
 
 BALL = ["scene.resolution=24", "log.every=0"]  # the default elastic ball (slip walls, gravity), small
 
@@ -133,112 +132,6 @@ def test_inversion_of_a_model_that_cannot_invert_is_named(tmp_path):
     assert fc["unstable_criterion"] != "inversion"
 
 
-@pytest.mark.parametrize("override, key", [("detect.action=halt", "detect.action"),
-                                           ("detect.energy_growth=0", "detect.energy_growth"),
-                                           ("detect.min_J=1.5", "detect.min_J")])
-def test_bad_detection_options_are_refused(override, key):
-    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
-        resolve(compose_cfg([override]))
-
-
-# ---------------------------------------------------------------------- maps and the suite
-@pytest.mark.parametrize("scale", ["default", "paper"])
-@pytest.mark.parametrize("case", group_options("extreme"))
-def test_every_extreme_case_resolves(case, scale):
-    """Each case of the suite composes with the experiment at both scales,
-    validates, and states its expected outcome."""
-    cfg = compose_cfg(["+experiment=extreme", f"+extreme={case}", f"scale={scale}"])
-    assert cfg.expected and len(cfg.expected) > 20
-    spec = resolve(cfg)
-    assert spec.stability_map is None
-
-
-def test_map_job_runs_its_points(tmp_path):
-    """A stability-map job (pipelines.sweeps.stability.run_map): every point runs at
-    k times the CFL limit of its stiffness; below the limit the point
-    completes, far above it the point stops unstable with its step and
-    criterion; the job's metrics.json holds the map and the points' own
-    metrics are not jobs of the sweep."""
-    from pipelines.report.jobs import load_jobs
-    from pipelines.report.sections.stability import largest_stable
-    from pipelines.sweeps.stability import run_map
-    from pipelines.config.validate import MapSpec
-
-    spec = spec_for(["scene=stability_ball_2d"])
-    m = run_map(spec, MapSpec(E=[1e4, 1e8], dt_cfl=[0.5, 5.0], steps=10), tmp_path, {"config_hash": "h"})
-    points = m["stability_map"]["points"]
-    assert [(p["E"], p["k"]) for p in points] == [(1e4, 0.5), (1e4, 5.0), (1e8, 0.5), (1e8, 5.0)]
-    for p in points:
-        lam_2mu = p["E"] * 0.7 / (1.3 * 0.4)  # lambda + 2 mu at nu = 0.3
-        c = np.sqrt(lam_2mu / 1000.0)  # P-wave speed [m/s]
-        assert p["dt"] == pytest.approx(p["k"] * (1.0 / 32) / (c + 1.0))  # dx / (c + v0), v0 = 1 m/s
-        if p["k"] < 1:
-            assert p["status"] == "completed" and p["steps"] == 10
-        else:
-            assert p["status"] == "unstable" and 1 <= p["unstable_step"] < 10 and p["criterion"]
-    assert largest_stable(points, 1e4) == 0.5
-    assert m["status"] == "completed" and m["config_hash"] == "h"
-    assert (tmp_path / "points" / "E10000_k0.5" / "point.json").is_file()
-    jobs, _ = load_jobs(tmp_path)
-    assert [j.rel for j in jobs] == ["."]
-
-
-def _map_job(root, name, kernel, rows):
-    from test_report import _job
-
-    m = {"status": "completed", "reason": "", "steps": 10, "sim_time": 0.0, "scene": "stability_ball_2d",
-         "scheme": "empm", "kernel": kernel, "transfer": "mls", "integrator": "explicit",
-         "config_hash": name,
-         "stability_map": {"E": [1e3, 1e6], "dt_cfl": [0.5, 1.0, 2.0], "steps": 10, "points": rows}}
-    return _job(root, name, m, ["scene=stability_ball_2d", f"kernel={kernel}", "+experiment=stability"])
-
-
-def _point(E, k, status, step=None, criterion=None):
-    return {"E": E, "k": k, "dt": k * 1e-4, "status": status, "steps": 10 if step is None else step,
-            "unstable_step": step, "criterion": criterion, "body": None, "reason": "", "wall_time_s": 0.1}
-
-
-def test_report_reads_a_synthetic_stability_sweep(tmp_path):
-    """Two maps and two extreme-suite jobs: stability.md tabulates the
-    largest stable multiple per combination and stiffness (a failure
-    below a stable point counts), draws the heat maps, and lists the suite
-    with the outcome and the expected text."""
-    import json
-
-    from pipelines.report import write_report
-    from test_report import _job
-
-    ok, bad = "completed", "unstable"
-    _map_job(tmp_path, "a", "quadratic", [
-        _point(1e3, 0.5, ok), _point(1e3, 1.0, ok), _point(1e3, 2.0, bad, 3, "energy"),
-        _point(1e6, 0.5, ok), _point(1e6, 1.0, bad, 5, "speed"), _point(1e6, 2.0, ok)])
-    _map_job(tmp_path, "b", "cubic", [
-        _point(1e3, 0.5, bad, 1, "outside"), _point(1e3, 1.0, ok), _point(1e3, 2.0, ok),
-        _point(1e6, 0.5, ok), _point(1e6, 1.0, ok), _point(1e6, 2.0, ok)])
-    for scheme, status in (("empm", "completed"), ("tlmpm", "unstable")):
-        m = {"status": status, "reason": "", "steps": 40, "sim_time": 0.01, "scene": "elastic_ball_2d",
-             "scheme": scheme, "kernel": "quadratic", "transfer": "mls", "config_hash": f"x{scheme}",
-             "energy_initial": 10.0, "energy_final": 9.0, "fracture": {"total": 0.25},
-             "detect": {"energy_scale": 4.0, "energy_growth_max": 0.0},
-             "unstable_criterion": "inversion", "unstable_step": 7}
-        d = _job(tmp_path, f"x{scheme}", m, ["+extreme=inverted_start", f"scheme={scheme}",
-                                             "+experiment=extreme"])
-        (d / ".hydra" / "config.yaml").write_text("expected: recovers from the inversion\n"
-                                                  "scene: {name: elastic_ball_2d}\n")
-    write_report(tmp_path)
-    text = (tmp_path / "stability.md").read_text()
-    assert "| empm · quadratic · mls · explicit | 1 | 0.5 |" in text
-    assert "| empm · cubic · mls · explicit | <0.5 | 2 |" in text
-    assert (tmp_path / "stability_stability_ball_2d.png").stat().st_size > 10_000
-    assert "| inverted_start | empm | completed | 40 | 0.01 | -0.25 | 0 | 0.25 |" in text
-    assert "| inverted_start | tlmpm | unstable (inversion, step 7) |" in text
-    assert "- `inverted_start`: recovers from the inversion" in text
-    rows = (tmp_path / "stability.csv").read_text().splitlines()
-    assert len(rows) == 1 + 12
-    assert "Stability maps" in (tmp_path / "report.md").read_text()
-    assert json.loads((tmp_path / "a" / "metrics.json").read_text())["stability_map"]["steps"] == 10
-
-
 def test_initial_deformation_and_lattice_offset(tmp_path):
     """Scene options of the suite: ``lattice_offset`` (0.5, 0.5) with one
     particle per cell puts every particle on a grid node; a body's
@@ -263,21 +156,6 @@ def test_initial_deformation_and_lattice_offset(tmp_path):
     model, state = mpm.build(nodes.scene, nodes.kernel, "float32", DEVICE)
     x = state.x.numpy() / model.dx
     assert np.abs(x - np.round(x)).max() < 1e-5 and len(x) == 8 * 8  # one per cell of the 8 x 8-cell box
-
-
-def test_linear_bound_of_the_lumped_hat_kernel_is_the_cfl_number_one():
-    """pipelines.cfl_bound against the closed form: linear elements with
-    lumped mass have omega_max = 2 c / dx, i.e. k* = 1 exactly, in 1D and
-    2D, with MLS or gradient weights; the smoother B-splines allow more
-    (quadratic sqrt(3) in 1D with the exact gradient on a fine periodic
-    lattice, within the lattice's resolution of the highest mode)."""
-    from pipelines.cfl_bound import bound
-
-    for dim in (1, 2):
-        for mls in (True, False):
-            assert bound("linear", mls, dim=dim, cells=8) == pytest.approx(1.0, rel=1e-9)
-    assert bound("quadratic", False, dim=1, cells=40) == pytest.approx(np.sqrt(3.0), rel=1e-3)
-    assert bound("linear", dim=1) < bound("quadratic", dim=1) < bound("cubic", dim=1)
 
 
 def test_detector_criteria_on_synthetic_reports():

@@ -1,20 +1,15 @@
-"""The papers' scenes: named sizes, colliders and meshes from the config,
-every scene a few steps with every scheme, and the bowl that holds water."""
-
-import json
+"""The papers' scenes in the config: named sizes, colliders and meshes
+(their runs: tests/mpm/test_paper_scene_runs.py)."""
 
 import numpy as np
 import pytest
 
-from helpers import compose_cfg, group_options, spec_for
+from helpers import PAPER_SCENES, compose_cfg, group_options, spec_for
 from pipelines.run.provenance import config_hash
 from pipelines.run.runner import execute
 from pipelines.config.validate import ConfigError
 
 SIZED = [s for s in group_options("scene") if compose_cfg([f"scene={s}"]).scene.sizes]
-PAPER_SCENES = {"snow_bunnies", "water_bunny", "bowl_fsi", "viscous_cup", "falling_bodies", "dam_break",
-                "dam_break_water", "dam_break_2d", "sand_bodies", "bullet_tungsten", "pumpkins",
-                "cookie_drop", "sandcastle", "hydrant"}
 
 
 def test_every_paper_scene_names_a_default_and_a_paper_size():
@@ -33,21 +28,6 @@ def test_size_errors_name_the_accepted_sizes():
         spec_for(["scene=vortex_2d", "scene.size=paper"])
     # an explicit resolution wins over the size's
     assert spec_for(["scene=water_bunny", "scene.size=paper", "scene.resolution=40"]).scene.resolution == 40
-
-
-@pytest.mark.parametrize("scheme", ["empm", "tlmpm", "aulmpm"])
-@pytest.mark.parametrize("scene", sorted(PAPER_SCENES))
-def test_paper_scene_runs_a_few_steps(scene, scheme, tmp_path):
-    """At a tiny size: 20 cells along x (80 for the 2D dam break's 0.4 m
-    domain), one wall cell so that every body fits."""
-    res = 80 if scene == "dam_break_2d" else 20
-    spec = spec_for([f"scene={scene}", f"scheme={scheme}", f"scene.resolution={res}", "scene.wall_cells=1",
-                     "run.steps=3", "log.every=3"])
-    metrics = execute(spec, tmp_path)
-    assert metrics["status"] == "completed", metrics["reason"]
-    assert metrics["steps"] == 3
-    if spec.scene.colliders:
-        assert set(metrics["inside_colliders"]) == {c.name for c in spec.scene.colliders}
 
 
 def test_collider_config_errors_are_one_line():
@@ -122,16 +102,3 @@ def test_shipped_meshes_and_unknown_files():
     with pytest.raises(ConfigError, match=r"scene.bodies\[0\].shape.mesh: 'warp:dragon': no such file; "
                                           r"accepted: .*warp:bunny, warp:bear"):
         spec_for(["scene=falling_bodies", "scene.bodies.0.shape.mesh=warp:dragon"])
-
-
-def test_bowl_holds_the_water_in_aulmpm(tmp_path):
-    """Fluid-structure interaction (A-ULMPM paper, Fig. 11) at a small size:
-    after the splash no water lies below the rim outside the bowl."""
-    spec = spec_for(["scene=bowl_fsi", "scheme=aulmpm", "scene.resolution=32", "scene.wall_cells=2",
-                     "run.duration=1.0", "log.every=0"])
-    metrics = execute(spec, tmp_path)
-    assert metrics["status"] == "completed", metrics["reason"]
-    assert metrics["spilled"] == {"water/bowl": 0.0}
-    assert metrics["fragments"]["bowl"] == 1
-    saved = json.loads((tmp_path / "metrics.json").read_text())
-    assert saved["spilled"] == {"water/bowl": 0.0}
