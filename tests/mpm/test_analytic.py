@@ -91,6 +91,7 @@ def _bar_error(tmp_path, resolution):
     return json.loads((d / "metrics.json").read_text())["error"]
 
 
+@pytest.mark.slow
 def test_vibrating_bar_error_shrinks_under_refinement(tmp_path):
     """One period of the bar at three grids (particles refine with the grid):
     the displacement error falls at a measured rate (about 2 here; at least 1.5

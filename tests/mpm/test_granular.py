@@ -17,6 +17,7 @@ from pipelines.config.validate import resolve
 
 
 # the heaps are at rest by these times (kinetic energy below 1e-6 of the initial energy)
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,aspect,scheme,duration", [("column_collapse_2d", 2.0, "empm", 0.6),
                                                           ("column_collapse_tall_2d", 8.0, "aulmpm", 1.0)])
 def test_column_collapse_follows_the_published_scaling(scene, aspect, scheme, duration, tmp_path):

@@ -172,6 +172,7 @@ def test_stiff_ball_bounces_at_fifty_times_the_explicit_step(scheme):
     assert solver.fracture(state).max() < 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.bitwise
 def test_aulmpm_limits_under_the_implicit_integrator():
     """epsilon = 0 (affine kept) is EMPM and epsilon = inf is TLMPM bit for
@@ -235,7 +236,7 @@ def test_implicit_config_and_metrics(tmp_path):
 CONSISTENCY = [  # (dim, kernel, transfer, material)
     (2, "compact", "mls", mpm.materials.Viscous(K=1e4, viscosity=2.0)),  # two grids, per-particle K_p
     (2, "quadratic", "apic", mpm.materials.Snow(E=1e5)),  # kernel gradients (as PIC), a plastic model
-    (3, "quadratic", "mls", mpm.FixedCorotated(E=1e4)),
+    pytest.param(3, "quadratic", "mls", mpm.FixedCorotated(E=1e4), marks=pytest.mark.slow),
 ]
 
 

@@ -28,6 +28,7 @@ def test_every_kernel_with_every_scheme(kernel, scheme, tmp_path):
     assert m["steps"] == 8 and m["kernel"] == kernel and np.isfinite(m["energy_final"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("transfer", ["apic", "pic"])
 def test_compact_with_the_other_transfers_and_the_lagrangian_schemes(transfer, tmp_path):
     for scheme in ("tlmpm", "aulmpm"):
@@ -63,6 +64,7 @@ def test_rotating_rod_keeps_its_angular_momentum(scheme, tmp_path):
     assert m["angular_momentum_drift"] <= 6e-3
 
 
+@pytest.mark.slow
 def test_ball_in_cylinder_falls_with_the_compact_kernel_only(tmp_path):
     """CK-MPM: the ball and the fixed tube share one grid with a 1.5 dx gap;
     the compact kernel's stencils do not reach across and the ball falls as
@@ -79,6 +81,7 @@ def test_ball_in_cylinder_falls_with_the_compact_kernel_only(tmp_path):
     assert drop["quadratic"] < 0.5
 
 
+@pytest.mark.slow
 def test_jelly_cube_vibrates_longer_with_the_compact_kernel(tmp_path):
     """CK-MPM: less numerical diffusion with the compact kernel. With the PIC
     transfer (the paper's pipeline) the jelly cube keeps vibrating after it

@@ -20,6 +20,7 @@ def run_scene(overrides, tmp_path, name):
     return metrics
 
 
+@pytest.mark.slow
 def test_rotating_plate_fractures_only_with_the_eulerian_scheme(tmp_path):
     """The spinning soft plate (A-ULMPM paper, Fig. 2): EMPM tears it, TLMPM
     and A-ULMPM (paper defaults for solids) keep it whole."""
@@ -93,6 +94,7 @@ def test_linear_momentum_conserved_by_every_scheme(scheme):
         assert 0 < updates < steps * len(scene.bodies)
 
 
+@pytest.mark.slow
 def test_droplet_tlmpm_cannot_splash_aulmpm_can(tmp_path):
     """The 2D droplet (A-ULMPM paper, Fig. 3): after impact EMPM and A-ULMPM
     throw a sheet up the walls; TLMPM stays a flat blob; A-ULMPM updates in a
@@ -255,6 +257,7 @@ def test_aulmpm_affine_default_depends_on_the_scene_kind():
     assert mpm.AULMPM(affine="transform").resolved("fluid").affine == "transform"
 
 
+@pytest.mark.slow
 def test_aulmpm_compact_droplet_is_stable(tmp_path):
     """Regression: with affine=transform, a lone splash particle's C doubled at
     each of its body's updates (every few steps) until the time step collapsed

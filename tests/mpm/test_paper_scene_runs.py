@@ -9,8 +9,13 @@ from helpers import PAPER_SCENES, spec_for
 from pipelines.run.runner import execute
 
 
-@pytest.mark.parametrize("scheme", ["empm", "tlmpm", "aulmpm"])
-@pytest.mark.parametrize("scene", sorted(PAPER_SCENES))
+SLOW_SCENES = {("hydrant", "tlmpm")}  # (scene, scheme) over about 8 s on two cores
+
+
+@pytest.mark.parametrize("scene, scheme", [
+    pytest.param(scene, scheme, id=f"{scene}-{scheme}",
+                 marks=[pytest.mark.slow] if (scene, scheme) in SLOW_SCENES else [])
+    for scheme in ("empm", "tlmpm", "aulmpm") for scene in sorted(PAPER_SCENES)])
 def test_paper_scene_runs_a_few_steps(scene, scheme, tmp_path):
     """At a tiny size: 20 cells along x (80 for the 2D dam break's 0.4 m
     domain), one wall cell so that every body fits."""
@@ -24,6 +29,7 @@ def test_paper_scene_runs_a_few_steps(scene, scheme, tmp_path):
         assert set(metrics["inside_colliders"]) == {c.name for c in spec.scene.colliders}
 
 
+@pytest.mark.slow
 def test_bowl_holds_the_water_in_aulmpm(tmp_path):
     """Fluid-structure interaction (A-ULMPM paper, Fig. 11) at a small size:
     after the splash no water lies below the rim outside the bowl."""

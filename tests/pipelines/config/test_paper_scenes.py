@@ -12,6 +12,7 @@ from pipelines.config.validate import ConfigError
 SIZED = [s for s in group_options("scene") if compose_cfg([f"scene={s}"]).scene.sizes]
 
 
+@pytest.mark.slow
 def test_every_paper_scene_names_a_default_and_a_paper_size():
     assert PAPER_SCENES <= set(SIZED)
     for s in SIZED:

@@ -13,6 +13,7 @@ from helpers import ROOT, run_cli
 from pipelines.recording import recordings
 
 
+@pytest.mark.slow
 @pytest.mark.bitwise
 def test_reproduce_reports_a_match_and_frames_are_written(tmp_path):
     run_dir = tmp_path / "run"
@@ -52,6 +53,7 @@ def test_compare_reports_the_largest_deviation(tmp_path):
     assert np.array_equal(recs[0].steps, [0, 10, 20])
 
 
+@pytest.mark.slow
 def test_frames_of_a_3d_scene_with_colliders(tmp_path):
     """The cup is read back from the recording and drawn; a field colours the
     particles; an unknown field is refused in one line."""
@@ -73,6 +75,7 @@ def test_frames_of_a_3d_scene_with_colliders(tmp_path):
         "error: --color nope: not in this recording; accepted: body, dJ"]
 
 
+@pytest.mark.slow
 def test_a_killed_run_is_read_and_repaired(tmp_path):
     """SIGKILL leaves no footer and no chance to finish: metrics.json still
     says running, the recording is read all the same (frames render, with a

@@ -135,6 +135,7 @@ def _with_run_dir(args, out):
     return args + [f"hydra.run.dir={out}"], out
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(tmp_path):
     """Every BAD_INPUTS entry, each through pipelines.run's main as from a
     fresh process, all in one process (tests/cli_batch.py: a process per
@@ -274,6 +275,7 @@ def test_a_signal_landing_in_a_finaliser_is_not_lost():
         interrupts.handler(signal.SIGINT, None)
 
 
+@pytest.mark.slow
 def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
     one = run_cli(["run.plan=true", f"hydra.run.dir={tmp_path / 'a'}"], cwd=ROOT, timeout=120)
     assert one.returncode == 0, one.stderr

@@ -29,6 +29,7 @@ def _sweep(tmp_path, launcher, extra=(), kernels="quadratic,linear"):
     return sweep, p
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("launcher", ["joblib", "ray"])
 def test_tiny_sweep_runs_every_job_reports_and_skips_on_rerun(tmp_path, launcher):
     sweep, _ = _sweep(tmp_path, launcher)
@@ -54,6 +55,7 @@ def test_tiny_sweep_runs_every_job_reports_and_skips_on_rerun(tmp_path, launcher
     assert all((j / "metrics.json").stat().st_mtime_ns == stamps[j] for j in jobs)
 
 
+@pytest.mark.slow
 def test_forced_rerun_and_changed_config_run_again(tmp_path):
     sweep, _ = _sweep(tmp_path, "basic", kernels="quadratic")
     jobs = _jobs(sweep)
@@ -120,6 +122,7 @@ def test_experiment_globs_pick_every_config_of_the_group_and_no_schema(name):
         assert sorted(override.value().filter(names)) == group_options(group)
 
 
+@pytest.mark.slow
 def test_changed_parameter_list_never_mixes_results(tmp_path):
     """Job numbers shift when a value is inserted: each directory must end up
     with its own job's result (only a job's own directory can be skipped)."""
@@ -135,6 +138,7 @@ def test_changed_parameter_list_never_mixes_results(tmp_path):
     assert steps == {"0": 2, "1": 4, "2": 3}
 
 
+@pytest.mark.slow
 def test_invalid_job_in_a_sweep_says_why_the_others_run_and_the_sweep_fails(tmp_path):
     sweep = tmp_path / "s"
     p = run_cli(["-m", "scene=rotating_plate_2d", "scene.resolution=16", "run.steps=2", "log.every=0",
