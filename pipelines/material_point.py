@@ -109,10 +109,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from hydra import compose, initialize_config_dir
 
-    from . import schema
-    from .errors import describe
-    from .validate import make_material
-    from .warp_setup import init_warp
+    from .config import schema
+    from .config.errors import describe
+    from .config.validate import make_material
+    from .run.warp_setup import init_warp
 
     schema.register()
     conf = Path(__file__).resolve().parents[1] / "conf"

@@ -6,21 +6,26 @@ list of argument lists; OUT gets [exit code, stderr] per list."""
 import contextlib
 import io
 import json
+import os
 import runpy
 import sys
 import traceback
 
-from hydra.core.global_hydra import GlobalHydra
+# the working directory first on the path, as for ``python -m pipelines.run`` (run from the
+# checkout's root: its pipelines, not an installed copy nor anything beside this script)
+sys.path[0] = os.getcwd()
 
-from pipelines import report
+from hydra.core.global_hydra import GlobalHydra  # noqa: E402
+
+from pipelines.sweeps import callback  # noqa: E402
 
 
 def one(args: list[str]) -> tuple[int, str]:
     """One command line, as ``python -m pipelines.run`` runs it (the module
     runs afresh as __main__: Hydra finds conf/ from its file)."""
     GlobalHydra.instance().clear()
-    report.SWEEPS.clear()
-    sys.argv = ["pipelines/run.py", *args]
+    callback.SWEEPS.clear()
+    sys.argv = ["pipelines/run/__main__.py", *args]
     err = io.StringIO()
     code = 0
     with contextlib.redirect_stderr(err):

@@ -10,12 +10,16 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from pipelines import schema
-from pipelines.validate import resolve
+from pipelines.config import schema
+from pipelines.config.validate import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
 DEVICE = os.environ.get("MPM_TEST_DEVICE", "cpu")  # set by conftest (pytest --device, default cpu)
+# the papers' scenes (conf/scene/): each has a default and a paper size
+PAPER_SCENES = {"snow_bunnies", "water_bunny", "bowl_fsi", "viscous_cup", "falling_bodies", "dam_break",
+                "dam_break_water", "dam_break_2d", "sand_bodies", "bullet_tungsten", "pumpkins",
+                "cookie_drop", "sandcastle", "hydrant"}
 schema.register()
 
 

@@ -1,0 +1,302 @@
+"""Replay a recording: ``python -m pipelines.replay <recording.rrd | run dir>``.
+
+  (no option)     open it in the Rerun viewer (needs a display)
+  --web           serve it to a browser with Rerun's web viewer
+  --frames DIR    render the particles to PNG frames without a display (and
+                  DIR/video.mp4 where ffmpeg is installed): a fixed camera on
+                  the domain, colliders drawn, particles coloured by body or
+                  (--color dJ, plastic_strain, ...) by a field with a colour
+                  bar; 3D in perspective (--view 3d, --elev, --azim) or
+                  projected (--view xy|xz|zy)
+  --reproduce     re-run the recorded configuration (its command-line
+                  overrides, into a fresh directory reproduce-* beside the
+                  recording, in its run directory) and compare the two
+                  recordings: bit for bit on the CPU, else the largest
+                  deviation per quantity; exit code 0 on a match, 1 otherwise
+  --repair        a run killed without warning (SIGKILL, power loss) leaves
+                  its recording without footer: every option above still
+                  reads it; --repair rewrites it (and its timings file) with
+                  one (``rerun rrd migrate``, the originals kept as
+                  *.backup.rrd) and marks the run's metrics.json ``killed``
+
+The recording carries how it was made (recording properties: overrides,
+resolved config, git commit, packages); --reproduce warns when the code has
+changed since.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import recordings
+from ..run import provenance, runner
+
+
+def rerun_executable() -> str:
+    exe = Path(sys.executable).parent / "rerun"
+    return str(exe) if exe.exists() else (shutil.which("rerun") or "rerun")
+
+
+def open_viewer(path: Path, web: bool) -> int:
+    if not web and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                        or sys.platform in ("darwin", "win32")):
+        print("no display here: use --web to serve the web viewer, or --frames DIR", file=sys.stderr)
+        return 2
+    cmd = [rerun_executable(), str(path)] + (["--web-viewer"] if web else [])
+    return subprocess.call(cmd)
+
+
+def _domain(rec: recordings.Recording, positions) -> np.ndarray:
+    """The domain's size [m] from the recorded config (else the particles' extent)."""
+    import yaml
+
+    text = (rec.properties.get("config:yaml") or [""])[0]
+    try:
+        return np.asarray(yaml.safe_load(text)["scene"]["domain"], float)
+    except (TypeError, KeyError, ValueError, yaml.YAMLError):
+        return np.concatenate(positions).max(axis=0)
+
+
+def _colours(rec: recordings.Recording, k: int, color: str):
+    """(RGB per particle, values or None) for frame ``k``: the body palette or a field."""
+    if color == "body":
+        if rec.colors is None:
+            return None, None
+        c = rec.colors  # RGBA packed as 0xRRGGBBAA
+        if rec.index and rec.index[k] is not None:  # some particles were removed at open walls
+            c = c[rec.index[k]]
+        return np.stack([(c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255], axis=1) / 255.0, None
+    values = rec.dJ[k] if color == "dJ" else rec.fields[k].get(color)
+    if values is None:
+        known = ["body"] + (["dJ"] if rec.dJ and rec.dJ[0] is not None else []) + sorted(rec.fields[k])
+        raise ValueError(f"--color {color}: not in this recording; accepted: {', '.join(known)}")
+    return None, values
+
+
+def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: float = 6.0,
+                  view: str = "xy", color: str = "body", elev: float = 20.0,
+                  azim: float = -60.0) -> list[Path]:
+    """One PNG per logged step (every ``every``-th) with a fixed camera that
+    frames the domain, axes in metres and the colliders drawn. Particles are
+    coloured by body, or by a per-particle field (``color``: dJ, or a plastic
+    field such as plastic_strain) with a colour bar. 3D recordings are drawn
+    in perspective from (``elev``, ``azim``) degrees, y up; ``view`` (xy, xz,
+    zy) projects them onto a plane instead when it is not "3d"."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    L = _domain(rec, rec.positions)
+    fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
+    values = [v for _, v in fields if v is not None]
+    vmin, vmax = (min(float(v.min()) for v in values), max(float(v.max()) for v in values)) if values \
+        else (0.0, 1.0)
+    written = []
+    for n, k in enumerate(range(0, len(rec.positions), every)):
+        x = rec.positions[k]
+        rgb, val = fields[n]
+        shift = _collider_shifts(rec, rec.steps[k])
+        if rec.dim == 3 and view == "3d":
+            fig = plt.figure(figsize=(size, size))
+            ax = fig.add_subplot(projection="3d")
+            _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim)
+            mappable = ax.collections[0] if val is not None else None
+        else:
+            fig, ax = plt.subplots(figsize=(size, size))
+            mappable = _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift)
+        if mappable is not None:
+            fig.colorbar(mappable, ax=ax, shrink=0.7, label=color)
+        ax.set_title(f"step {rec.steps[k]}, t = {rec.times[k]:.4f} s")
+        path = out / f"frame_{len(written):05d}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        written.append(path)
+    if shutil.which("ffmpeg") and written:
+        subprocess.run(["ffmpeg", "-y", "-loglevel", "error", "-framerate", "30", "-i",
+                        str(out / "frame_%05d.png"), "-pix_fmt", "yuv420p", str(out / "video.mp4")],
+                       check=False)
+    return written
+
+
+def _collider_shifts(rec: recordings.Recording, step: int) -> dict:
+    out = {}
+    for name, (steps, shifts) in (rec.collider_shift or {}).items():
+        i = np.searchsorted(steps, step, side="right") - 1
+        if i >= 0:
+            out[name] = shifts[i][:rec.dim]
+    return out
+
+
+def _paint(rgb, val, vmin, vmax) -> dict:
+    """Scatter colour arguments: a field on a colour map, or fixed colours."""
+    if val is not None:
+        return dict(c=val, cmap="viridis", vmin=vmin, vmax=vmax)
+    return dict(c=rgb) if rgb is not None else {}
+
+
+def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
+    """Perspective view, y up (matplotlib's z axis shows the scene's y)."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    swap = [0, 2, 1]
+    ax.scatter(x[:, 0], x[:, 2], x[:, 1], s=1.0, linewidths=0, depthshade=True, **_paint(rgb, val, vmin, vmax))
+    for name, geo in (rec.colliders or {}).items():
+        if isinstance(geo, tuple):
+            v, f = geo
+            v = v + shift.get(name, 0.0)
+            ax.add_collection3d(Poly3DCollection(v[:, swap][f], facecolor=(0.6, 0.6, 0.65, 0.25),
+                                                 edgecolor=(0.4, 0.4, 0.45, 0.15), linewidths=0.2))
+    ax.set_xlim(0, L[0])
+    ax.set_ylim(0, L[2])
+    ax.set_zlim(0, L[1])
+    ax.set_box_aspect((L[0], L[2], L[1]))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
+    ax.set_zlabel("y [m]")
+    ax.view_init(elev=elev, azim=azim)
+
+
+def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
+    """A 2D recording, or a 3D one projected onto ``view`` (back to front)."""
+    axes = {"x": 0, "y": 1, "z": 2}
+    a, b = (0, 1) if rec.dim == 2 else (axes[view[0]], axes[view[1]])
+    depth = ({0, 1, 2} - {a, b}).pop() if rec.dim == 3 else None
+    order = np.argsort(x[:, depth]) if depth is not None else slice(None)
+    sc = ax.scatter(x[order, a], x[order, b], s=2.0, linewidths=0,
+                    **_paint(None if rgb is None else rgb[order], None if val is None else val[order],
+                             vmin, vmax))
+    for name, geo in (rec.colliders or {}).items():
+        if rec.dim == 2 and isinstance(geo, list):
+            for line in geo:
+                line = line + shift.get(name, 0.0)
+                ax.plot(line[:, 0], line[:, 1], color=(0.35, 0.35, 0.4), linewidth=1.0)
+    ax.set_xlim(0, L[a])
+    ax.set_ylim(0, L[b])
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{'xyz'[a]} [m]")
+    ax.set_ylabel(f"{'xyz'[b]} [m]")
+    return sc if val is not None else None
+
+
+def reproduce(path: Path, workdir: Path | None = None) -> dict:
+    """Re-run the recorded overrides and compare the recordings; the re-run
+    lands in ``workdir`` (default: beside the recording, in its run
+    directory: ``reproduce-*``)."""
+    rec = recordings.read(path)
+    overrides = [o for o in rec.properties.get("config:overrides", []) if o]
+    recorded_commit = (rec.properties.get("provenance:git_commit") or ["unknown"])[0]
+    now = provenance.git_state()
+    notes = []
+    if recorded_commit != now["git_commit"]:
+        notes.append(f"recorded with commit {recorded_commit}, now at {now['git_commit']}")
+    if (rec.properties.get("provenance:git_dirty") or [False])[0] or now["git_dirty"]:
+        notes.append("uncommitted changes (then or now): a mismatch may come from them")
+    tmp = Path(tempfile.mkdtemp(prefix="reproduce-", dir=workdir if workdir is not None else Path(path).parent))
+    cmd = [sys.executable, "-m", "pipelines.run", *overrides, f"hydra.run.dir={tmp}"]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    if run.returncode not in (0, 3):
+        return {"match": False, "problems": [f"re-run failed ({run.returncode}): {run.stderr.strip()}"],
+                "largest": {}, "notes": notes, "rerun_dir": str(tmp)}
+    result = recordings.compare(rec, recordings.read(tmp / "recording.rrd"))
+    result.update(notes=notes, rerun_dir=str(tmp), overrides=overrides)
+    return result
+
+
+def repair(path: Path) -> list[str]:
+    """Repair the recording and its timings file; a metrics.json still
+    ``running`` becomes ``killed`` at the last recorded step.
+    Returns what was done, a line each."""
+    done = []
+    for f in (path, recordings.timings_path(path)):
+        if f.is_file():
+            backup = recordings.repair(f)
+            done.append(f"{f}: repaired (original: {backup})" if backup else f"{f}: complete, left as it is")
+    metrics = path.parent / "metrics.json"
+    m = json.loads(metrics.read_text()) if metrics.is_file() else {}
+    if m.get("status") == "running":  # its process is gone (or this is run while it still runs: don't)
+        rec = recordings.read(path)
+        steps, t = rec.end
+        m.update(status="killed", steps=steps, sim_time=t,
+                 reason=f"the process ended without warning (SIGKILL, power loss) after step {steps} "
+                        f"(t = {t:.6g} s), the last one in the recording")
+        runner.write_metrics(metrics, m)
+        done.append(f"{metrics}: status killed after step {steps}")
+    return done
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", type=Path)
+    p.add_argument("--web", action="store_true", help="serve the web viewer")
+    p.add_argument("--frames", type=Path, default=None, help="render PNG frames into this directory")
+    p.add_argument("--every", type=int, default=1, help="with --frames: every N-th logged step")
+    p.add_argument("--view", default="3d", choices=["3d", "xy", "xz", "zy"],
+                   help="3D recordings: perspective (3d) or a projection plane")
+    p.add_argument("--color", default="body",
+                   help="body, dJ, or a per-particle field of the recording (e.g. plastic_strain)")
+    p.add_argument("--elev", type=float, default=20.0, help="3d view: camera elevation [deg]")
+    p.add_argument("--azim", type=float, default=-60.0, help="3d view: camera azimuth [deg]")
+    p.add_argument("--reproduce", action="store_true", help="re-run and compare")
+    p.add_argument("--repair", action="store_true", help="add the footer a killed run could not write")
+    args = p.parse_args(argv)
+    if args.recording.is_dir():
+        args.recording = args.recording / "recording.rrd"
+    if not args.recording.is_file():
+        print(f"error: recording: {args.recording}: no such file", file=sys.stderr)
+        return 2
+    try:
+        complete = recordings.is_complete(args.recording)
+    except (RuntimeError, OSError, ValueError) as e:
+        print(f"error: recording: {args.recording}: not a readable Rerun recording "
+              f"({str(e).splitlines()[0] if str(e) else type(e).__name__})", file=sys.stderr)
+        return 2
+    if args.repair:
+        for line in repair(args.recording):
+            print(line)
+        return 0
+    if not complete:
+        print(f"note: {args.recording} has no footer: its run was killed before closing it; it is read "
+              f"all the same. To repair it: python -m pipelines.replay {args.recording} --repair",
+              file=sys.stderr)
+    if args.reproduce:
+        r = reproduce(args.recording)
+        for n in r.get("notes", []):
+            print(f"note: {n}")
+        if r["match"]:
+            c = r["checked"]
+            print(f"match: {c['particle_frames']} particle frames and {c['scalars']} scalar series "
+                  f"identical bit for bit ({r['rerun_dir']})")
+            return 0
+        print(f"no match ({r['rerun_dir']}):")
+        for prob in r["problems"]:
+            print(f"  {prob}")
+        for k, v in sorted(r["largest"].items()):
+            print(f"  largest deviation of {k}: {v:.3g}")
+        return 1
+    if args.frames is not None:
+        try:
+            frames = render_frames(recordings.read(args.recording), args.frames, args.every, view=args.view,
+                                   color=args.color, elev=args.elev, azim=args.azim)
+        except ValueError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        video = args.frames / "video.mp4"
+        print(f"{len(frames)} frames in {args.frames}" + (f", {video}" if video.exists() else
+                                                           " (no ffmpeg: no video)"))
+        return 0
+    return open_viewer(args.recording, args.web)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The sections of the sweep report, one module per analysis."""

@@ -1,0 +1,178 @@
+"""Command-line entry: ``python -m pipelines.run [overrides]``.
+
+Hydra composes the config from ``conf/`` (groups scheme, kernel, material,
+scene; settings run and log), the run is validated before anything is
+compiled or allocated, and :func:`pipelines.run.runner.execute` writes
+``recording.rrd`` and ``metrics.json`` into the Hydra run directory.
+
+Exit codes: 0 completed, 1 failed (exception), 2 bad configuration,
+3 unstable, 130 interrupted; a sweep (-m) exits with the worst of its jobs
+(invalid 2, failed 1, interrupted 130, unstable 3) and prints a line with
+the jobs per outcome and where the report is.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+
+from . import provenance
+from ..config import schema
+from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
+from ..config.validate import ConfigError, check_memory, resolve
+from .warp_setup import init_warp
+
+schema.register()
+_last_status: list[str] = []
+_config_errors: list[str] = []
+
+
+def run(cfg: DictConfig) -> dict:
+    """Validate, run and return the metrics of one composed config. In a
+    sweep, a job whose directory already holds a finished run of the same
+    config hash returns that run's metrics instead, unless ``run.force``."""
+    hc = HydraConfig.get()
+    out_dir = Path(hc.runtime.output_dir)
+    try:
+        spec = resolve(cfg)
+        check_memory(spec)
+    except ConfigError as e:
+        # said here too: a launcher's worker process never reaches main()
+        print(f"error: {e}", file=sys.stderr)
+        _config_errors.append(str(e))
+        invalid = {"status": "invalid", "reason": str(e)}
+        if hc.mode == RunMode.MULTIRUN:  # Hydra still writes into a job's directory: say why it is empty
+            (out_dir / "metrics.json").write_text(json.dumps(invalid, indent=2) + "\n")
+        else:
+            _remove_if_empty(out_dir)
+        return invalid
+    init_warp()  # a launcher's worker process did not pass through main()
+    if cfg.run.plan:
+        from .runner import plan
+
+        print(plan(spec))
+        _remove_if_empty(out_dir)
+        return {"status": "plan", "reason": ""}
+    overrides = list(hc.overrides.task)
+    for note in unused_overrides(spec, overrides):
+        print(f"note: {note}", file=sys.stderr)
+    choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
+    identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
+                                                      provenance.code_hash(), files=spec.meshes)}
+    if spec.meshes:
+        identity["meshes"] = spec.meshes
+    if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
+        done = finished(out_dir, identity["config_hash"])
+        if done is not None:
+            print(f"skipped: {out_dir} already holds this config's {done['status']} run "
+                  f"(hash {identity['config_hash']}); run.force=true runs it again", file=sys.stderr)
+            _last_status.append(done["status"])
+            return done
+    if spec.stability_map is not None:  # a stability map: its points in this process
+        from ..sweeps.stability import run_map
+
+        metrics = run_map(spec, spec.stability_map, out_dir, identity)
+    else:
+        from .progress import Progress
+        from .runner import execute  # with Rerun: imported only for a run that goes ahead
+
+        if hc.mode != RunMode.MULTIRUN and Progress.shown(cfg.log.progress):
+            print(f"run directory: {out_dir}", file=sys.stderr, flush=True)
+
+        metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
+                          identity=identity)
+    _last_status.append(metrics["status"])
+    summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
+               f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
+    print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
+    return metrics
+
+
+def unused_overrides(spec, overrides: list[str]) -> list[str]:
+    """Overrides that the run cannot use, said rather than ignored: the
+    material group when every body of the scene brings its own material."""
+    notes = []
+    if not spec.material_used:
+        mine = [o for o in overrides if o.lstrip("+~").split("=")[0].split(".")[0] == "material"]
+        if mine:
+            notes.append(f"{', '.join(mine)} has no effect: every body of scene {spec.scene_name} brings its own "
+                         f"material (override scene.bodies.<i>.material.<key> instead)")
+    return notes
+
+
+FINISHED = ("completed", "unstable")  # deterministic outcomes; failed and interrupted runs run again
+
+
+def finished(job_dir: Path, config_hash: str) -> dict | None:
+    """The metrics in ``job_dir`` if they belong to a finished run of this
+    config hash. Only the job's own directory counts: job numbers shift when a
+    sweep's parameter list changes, and another directory's run would then be
+    overwritten by the job that owns it."""
+    try:
+        metrics = json.loads((job_dir / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if metrics.get("config_hash") == config_hash and metrics.get("status") in FINISHED:
+        return metrics
+    return None
+
+
+def _remove_if_empty(run_dir: Path) -> None:
+    """Drop the run directory Hydra made for a run that never started."""
+    if run_dir.is_dir() and all(p.name in (".hydra", "run.log") for p in run_dir.iterdir()):
+        shutil.rmtree(run_dir, ignore_errors=True)
+
+
+@hydra.main(version_base="1.3", config_path="../../conf", config_name="config")
+def _main(cfg: DictConfig):
+    return run(cfg)
+
+
+def main() -> None:
+    """Hydra's own error reports are multi-line; ask it to raise instead and
+    print configuration errors on one line with exit code 2."""
+    os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+    init_warp()
+    try:
+        _main()
+    except KeyboardInterrupt:
+        sys.exit(EXIT_CODES["interrupted"])
+    except Exception as e:  # noqa: BLE001 - classified below
+        message = describe(e)
+        if message is None and isinstance(e, OSError) and e.filename and not _last_status:
+            # Hydra could not create the run (or sweep) directory; a run that started fails with its traceback
+            key = "hydra.sweep.dir" if any(a in ("-m", "--multirun") for a in sys.argv[1:]) else "hydra.run.dir"
+            message = f"{key}: cannot create {e.filename}: {e.strerror}; accepted: a writable directory"
+        if message is None:
+            raise
+        print(f"error: {message}", file=sys.stderr)
+        _config_errors.append(message)
+    if _config_errors:  # run() has printed its own
+        sys.exit(EXIT_CONFIG)
+    from ..sweeps.callback import SWEEPS
+
+    if SWEEPS:  # a multirun: the worst outcome of any job (the summary line is printed)
+        statuses = {s for outcome in SWEEPS for s in outcome}
+        for status, code in SWEEP_EXIT:
+            if status in statuses:
+                sys.exit(code)
+        return
+    if _last_status and len(_last_status) == 1:
+        sys.exit(EXIT_CODES.get(_last_status[0], 1))
+
+
+# a sweep's exit code: the first status present among its jobs (0: all completed)
+SWEEP_EXIT = [("invalid", EXIT_CONFIG), ("failed", 1), ("unreadable", 1), ("unknown", 1), ("killed", 1), ("running", 1),
+              ("interrupted", EXIT_CODES["interrupted"]), ("unstable", EXIT_CODES["unstable"])]
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,207 @@
+"""Run one validated configuration: build, compile, step, log, report.
+
+Hydra-free: ``pipelines.run`` composes the config and calls :func:`execute`,
+which steps the scene with ``mpm``'s driver (mpm.driver: the stable step,
+collapse and blow-up detection) and records what it reports through a
+:class:`pipelines.run.recorder.Recorder`. Whatever happens (completion,
+instability, Ctrl-C, SIGTERM, an exception), the recording is finalised and
+``metrics.json`` written.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+
+import mpm
+from mpm.plan import plan as step_plan
+
+from . import provenance
+from ..config.validate import RunSpec
+from ..recording.rerun_sink import RerunSink
+from ..recording.sinks import Sink
+from .recorder import Recorder
+
+
+RUN_PROPERTIES = ("command", "host", "started")  # differ between identical runs
+
+
+def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
+                         choices: dict | None = None) -> dict:
+    """How to reproduce the run: resolved config, overrides, group choices,
+    git commit and dirty flag, package versions, device, precision, seed; and
+    (``run``: the timings file's) when, where and with which command it ran."""
+    prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
+    packages = prov.pop("packages")
+    when = {k: prov.pop(k) for k in RUN_PROPERTIES}
+    nonempty = lambda v: v or [""]  # noqa: E731 - Rerun needs a non-empty batch
+    return {
+        "run": when,
+        "config": {"yaml": config_yaml, "overrides": nonempty(list(overrides)),
+                   "choices": nonempty([f"{k}={v}" for k, v in sorted((choices or {}).items())])},
+        "provenance": {k: nonempty(v) if isinstance(v, list) else v for k, v in prov.items()},
+        "packages": packages,
+    }
+
+
+def solver_options(spec: RunSpec) -> mpm.SolverOptions:
+    """What the solver compiles for this run: dJ only when it is logged, the
+    detection's measurements only when it is on."""
+    detect = spec.detect.action != "off"
+    return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer,
+                             integrator=spec.integrator, track_energy=detect, fuse=spec.run.fuse,
+                             track_J=detect and any(not b.material.invertible for b in spec.scene.bodies))
+
+
+def step_policy(spec: RunSpec) -> mpm.StepPolicy:
+    """How the run's steps are chosen and when it ends (mpm.driver)."""
+    run = spec.run
+    steps, duration = spec.end
+    return mpm.StepPolicy(steps=steps, duration=duration, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max,
+                          dt_collapse=run.dt_collapse)
+
+
+def plan(spec: RunSpec) -> str:
+    """``run.plan=true``: the stages of a step and the kernels they launch,
+    the run's size, and what it logs; nothing is compiled or run."""
+    model, _ = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
+    solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+    log = spec.log
+    frames = ("none" if not log.particles else f"every {log.every} steps" if log.every is not None
+              else f"{log.fps:g} per simulated second")
+    lines = [f"{spec.scene_name}: {model.n_particles} particles, {len(spec.scene.bodies)} body(ies), "
+             f"{model.dim}D, {spec.run.precision} on {spec.run.device}; {solver.scheme.name}, "
+             f"{spec.kernel.name} kernel ({spec.transfer}), {spec.integrator.name} integrator",
+             "step:"]
+    for i, (stage, kernels) in enumerate(step_plan(solver), 1):
+        lines.append(f"  {i}. {stage}" + (f": {', '.join(kernels)}" if kernels else ""))
+    lines.append(f"logging: particle frames {frames}" + (" with dJ" if solver.options.record_dJ else "")
+                 + (", scalars every step" if log.scalars else ", no scalars")
+                 + f", fracture every {log.fracture_every} steps; detection {spec.detect.action}")
+    lines.append(f"kernels compiled: {len(solver.kernels())}")
+    return "\n".join(lines)
+
+
+class _Terminate(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (e.g. a cluster pre-empting the job)."""
+
+
+class Interrupts:
+    """Ctrl-C and SIGTERM. Outside the step loop they raise at once; inside
+    it they are remembered and raised at the next step boundary
+    (:meth:`check`): Python ignores an exception raised while a finaliser
+    runs (a Warp array's ``__del__``, say, which the loop triggers every step),
+    so a signal raised wherever it lands can be lost. A second signal while
+    one is pending raises at once."""
+
+    def __init__(self):
+        self.deferred = False
+        self.pending: type[KeyboardInterrupt] | None = None
+
+    def handler(self, signum, frame):
+        exc = _Terminate if signum == signal.SIGTERM else KeyboardInterrupt
+        if self.deferred and self.pending is None:
+            self.pending = exc
+            return
+        raise exc()
+
+    def check(self) -> None:
+        if self.pending is not None:
+            exc, self.pending = self.pending, None
+            raise exc()
+
+
+def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),
+            choices: dict | None = None, sink: Sink | None = None, identity: dict | None = None) -> dict:
+    """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
+
+    ``config_yaml``, ``overrides`` and ``choices`` describe how the spec was
+    composed; they are stored in the recording with the provenance.
+    ``identity`` (e.g. the config hash) goes into metrics.json as given."""
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    properties = recording_properties(spec, config_yaml, list(overrides), choices)
+    if sink is None:
+        sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
+    run = Recorder(spec, out_dir, properties, sink)
+    interrupts = Interrupts()
+    run.metrics.update(identity or {})
+    # what a run killed without warning leaves (python -m pipelines.replay <dir> --repair marks it killed)
+    write_metrics(out_dir / "metrics.json", {**run.metrics, "status": "running",
+                                             "reason": "started, not finished"})
+    previous_term = previous_int = None
+    try:
+        previous_term = signal.signal(signal.SIGTERM, interrupts.handler)
+        previous_int = signal.signal(signal.SIGINT, interrupts.handler)
+    except ValueError:  # not the main thread
+        pass
+    try:
+        run.build(step_policy(spec), solver_options(spec))
+        sink.start(run.meta())
+        driver = run.driver
+        driver.start()
+        interrupts.deferred = True  # Ctrl-C and SIGTERM end the run at a step boundary
+        try:
+            while driver.running:
+                interrupts.check()
+                driver.advance()
+        finally:
+            interrupts.deferred = False
+        if driver.outcome.status == "completed":
+            run.metrics["status"], run.metrics["reason"] = "completed", ""
+    except KeyboardInterrupt as e:
+        run.metrics["status"] = "interrupted"
+        what = "SIGTERM" if isinstance(e, _Terminate) else "Ctrl-C"
+        run.metrics["reason"] = f"{what} at step {run.step} (t = {run.t:.6g} s)"
+    except Exception as e:
+        run.metrics["status"] = "failed"
+        run.metrics["reason"] = f"{type(e).__name__}: {e}"
+        raise
+    finally:
+        # no second Ctrl-C may cut the cleanup short
+        old_int = previous_int if previous_int is not None else signal.getsignal(signal.SIGINT)
+        try:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        except ValueError:
+            old_int = None
+        try:
+            try:
+                run.finish()
+            except Exception as e:  # never leave a "completed" that did not complete
+                run.metrics["status"] = "failed"
+                run.metrics["reason"] = f"while finishing: {type(e).__name__}: {e}"
+                raise
+            finally:
+                run.metrics["wall_time_s"] = time.perf_counter() - t_start
+                sink.close()
+                write_metrics(out_dir / "metrics.json", run.metrics)
+        finally:
+            if old_int is not None:
+                signal.signal(signal.SIGINT, old_int)
+            if previous_term is not None:
+                signal.signal(signal.SIGTERM, previous_term)
+    return run.metrics
+
+
+def write_metrics(path: Path, metrics: dict) -> None:
+    """metrics.json, atomically, non-finite numbers as null."""
+    def clean(v):
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        if isinstance(v, (np.floating, np.integer)):
+            v = v.item()
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        return v
+
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({k: clean(v) for k, v in metrics.items()}, indent=2) + "\n")
+    tmp.replace(path)

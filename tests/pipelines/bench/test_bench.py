@@ -1,0 +1,76 @@
+"""The bench's accounting (pipelines.bench.scale, mpm.memory): launches per
+step, the arrays a run holds. Speed itself is measured by the bench, not here."""
+
+import warp as wp
+
+import mpm
+from helpers import DEVICE, spec_for
+from mpm.memory import array_bytes
+from pipelines.bench import scale as bench_scale
+from pipelines.run.runner import execute, solver_options
+from pipelines.recording.sinks import Sink
+
+SMALL = ["scene=elastic_ball_2d", "scene.resolution=32", "scheme=empm", "detect.action=off"]
+
+
+def test_a_step_launches_only_the_stages_the_scene_needs():
+    """One body, explicit EMPM: P2G, grid update, G2P (which does the
+    configuration update with the quadratic kernel; the compact kernel's is a
+    launch of its own). Two bodies with contact add splat, correct, clear and
+    the boundary pass (mpm.solver.Solver.plan)."""
+    launches, _ = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
+    assert launches == 3
+    launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["kernel=compact"]), steps=3)
+    assert launches == 4
+    two = SMALL + [bench_scale.TWO_BALLS, "scene.contact=frictionless"]
+    launches, _ = bench_scale.launches_per_step(spec_for(two), steps=3)
+    assert launches == 3 + 3 + 1
+    launches, _ = bench_scale.launches_per_step(spec_for(two + ["run.fuse=false"]), steps=3)
+    assert launches == 3 + 3 + 1 + 2  # and an update per body
+    # TLMPM never updates its configuration
+    launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["scheme=tlmpm"]), steps=3)
+    assert launches == 3
+
+
+def test_memory_counts_each_array_once():
+    """array_bytes: the distinct arrays reachable from the roots, a view and a
+    repeated reference counted once; a run's arrays at least hold the state."""
+    with wp.ScopedDevice(DEVICE):
+        a = wp.zeros(100, dtype=wp.float32)
+        b = wp.zeros((10, 3), dtype=wp.float64)
+    assert array_bytes(a, b) == 400 + 240
+    assert array_bytes([a, a[10:], {"b": b, "again": b}]) == 640
+    spec = spec_for(SMALL)
+    model, state = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
+    solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+    solver.prepare(state)
+    state_bytes = sum(getattr(state, k).capacity for k in ("x", "v", "C", "F0s", "Fsn", "X"))
+    assert solver.memory_bytes(state) > state_bytes + model.mass.capacity + solver.grid.v.capacity
+
+
+def test_metrics_report_memory(tmp_path):
+    """metrics.json: the run's arrays [MB] (grids at capacity) and the
+    process's peak resident memory, which holds them."""
+    m = execute(spec_for(SMALL + ["run.steps=2"]), tmp_path, sink=Sink())
+    assert m["status"] == "completed"
+    n = m["particles"]
+    # per particle at least x, v, X (2 floats each), C, F0s, Fsn (4 each), mass and volume
+    assert m["memory_mb"] * 1e6 >= n * 4 * (3 * 2 + 3 * 4 + 2)
+    assert m["peak_rss_mb"] > m["memory_mb"]
+
+
+def test_the_fused_eulerian_path_holds_no_stencil_cache():
+    """EMPM fused (the default with the quadratic kernel) keeps no per-particle
+    stencils: it holds less than the cached path by at least the cache's
+    first nodes, coordinates and weights (and slopes) per particle."""
+    held, stencils = {}, {}
+    for fuse in (True, False):
+        spec = spec_for(SMALL + [f"run.fuse={str(fuse).lower()}"])
+        model, state = mpm.build(spec.scene, spec.kernel, "float32", DEVICE)
+        solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+        solver.prepare(state)
+        assert solver.fused == fuse
+        held[fuse] = solver.memory_bytes(state)
+        stencils[fuse] = sum(getattr(state.stencils, k).capacity for k in ("base", "fx", "W", "dW"))
+    assert stencils[False] >= model.n_particles * 4  # the cached run holds a first node per particle
+    assert held[False] - held[True] >= stencils[False] - stencils[True]

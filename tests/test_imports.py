@@ -1,0 +1,175 @@
+"""The packages' import structure: no import circle in ``mpm`` or
+``pipelines``, and a solver free of Hydra, OmegaConf and Rerun.
+
+The graph is read from the sources (``ast``), every import statement
+counted, at module level or inside a function: a module imports the project
+module it names (``import pkg.mod``: ``pkg.mod``), a name that is a
+submodule of the package it comes from (``from pkg import mod``:
+``pkg.mod``), else the package itself (a package is its ``__init__``);
+relative imports are resolved against the importing module's package. The
+report imports every module of ``pipelines.report.sections`` by name
+(pkgutil): it counts as importing each of them."""
+
+from __future__ import annotations
+
+import ast
+from collections import deque
+from pathlib import Path
+
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("mpm", "pipelines")
+NOT_IN_THE_SOLVER = ("hydra", "omegaconf", "rerun")
+DISCOVERS = {"pipelines.report": "pipelines.report.sections"}  # importer: package of modules it imports
+
+
+def find_modules(root: Path, packages=PACKAGES) -> dict[str, tuple[Path, bool]]:
+    """Module name -> (file, is a package) for every module below ``root``'s ``packages``."""
+    out = {}
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            parts = list(path.relative_to(root).with_suffix("").parts)
+            is_package = parts[-1] == "__init__"
+            out[".".join(parts[:-1] if is_package else parts)] = (path, is_package)
+    return out
+
+
+def imported_names(name: str, path: Path, is_package: bool) -> list[tuple[str, str | None, int]]:
+    """(module, imported name or None, line) of every import statement of a module."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(alias.name, None, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            module = node.module or ""
+            if node.level:
+                package = name.split(".") if is_package else name.split(".")[:-1]
+                if node.level - 1 > len(package) - 1:
+                    raise ValueError(f"{path}:{node.lineno}: relative import beyond the top-level package")
+                base = package[:len(package) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            out += [(module, alias.name, node.lineno) for alias in node.names]
+    return out
+
+
+def import_graph(modules: dict[str, tuple[Path, bool]], root: Path = ROOT) -> dict[str, dict[str, str]]:
+    """module -> {imported project module: where ("file:line", the first import of it)}."""
+    graph: dict[str, dict[str, str]] = {m: {} for m in modules}
+    for name, (path, is_package) in modules.items():
+        for module, imported, line in imported_names(name, path, is_package):
+            target = f"{module}.{imported}" if imported and f"{module}.{imported}" in modules else module
+            while target and target not in modules:
+                target = target.rpartition(".")[0]
+            if target and target != name:
+                graph[name].setdefault(target, f"{path.relative_to(root).as_posix()}:{line}")
+    for importer, package in DISCOVERS.items():
+        if importer in graph:
+            graph[importer].update({m: f"{package} (every module)" for m in modules if m.startswith(package + ".")})
+    return graph
+
+
+def strongly_connected(graph: dict[str, dict[str, str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def cycle_through(graph: dict[str, dict[str, str]], component: list[str]) -> list[str]:
+    """A shortest import cycle from the component's first module back to it."""
+    start, members = component[0], set(component)
+    parent: dict[str, str | None] = {start: None}
+    queue = deque([start])
+    while queue:
+        v = queue.popleft()
+        for w in sorted(graph[v]):
+            if w == start:
+                path = [v]
+                while parent[path[-1]] is not None:
+                    path.append(parent[path[-1]])
+                return path[::-1] + [start]
+            if w in members and w not in parent:
+                parent[w] = v
+                queue.append(w)
+    raise AssertionError(f"no cycle through {start}")
+
+
+def describe_cycles(graph: dict[str, dict[str, str]]) -> list[str]:
+    out = []
+    for component in strongly_connected(graph):
+        cycle = cycle_through(graph, component)
+        steps = " -> ".join(f"{a} ({graph[a][b]})" for a, b in zip(cycle, cycle[1:])) + f" -> {cycle[-1]}"
+        out.append(f"import circle among {len(component)} modules ({', '.join(component)}): {steps}")
+    return out
+
+
+def test_no_import_circle():
+    graph = import_graph(find_modules(ROOT))
+    assert {"mpm", "pipelines", "pipelines.report", "pipelines.run.runner"} <= set(graph)
+    assert "pipelines.report.sections.runs" in graph["pipelines.report"]
+    cycles = describe_cycles(graph)
+    assert not cycles, "\n".join(cycles)
+
+
+def test_the_check_finds_a_circle(tmp_path):
+    """A package whose modules import each other (one of them inside a
+    function, relatively, and by a submodule's name) is a circle."""
+    pkg = tmp_path / "mpm" / "sub"
+    pkg.mkdir(parents=True)
+    (tmp_path / "mpm" / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("from .a import f\n")
+    (pkg / "a.py").write_text("def f():\n    from .. import other\n")
+    (pkg / "b.py").write_text("VALUE = 1\n")
+    (tmp_path / "mpm" / "other.py").write_text("from mpm.sub import b\n")
+    graph = import_graph(find_modules(tmp_path, ("mpm",)), tmp_path)
+    assert graph["mpm.other"] == {"mpm.sub.b": "mpm/other.py:1"}  # the submodule, not the package
+    assert describe_cycles(graph) == []
+    (pkg / "b.py").write_text("from mpm.sub import a\n")
+    cycles = describe_cycles(import_graph(find_modules(tmp_path, ("mpm",)), tmp_path))
+    assert len(cycles) == 1 and "mpm.other, mpm.sub.a, mpm.sub.b" in cycles[0], cycles
+
+
+def test_solver_imports_neither_hydra_omegaconf_nor_rerun():
+    bad = [f"{path.relative_to(ROOT)}:{line}: {module}"
+           for name, (path, is_package) in find_modules(ROOT, ("mpm",)).items()
+           for module, _, line in imported_names(name, path, is_package)
+           if module.split(".")[0] in NOT_IN_THE_SOLVER]
+    assert not bad, "\n".join(bad)
+
+
+def test_solver_package_imports_neither_hydra_nor_rerun():
+    import subprocess
+    import sys
+
+    code = ("import sys, mpm; bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('hydra', 'omegaconf', 'rerun')]; print(bad); sys.exit(1 if bad else 0)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stdout + p.stderr
