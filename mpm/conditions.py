@@ -26,17 +26,18 @@ class Conditions:
     ``implicit``: also compile the solve's constraints; ``lattice``: the
     nodes sit on the lattice (the Eulerian scheme; no summed positions)."""
 
-    def __init__(self, model, launch, separate: bool, implicit: bool, lattice: bool):
+    def __init__(self, model, launch, control, separate: bool, implicit: bool, lattice: bool,
+                 batched: bool = False):
         t, scene = model.types, model.scene
-        self.model, self.launch = model, launch
+        self.model, self.launch, self.control = model, launch, control
         self.regions = len(scene.regions) > 0
         self.collider_kinds = kinds_of(scene.colliders)
         self.band = (scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
         self.closed = (np.array(model.wall_codes[0]) != OPEN, np.array(model.wall_codes[1]) != OPEN)
         self.open = not (self.closed[0].all() and self.closed[1].all())  # particles leave at open faces
         self.grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
-                                            lattice=lattice, n_grids=model.kernel.n_grids)
-        self.boundary = make_boundary(t, self.regions, self.collider_kinds) if separate else None
+                                            lattice=lattice, n_grids=model.kernel.n_grids, batched=batched)
+        self.boundary = make_boundary(t, self.regions, self.collider_kinds, batched) if separate else None
         self.constraints = (make_constraints(t, self.regions, self.collider_kinds,
                                              any(c.friction > 0 for c in scene.colliders))
                             if implicit else None)
@@ -82,18 +83,17 @@ class Conditions:
         return max([self.collider_speed] + regions)
 
     # ------------------------------------------------------------ passes
-    def update_grid(self, grid, layout, const, dt, time, status, positioned: int) -> None:
-        """Grid momentum to velocity, gravity, and (unless separate) the
-        conditions at the nodes' current positions."""
+    def update_grid(self, grid, layout, const, status) -> None:
+        """Grid momentum to velocity, gravity over the device's step, and
+        (unless separate) the conditions at the nodes' current positions."""
         self.launch(self.grid_update, layout.n_nodes, [
-            grid.m, const.gravity, dt, time, self.data, grid.kin, grid.kin_id, grid.v, grid.q, status,
-            layout.lo_d, layout.shape_d, layout.offset_d, len(layout.lo), const.grid_offsets, const.dx,
-            positioned])
+            grid.m, const.gravity, self.control, self.data, grid.kin, grid.kin_id, grid.v, grid.q, status,
+            layout.lo_d, layout.shape_d, layout.offset_d, len(layout.lo), const.grid_offsets, const.dx])
 
-    def apply(self, grid, layout, time, status) -> None:
-        """The conditions as a pass of their own (after contact)."""
+    def apply(self, grid, layout, status) -> None:
+        """The conditions as a pass of their own (after contact), at the step's start."""
         self.launch(self.boundary, layout.n_nodes, [
-            grid.m, grid.q, time, self.data, grid.kin, grid.kin_id, grid.v, status])
+            grid.m, grid.q, self.control, self.data, grid.kin, grid.kin_id, grid.v, status])
 
     def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n) -> None:
         """The implicit solve's constraints on the first ``n`` nodes: the

@@ -19,10 +19,12 @@ K_p = I/(moment dx^2) is a constant of the solver and not cached.
 
 import functools
 
+import numpy as np
 import warp as wp
 
 from .kernels import Kernel
 from .launch import warp_kernel
+from .status import StepControl
 from .stencil import make_locate, make_origin, make_stencil_cache, make_weigh, weight_matrix_type
 from .types import Types
 
@@ -108,12 +110,14 @@ def make_committed(t: Types, project):
 
 @functools.cache
 def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradients: bool,
-                fused: bool = False, moment: bool = True):
+                fused: bool = False, moment: bool = True, gated: bool = False):
     """``project``: the material's projection factory or None; ``gradients``:
     cache the weight derivatives too (APIC and PIC transfers); ``fused``: the
     transfers locate the stencils themselves (mpm.stencil.fuse): only K_p is
     cached; ``moment``: the transfer uses K_p (not PIC), built when the
-    kernel's moment varies per particle."""
+    kernel's moment varies per particle; ``gated``: only when the criterion
+    asked for it (``control.update`` of the body, mpm.criterion), so that the
+    driver can launch it every step without the host."""
     S = t.scalar
     dim, G = t.dim, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
@@ -146,9 +150,13 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
         Fsn: wp.array(dtype=t.mat),
         # Stencil cache out (entry p * G + g; K_p per particle):
         cache: Cache,
+        control: StepControl,
     ):
         p = wp.tid() + start
         b = body[p]
+        if wp.static(gated):
+            if control.update[b] == wp.float64(0.0) or control.skip[0] != wp.float64(0.0):
+                return
         Xp = x[p]
         Fs = Fsn[p]
         if wp.static(transform_affine):
@@ -164,7 +172,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
                 flat, fx, W, dW = locate(u0, P, grid_offsets[g] - grid_offsets[0], g, lo[box], shape[box],
                                          offset[box])
                 k = p * G + g
-                cache.base[k] = flat
+                cache.base[k] = flat - offset[box]
                 cache.fx[k] = fx
                 cache.W[k] = W
                 if wp.static(gradients):
@@ -183,33 +191,38 @@ class References:
     """The bodies' reference configurations on the device: their grids (the
     boxes of ``layout``, whose nodal fields ``grid`` grows to fit) and the
     update of their particles (one kernel per body, for its material's
-    projection). ``transform``: C <- C (F^sn)^-1 at an update; ``gradients``,
-    ``fused``, ``moment``: what the stencil cache holds (:func:`make_update`)."""
+    projection; a gated twin for the driver, mpm.driver). ``transform``:
+    C <- C (F^sn)^-1 at an update; ``gradients``, ``fused``, ``moment``: what
+    the stencil cache holds (:func:`make_update`)."""
 
-    def __init__(self, model, launch, layout, grid, *, transform: bool, gradients: bool, fused: bool,
+    def __init__(self, model, launch, layout, grid, control, *, transform: bool, gradients: bool, fused: bool,
                  moment: bool):
         t, k = model.types, model.kernel
-        self.model, self.launch, self.layout, self.grid = model, launch, layout, grid
-        self.update = [make_update(t, k, b.material.project, transform, gradients=gradients, fused=fused,
-                                   moment=moment) for b in model.scene.bodies]
+        self.model, self.launch, self.layout, self.grid, self.control = model, launch, layout, grid, control
+        options = dict(gradients=gradients, fused=fused, moment=moment)
+        self.update = [make_update(t, k, b.material.project, transform, **options) for b in model.scene.bodies]
+        self.gated = [make_update(t, k, b.material.project, transform, gated=True, **options)
+                      for b in model.scene.bodies]
 
-    def kernels(self) -> list:
-        return list(self.update)
+    def kernels(self, gated: bool = False) -> list:
+        return list(self.gated if gated else self.update)
 
-    def fit(self, bodies, lo, hi) -> None:
+    def fit(self, bodies, lo, hi, pad: float = 0.0) -> None:
         """Grids for ``bodies`` covering every stencil of positions within
-        ``lo``/``hi`` [body, axis] [m]; the nodal fields grow to fit."""
+        ``lo``/``hi`` [body, axis] [m], grown by ``pad`` [m] on every side; the
+        nodal fields grow to fit."""
         for b in bodies:
-            self.layout.fit(b, lo[b], hi[b])
+            self.layout.fit(b, np.asarray(lo[b], float) - pad, np.asarray(hi[b], float) + pad)
         self.layout.commit()
         self.grid.reserve(self.layout.n_nodes)
 
-    def move(self, state, bodies, const) -> None:
+    def move(self, state, bodies, const, gated: bool = False) -> None:
         """X <- x for the particles of ``bodies`` (module docstring), in their
-        current grids."""
+        current grids; ``gated``: those whose criterion fired (``control.update``)."""
         m, lay = self.model, self.layout
+        kernels = self.gated if gated else self.update
         for b in bodies:
             start, count = m.body_ranges[b]
-            self.launch(self.update[b], count, [
+            self.launch(kernels[b], count, [
                 m.body, m.body_params, lay.lo_d, lay.shape_d, lay.offset_d, const.grid_offsets, const.dx,
-                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils])
+                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils, self.control])

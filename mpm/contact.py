@@ -51,7 +51,7 @@ import warp as wp
 
 from .launch import warp_kernel
 from .stencil import make_node_box
-from .status import StepStatus
+from .status import StepControl, StepStatus
 from .types import Types
 
 
@@ -146,13 +146,14 @@ def make_occupancy(t: Types):
 
 
 @functools.cache
-def make_contact(t: Types):
+def make_contact(t: Types, batched: bool = False):
     """The three contact passes, each over the body nodes (never over the
     whole lattice, which a scene of small bodies in a large domain would pay
     for every step): ``splat`` bins the nodes, ``correct`` gives each node
     its bin's correction dV_bg (every node of a bin computes it from the
     bin's sums: the same value, no per-bin array), ``clear`` zeroes the bins
-    again (M and P are zero between steps: no fill of the lattice)."""
+    again (M and P are zero between steps: no fill of the lattice).
+    ``batched``: nothing in a step the driver skips (``control.skip``)."""
     S = t.scalar
     vec = t.vec
     nearest = make_nearest(t)
@@ -174,7 +175,11 @@ def make_contact(t: Types):
         n_global: int,
         M: wp.array(dtype=S),
         P: wp.array(dtype=t.vec),
+        control: StepControl,
     ):
+        if wp.static(batched):
+            if control.skip[0] != wp.float64(0.0):
+                return
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
@@ -219,7 +224,11 @@ def make_contact(t: Types):
         P: wp.array(dtype=t.vec),
         grid_v: wp.array(dtype=t.vec),
         status: StepStatus,  # contact_nodes += 1 per node of a bin in contact
+        control: StepControl,
     ):
+        if wp.static(batched):
+            if control.skip[0] != wp.float64(0.0):
+                return
         i = wp.tid()
         if grid_m[i] <= S(0.0):
             return
@@ -260,7 +269,11 @@ def make_contact(t: Types):
         n_global: int,
         M: wp.array(dtype=S),
         P: wp.array(dtype=t.vec),
+        control: StepControl,
     ):
+        if wp.static(batched):
+            if control.skip[0] != wp.float64(0.0):
+                return
         i = wp.tid()
         if grid_m[i] <= S(0.0):
             return
@@ -420,10 +433,10 @@ class Contact:
     over the body nodes (:meth:`resolve`; :meth:`bin` and :meth:`unbin` for
     the implicit solve's constraints, mpm.implicit)."""
 
-    def __init__(self, model, launch, implicit: bool):
+    def __init__(self, model, launch, implicit: bool, control, batched: bool = False):
         t = model.types
-        self.model, self.launch = model, launch
-        self.splat, self.correct, self.clear = make_contact(t)
+        self.model, self.launch, self.control = model, launch, control
+        self.splat, self.correct, self.clear = make_contact(t, batched)
         self.constraint = make_contact_constraint(t) if implicit else ()
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
@@ -448,10 +461,11 @@ class Contact:
     def resolve(self, grid, layout, status) -> None:
         """Frictionless contact on the grid velocities (module docstring)."""
         common = self.common(layout)
-        self.launch(self.splat, layout.n_nodes, [grid.m, grid.v, grid.q, *common, self.M, self.P])
+        ctl = self.control
+        self.launch(self.splat, layout.n_nodes, [grid.m, grid.v, grid.q, *common, self.M, self.P, ctl])
         self.launch(self.correct, layout.n_nodes, [
-            grid.m, grid.q, *common, self.rest_mass, self.fill, self.M, self.P, grid.v, status])
-        self.launch(self.clear, layout.n_nodes, [grid.m, grid.q, *common, self.M, self.P])
+            grid.m, grid.q, *common, self.rest_mass, self.fill, self.M, self.P, grid.v, status, ctl])
+        self.launch(self.clear, layout.n_nodes, [grid.m, grid.q, *common, self.M, self.P, ctl])
 
     def couple(self, grid, layout, cbin, coef) -> None:
         """The implicit solve's constraints from the predictor in ``grid.v``:
@@ -460,7 +474,7 @@ class Contact:
         common = self.common(layout)
         n = layout.n_nodes
         dev = self.model.device
-        wp.launch(self.splat, n, device=dev, inputs=[grid.m, grid.v, grid.q, *common, self.M, self.P])
+        wp.launch(self.splat, n, device=dev, inputs=[grid.m, grid.v, grid.q, *common, self.M, self.P, self.control])
         wp.launch(self.constraint[0], n, device=dev, inputs=[
             grid.m, grid.q, *common, self.rest_mass, self.fill, self.M, self.P, cbin, coef])
-        wp.launch(self.clear, n, device=dev, inputs=[grid.m, grid.q, *common, self.M, self.P])
+        wp.launch(self.clear, n, device=dev, inputs=[grid.m, grid.q, *common, self.M, self.P, self.control])

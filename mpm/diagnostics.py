@@ -34,6 +34,7 @@ import numpy as np
 import warp as wp
 
 from .launch import warp_kernel
+from .status import StepControl, StepStatus
 from .types import Types
 
 
@@ -79,9 +80,12 @@ def about_center_of_mass(d: np.ndarray, dim: int) -> np.ndarray:
 
 
 @functools.cache
-def make_measure(t: Types, per_particle_K: bool):
-    """Everything but the elastic energy, for all particles at once;
-    ``per_particle_K``: the kernel's moment D_p = K_p^-1 varies per particle."""
+def make_measure(t: Types, per_particle_K: bool, batched: bool = False):
+    """Everything but the elastic energy, for all particles at once, into the
+    step's ``status.diagnostics`` (the angular momentum scale about
+    ``control.center``); ``per_particle_K``: the kernel's moment D_p = K_p^-1
+    varies per particle; ``batched``: nothing in a step the driver skips or
+    whose configuration update waits for the host (mpm.driver)."""
     S = t.scalar
     vec = t.vec
     dim = t.dim
@@ -101,9 +105,16 @@ def make_measure(t: Types, per_particle_K: bool):
         D: S,
         cache_K: wp.array(dtype=t.mat),
         gravity: t.vec,
-        center: t.vec,
-        out: wp.array(dtype=f64),
+        status: StepStatus,
+        control: StepControl,
     ):
+        if wp.static(batched):
+            if control.skip[0] != f64(0.0) or control.host_update[0] != f64(0.0):
+                return
+        out = status.diagnostics
+        center = t.vec()
+        for d in range(wp.static(dim)):
+            center[d] = S(control.center[d])
         p = wp.tid()
         m = mass[p]
         xp = x[p]
@@ -149,33 +160,42 @@ def spilled_fraction(x: np.ndarray, bowl) -> float:
 
 class Diagnostics:
     """The scalars of :func:`diagnostic_names` for one model's states, but the
-    elastic energy (P2G evaluates it: mpm.solver.Solver.measure)."""
+    elastic energy (P2G evaluates it: mpm.solver.Solver.measure), summed on
+    the device into the step buffer (mpm.status); the centre of the angular
+    momentum scale is the last measurement's centre of mass, kept in
+    ``control.center``."""
 
-    def __init__(self, model, launch, per_particle_K: bool):
+    def __init__(self, model, launch, buffer, per_particle_K: bool, batched: bool = False):
         t = model.types
-        self.model, self.launch = model, launch
-        self.kernel = make_measure(t, per_particle_K=per_particle_K)
+        self.model, self.launch, self.buffer = model, launch, buffer
+        self.kernel = make_measure(t, per_particle_K=per_particle_K, batched=batched)
         self.names = diagnostic_names(t.dim)
         self.D = t.scalar(model.kernel.moment * model.dx**2 if model.kernel.moment is not None else 0.0)
         self.gravity = t.vec(*model.gravity)
-        self.center = np.zeros(t.dim)  # [m] the angular momentum scale's centre: the last measured one
-        with wp.ScopedDevice(model.device):
-            self.sums = wp.zeros(len(self.names), dtype=wp.float64)
+        self.sums = buffer.view("diagnostics")
 
     def prepare(self, x: np.ndarray) -> None:
         """The centre of mass of the initial positions ``x`` [m]."""
         mass = self.model.mass.numpy().astype(np.float64)
-        self.center = mass @ np.asarray(x, np.float64) / mass.sum()
+        self.buffer.set(center=mass @ np.asarray(x, np.float64) / mass.sum())
+
+    def launch_measure(self, state) -> None:
+        """Sum the diagnostics of ``state`` on the device (nothing read back)."""
+        b = self.buffer
+        self.launch(self.kernel, self.model.n_particles, [
+            self.model.mass, state.x, state.v, state.C, state.Fsn, self.D, state.stencils.K, self.gravity,
+            b.status, b.control])
 
     def measure(self, state) -> np.ndarray:
         """Every scalar of ``state`` (float64) with the elastic energy NaN."""
-        m = self.model
         self.sums.zero_()
-        self.launch(self.kernel, m.n_particles, [
-            m.mass, state.x, state.v, state.C, state.Fsn, self.D, state.stencils.K, self.gravity,
-            m.types.vec(*self.center), self.sums])
-        out = about_center_of_mass(self.sums.numpy(), m.dim)
-        i = self.names.index("center_of_mass_x")
-        self.center = out[i:i + m.dim].copy()
+        self.launch_measure(state)
+        out = self.named(self.sums.numpy())
+        self.buffer.set(center=out[self.names.index("center_of_mass_x"):][:self.model.dim])
+        return out
+
+    def named(self, sums: np.ndarray) -> np.ndarray:
+        """The named scalars (NaN elastic energy) of the sums of a measurement."""
+        out = about_center_of_mass(np.asarray(sums, np.float64), self.model.dim)
         out[self.names.index("elastic_energy")] = np.nan
         return out

@@ -16,9 +16,19 @@ and stopping a run that goes unstable:
   fails after its halvings, or when the blow-up detection (mpm.stability)
   fires with action ``stop`` (``warn``: an event, the run goes on).
 
+The policy runs on the device (mpm.policy), after every step, from the
+step's own figures: the host reads back once every ``sync_every`` = k steps
+(a history of k rows, one per step), and the steps after a halt in a batch
+do nothing, so the detection stops a blow-up at the same step as when the
+host reads every step. A fixed-size scene's k steps can be captured as a
+CUDA graph and replayed (``graph``). The implicit integrator (its Newton
+loop reads back) and a manufactured solution's host-side body force take
+k = 1.
+
 What happens is reported to :class:`Observer` objects (recording, metrics,
 progress live outside ``mpm``): every completed step's report, events
-(warnings, halvings), and the end. A short run::
+(warnings, halvings), and the end; an observer may ask for the state at a
+step or a time (:meth:`Observer.wants`: a batch ends there). A short run::
 
     driver = Driver(solver, state, StepPolicy(duration=0.5))
     outcome = driver.run()
@@ -32,12 +42,16 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
 from .params import param
+from .policy import Policy
 from .stability import Detection, Detector
-from .status import StepReport
+from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, StepReport
+from .timestep import BINDINGS
 
 STATUSES = ("running", "completed", "unstable")
+SYNC_EVERY_CUDA = 10  # the default k on CUDA (batched solvers)
 
 
 @dataclass
@@ -86,7 +100,9 @@ class Outcome:
 
 
 class Observer:
-    """What a driver reports; every method does nothing unless overridden."""
+    """What a driver reports; every method does nothing unless overridden.
+    The state on the device is the driver's current one only while
+    ``driver.current`` (the last step of a batch, or at the start)."""
 
     def on_start(self, driver: "Driver") -> None:
         """The initial state, prepared (``driver.initial``: its diagnostics)."""
@@ -100,24 +116,45 @@ class Observer:
     def on_stop(self, driver: "Driver", outcome: Outcome) -> None:
         """The run ended unstable (``outcome.report``: the step that failed, if any)."""
 
+    def wants(self, driver: "Driver") -> tuple[float, float]:
+        """The next step count and time [s] at which this observer needs the
+        state (a batch of steps ends there); inf: none."""
+        return math.inf, math.inf
+
 
 class Driver:
-    """Steps ``solver`` on ``state`` under ``policy``; ``detection`` (None:
-    mpm.stability's defaults) needs the solver's ``track_energy`` (and
-    ``track_J`` for models that cannot invert) unless its action is off."""
+    """Steps ``solver`` on ``state`` under ``policy``.
+
+    ``detection`` (None: mpm.stability's defaults) needs the solver's
+    ``track_energy`` (and ``track_J`` for models that cannot invert) unless
+    its action is off. ``sync_every``: the host reads back every k steps
+    (None: 10 on CUDA for a batched solver, else 1; k > 1 needs
+    ``SolverOptions(batched=True)``). ``graph``: replay the k steps as a CUDA
+    graph (None: on CUDA when batched). ``measure``: the diagnostics of every
+    state reached (mpm.diagnostics) arrive with each step's report."""
 
     def __init__(self, solver, state, policy: StepPolicy, detection: Detection | None = None,
-                 observers: list[Observer] | tuple = ()):
-        self.solver, self.state, self.policy = solver, state, policy
-        self.detection = detection if detection is not None else Detection()
-        self.observers = list(observers)
+                 observers: list[Observer] | tuple = (), sync_every: int | None = None, graph: bool | None = None,
+                 measure: bool = False):
         for name, message in policy.problems():
             raise ValueError(f"{name}: {message}")
+        opt, device = solver.options, wp.get_device(solver.model.device)
+        k = sync_every if sync_every is not None else (SYNC_EVERY_CUDA if opt.batched and device.is_cuda else 1)
+        if k > 1 and not opt.batched:
+            raise ValueError(f"sync_every {k} needs a batched solver (SolverOptions(batched=True)); accepted: 1")
+        self.solver, self.state, self.policy, self.k = solver, state, policy, int(k)
+        self.detection = detection if detection is not None else Detection()
+        self.observers = list(observers)
+        self.graph = bool(graph if graph is not None else opt.batched and device.is_cuda) and self.k > 1
+        if self.graph and not device.is_cuda:
+            raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
+        self.measure = measure
+        self.device_policy = Policy(solver, policy, self.detection, self.k, measured=measure and opt.batched,
+                                    batched=opt.batched)
         self.step, self.time = 0, 0.0
         self.outcome = Outcome()
         self.detector: Detector | None = None
-        integrator = solver.options.integrator
-        self.halvings = integrator.halvings if solver.implicit is not None and policy.dt is None else 0
+        self.halvings = opt.integrator.halvings if solver.implicit is not None and policy.dt is None else 0
         self.dt = math.inf  # [s] the next step
         self.dt_fresh = math.inf  # [s] the step a freshly updated reference would allow
         self.dt_first: float | None = None  # [s] the first adaptive step
@@ -127,12 +164,13 @@ class Driver:
         self.halved = 0  # implicit steps retried with half the step
         self.initial: np.ndarray | None = None  # diagnostics of the initial state (mpm.diagnostics)
         self.v0 = 0.0  # [m/s] the fastest initial particle
-        self._last: StepReport | None = None
+        self.current = True  # the device holds the state of driver.step (observers may read it)
+        self.syncs = 0  # read-backs of the step history
+        self._values: dict | None = None  # the last row read
         self._landing = False  # the last step was shortened to land on the duration
-        self._limit = math.inf  # [s] the rule's step (before landing on the duration)
-        self._factor = 1.0  # reference factor of the next step
         self._scale = 1.0  # the implicit step's factor after halvings
-        self._energies = (0.0, 0.0)  # kinetic and potential energy [J] of the last state reached
+        self._wanted = (None, None)
+        self._graph = self._graph_key = None
 
     # ------------------------------------------------------------ state
     @property
@@ -145,7 +183,6 @@ class Driver:
         p = self.policy
         return self.step >= p.steps if p.steps is not None else self.time >= p.duration * (1 - 1e-12)
 
-
     # ------------------------------------------------------------ run
     def run(self) -> Outcome:
         """Start, step until the end or an instability; the outcome."""
@@ -155,14 +192,16 @@ class Driver:
         return self.outcome
 
     def start(self) -> None:
-        """Prepare the solver, measure the initial state, check it, and tell the observers."""
-        s, state = self.solver, self.state
+        """Prepare the solver, measure the initial state, check it, choose the
+        first step, and tell the observers."""
+        s, state, p = self.solver, self.state, self.policy
+        if self.k > 1:  # room for k steps of at most a cell each (a fixed step: the device checks)
+            s.pad = (math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) + 1) * s.model.dx
         s.prepare(state)
         self.initial = s.measure(state, elastic=False)
         names = s.diagnostics.names
         kinetic, potential = (float(self.initial[names.index(k)]) for k in ("kinetic_energy", "potential_energy"))
         self.v0 = float(np.max(np.linalg.norm(state.v.numpy(), axis=1)))
-        self._energies = (kinetic, potential)
         problem = None
         if not (np.isfinite([kinetic, potential]).all() and np.isfinite(self.v0)):
             problem = (f"the initial state's kinetic or potential energy is not finite (fastest particle "
@@ -177,118 +216,178 @@ class Driver:
                 t = trips[0]
                 problem = (t.message, t.criterion, t.body, {"value": t.value, "limit": t.limit})
         if problem is None:
-            self._choose_dt()
+            s.buffer.set(kinetic_last=kinetic, potential_last=potential)
+            self.device_policy.start(self.v0, self.detector)
+            v = s.buffer.read()
+            self._chosen(v)
         for o in self.observers:
             o.on_start(self)
         if problem is not None:
             message, criterion, body, values = problem
             self._stop(message, criterion, body, **values)
+        elif int(v["halt"][0]) == COLLAPSE:
+            self._stop(self._collapse(v), "dt_collapse")
         elif self.done:
             self.outcome.status = "completed"
 
     def advance(self) -> None:
-        """One step (with its retries), its checks, and the observers' turn."""
-        s = self.solver
-        collapse = self._collapsed()
-        if collapse:
-            self._stop(collapse, "dt_collapse")
+        """A batch of up to ``sync_every`` steps (one under the implicit
+        integrator, with its retries), one read-back, then the host's turn:
+        the reports in order, the configuration updates the device left, the
+        checks, and the observers."""
+        if self.solver.implicit is not None:
+            self._advance_implicit()
             return
+        s, buffer = self.solver, self.solver.buffer
+        self._request()
         t0 = time.perf_counter()
-        report = s.advance(self.state, self.dt, self.halvings)
-        report.wall_time = time.perf_counter() - t0
-        report.elastic = s.step_energy()  # of the state the step started from
-        trips = []
-        failed = report.newton is not None and not report.newton.converged
-        if self.detector is not None and not failed:
-            # the state the step started from: its kinetic and potential energy from the last G2P,
-            # its elastic energy from this step's P2G
-            trips = self.detector.energy(self._energies[0], report.elastic, self._energies[1])
-            self._energies = (report.kinetic, report.potential)
-        if failed:  # the state is the step's start
-            n = report.newton
-            self._stop(report.reason, "newton", report=report, newton_iterations=n.newton, cg_iterations=n.cg,
-                       newton_residual=n.residual, halvings=report.halvings)
+        if self.graph:
+            self._replay()
+        else:
+            for _ in range(self.k):
+                self._device_step()
+        rows = self.device_policy.history.numpy()
+        self.syncs += 1
+        rows = sorted((r for r in rows if r[buffer.slices["step"]][0] > self.step),
+                      key=lambda r: r[buffer.slices["step"]][0])
+        wall = (time.perf_counter() - t0) / max(len(rows), 1)
+        buffer.set(halt=0.0, skip=0.0)  # the host holds the state: kernels it runs now must run
+        for i, row in enumerate(rows):
+            v = buffer.values(row)
+            report = s.report(v)
+            report.wall_time = wall
+            self.current = i == len(rows) - 1
+            if not self._accept(report, v):
+                return
+
+    def _device_step(self) -> None:
+        """One step on the device: the solver's stages, the criterion, the
+        device's configuration updates, the diagnostics, the policy."""
+        s = self.solver
+        s.attempt(self.state)
+        s.interpolate(self.state)
+        s.decide()
+        s.move(self.state)
+        if self.measure and s.options.batched:
+            s.diagnostics.launch_measure(self.state)
+        self.device_policy.record()
+
+    def _advance_implicit(self) -> None:
+        """One implicit step: Newton's loop reads back, so the host takes the
+        retries, then the policy runs on the device as for any step."""
+        s, buffer = self.solver, self.solver.buffer
+        s.time = self.time
+        t0 = time.perf_counter()
+        newton, dt, attempts = s.solve_step(self.state, self.dt, self.halvings)
+        if not newton.converged:
+            report = StepReport.failed(s.n_bodies)
+            report.dt, report.newton, report.halvings = dt, newton, attempts
+            report.wall_time = time.perf_counter() - t0
+            report.elastic = s.step_energy()
+            self._stop(report.reason, "newton", report=report, newton_iterations=newton.newton,
+                       cg_iterations=newton.cg, newton_residual=newton.residual, halvings=attempts)
             return
+        s.interpolate(self.state)
+        s.decide()
+        if attempts:
+            self.halved += attempts
+            self._scale *= 0.5 ** attempts
+        else:
+            self._scale = min(1.0, 2.0 * self._scale)
+        buffer.set(scale=self._scale)
+        self.device_policy.record()
+        v = buffer.values(self.device_policy.history.numpy()[0])
+        self.syncs += 1
+        buffer.set(halt=0.0, skip=0.0)
+        report = s.report(v)
+        report.newton, report.halvings = newton, attempts
+        report.wall_time = time.perf_counter() - t0
+        if attempts:
+            self._event(f"implicit step halved {attempts} time(s) to {dt:.3g} s after a failed Newton solve",
+                        "WARN", "halving", halvings=attempts, dt=dt)
+        self.current = True
+        self._accept(report, v)
+
+    def _accept(self, report: StepReport, v: dict) -> bool:
+        """The host's turn after one step of a batch: bookkeeping, the device's
+        trips and halts, the observers; False when the run stopped."""
+        s = self.solver
+        self.step, self.time = report.step, report.time
+        s.time = self.time
         self.dts.append(report.dt)
-        self.reference_factors.append(self._factor)
-        self._landing = self.dt < self._limit
-        report.dt_fresh = self.dt_fresh
-        self.step += 1
-        self.time += report.dt
-        self._last = report
-        if report.newton is not None:
-            self._halvings(report)
-        # the detection names the cause when particles also left the domain in this step
+        self.reference_factors.append(float(v["factor_step"][0]))
+        self._landing = bool(v["landing_step"][0])
+        if self.detector is not None:
+            self.detector.sync(v)
+        if self.current:
+            s.settle(self.state, report)
+        else:
+            s.count_removed(report)
+        self.outcome.step, self.outcome.time = self.step, self.time
         if self.detector is not None and not report.nonfinite:
-            for trip in trips + self.detector.step(report):
+            for record in report.trips.reshape(-1, 6):
+                trip = self.detector.trip(record)
                 if self.detection.action == "stop":
                     self._stop(trip.message, trip.criterion, trip.body, report=report, value=trip.value,
                                limit=trip.limit)
-                    return
+                    return False
                 where = {"criterion": trip.criterion, **({"body": trip.body} if trip.body else {})}
-                self._event(f"stability warning: {trip.message}", "WARN", "detection", **where, value=trip.value,
-                            limit=trip.limit)
+                self._event(f"stability warning: {trip.message}", "WARN", "detection", **where,
+                            value=trip.value, limit=trip.limit)
         if report.reason:
             self._stop(report.reason, "nonfinite" if report.nonfinite else "outside", report=report,
                        nonfinite=report.nonfinite, outside=report.outside)
-            return
-        self.outcome.step, self.outcome.time = self.step, self.time
-        if self.done:
+            return False
+        if report.halt == DONE:
             self.outcome.status = "completed"
+        if self.measure:  # after the configuration updates, as the device does
+            report.diagnostics = (s.measure(self.state, elastic=False) if not s.options.batched or report.host_update
+                                  else s.diagnostics.named(report.diagnostics))
         for o in self.observers:
             o.on_step(self, report)
-        if self.running:
-            self._choose_dt()
+        if report.halt in (DONE, NONFINITE, OUTSIDE, DETECTION):
+            return self.running
+        self._chosen(v)
+        if report.halt == COLLAPSE:
+            self._stop(self._collapse(v), "dt_collapse")
+            return False
+        return True
 
-    # ------------------------------------------------------------ the step rule
-    def _choose_dt(self) -> None:
-        """The next step: the solver's stable step (mpm.timestep) capped by
-        dt_max, unless the policy fixes it; the implicit integrator's step is
-        the displacement limit instead, times a factor that halves with a
-        failed solve and recovers; the last step ends on the duration."""
-        s, p, report = self.solver, self.policy, self._last
-        if s.implicit is not None:
-            limit = self._scale * s.timestep.displacement_dt(s.options.integrator.displacement, report, self.v0)
-            self.dt_fresh, self._factor, binding = limit, 1.0, "displacement"
-        else:
-            limits = s.timestep.limits(p.cfl, report, self.v0)
-            lim = min(limits, key=lambda x: x.dt)
-            self.dt_fresh = min(p.dt_max, min(x.fresh for x in limits))
-            self._factor = lim.reference_factor
-            limit, binding = lim.dt, lim.binding
-        if p.dt is not None:
-            dt = p.dt
-            self.binding["fixed"] += 1
-        else:
-            dt = min(p.dt_max, limit)
-            self.binding["dt_max" if p.dt_max <= limit else binding] += 1
-            if self.dt_first is None:
-                self.dt_first = dt
-        self._limit = dt
-        self.dt = dt if p.duration is None else min(dt, p.duration - self.time)
+    # ------------------------------------------------------------ the step rule's choices
+    def _chosen(self, v: dict) -> None:
+        """The next step the device chose (mpm.policy), counted by its binding term."""
+        self.dt, self.dt_fresh = float(v["dt"][0]), float(v["dt_fresh"][0])
+        self.binding[BINDINGS[int(v["binding"][0])]] += 1
+        if v["dt0_set"][0]:
+            self.dt_first = float(v["dt0"][0])
 
-    def _collapsed(self) -> str | None:
-        """Why the step cannot be taken: the adaptive step fell below
-        dt_collapse of the first (a particle's strain rate or compression is
-        running away), or it is not a positive finite number."""
-        dt, dt0, p = self._limit, self.dt_first, self.policy
-        if p.dt is None and dt0 is not None and not (dt >= p.dt_collapse * dt0):  # NaN and 0 included
-            return (f"time step collapsed to {dt:.3g} s, below {p.dt_collapse:g} of the first "
+    def _collapse(self, v: dict) -> str:
+        """Why the next step cannot be taken."""
+        p, dt0, limit = self.policy, self.dt_first, float(v["dt_limit"][0])
+        if p.dt is None and dt0 is not None and not (limit >= p.dt_collapse * dt0):
+            return (f"time step collapsed to {limit:.3g} s, below {p.dt_collapse:g} of the first "
                     f"step ({dt0:.3g} s): a particle's strain rate or compression is running away")
-        if not (0.0 < self.dt < math.inf):  # a step of 0 would never end the run (or end it at t = 0)
-            speed = self._last.max_speed if self._last is not None else self.v0
-            return f"the time step is {self.dt:.3g} s (fastest particle {speed:.3g} m/s): the run cannot advance"
-        return None
+        speed = math.sqrt(v["max_v2"][0]) if self.step else self.v0
+        return f"the time step is {self.dt:.3g} s (fastest particle {speed:.3g} m/s): the run cannot advance"
 
-    def _halvings(self, report: StepReport) -> None:
-        """An implicit step's halvings: an event, and the next steps' factor."""
-        if report.halvings:
-            self.halved += report.halvings
-            self._scale *= 0.5 ** report.halvings
-            self._event(f"implicit step halved {report.halvings} time(s) to {report.dt:.3g} s after a failed "
-                        "Newton solve", "WARN", "halving", halvings=report.halvings, dt=report.dt)
-        else:
-            self._scale = min(1.0, 2.0 * self._scale)
+    def _request(self) -> None:
+        """The observers' next wants: the device pauses there."""
+        wants = [o.wants(self) for o in self.observers]
+        wanted = (min((w[0] for w in wants), default=math.inf), min((w[1] for w in wants), default=math.inf))
+        if wanted != self._wanted:
+            self.solver.buffer.set(stop_step=float(wanted[0]), stop_time=float(wanted[1]))
+            self._wanted = wanted
+
+    def _replay(self) -> None:
+        """The k steps as a CUDA graph, captured again when the grids changed."""
+        s = self.solver
+        key = (s.layout.n_nodes, s.layout.version, id(s.grid.m))
+        if self._graph is None or key != self._graph_key:
+            with wp.ScopedCapture(device=s.model.device) as capture:
+                for _ in range(self.k):
+                    self._device_step()
+            self._graph, self._graph_key = capture.graph, key
+        wp.capture_launch(self._graph)
 
     # ------------------------------------------------------------ reporting
     def _event(self, text: str, level: str = "INFO", kind: str = "", **values) -> None:

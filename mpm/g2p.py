@@ -13,7 +13,7 @@ import warp as wp
 from .configuration import make_committed, make_moment_at
 from .kernels import Kernel
 from .launch import warp_kernel
-from .status import StepStatus
+from .status import StepControl, StepStatus
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
@@ -44,14 +44,15 @@ def make_min_stretch2(t: Types):
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
-             bound_reach: bool = False, commit: bool = False, project=None):
-    """G2P for all particles.
+             bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False):
+    """G2P for all particles, for the step ``control.dt`` (``batched``: nothing
+    in a step the driver skips, mpm.driver).
 
     ``removal`` (a domain with open faces): a particle that crosses the
     interior's bound on an open face (``open_lo``/``open_hi`` 1 per axis) is
     removed: its mass and volume become 0 (so no transfer sees it again), it
     stays where it crossed, clamped to the interior, at rest, and G2P skips
-    it from then on; ``status.removed`` counts the removals. A
+    it from then on; ``status.removed`` counts the removals per body. A
     particle crossing a closed face still counts as outside (unstable).
     ``fused``: stencils located from the reference positions (mpm.stencil.fuse);
     ``commit`` (with it: the Eulerian scheme, whose reference follows the
@@ -158,7 +159,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         # Step:
         dx: S,
         K: S,
-        dt: S,
+        control: StepControl,
         epsilon: S,
         inside_lo: t.vec,
         inside_hi: t.vec,
@@ -180,6 +181,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         # with commit:
         body_params: wp.array(dtype=t.params),
     ):
+        if wp.static(batched):
+            if control.skip[0] != f64(0.0):
+                return
+        dt = S(control.dt[0])
         p = wp.tid()
         b = body[p]
         if wp.static(removal):
@@ -257,7 +262,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 C[p] = mat()
                 mass[p] = S(0.0)
                 volume[p] = S(0.0)
-                wp.atomic_add(status.removed, 0, f64(1.0))
+                wp.atomic_add(status.removed, b, f64(1.0))
                 grow_box(status, b, xp)
                 if wp.static(commit):  # F^sn was not advanced for a removed particle
                     commit_reference(p, xp, Fsn_old, F0s[p], body_params[b], F0s, Fsn, cache, dx)

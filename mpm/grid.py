@@ -30,7 +30,7 @@ import functools
 import warp as wp
 
 from .launch import warp_kernel
-from .status import StepStatus
+from .status import StepControl, StepStatus
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
@@ -245,14 +245,17 @@ def make_work(t: Types):
 
 @functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
-                     colliders: tuple[str, ...] = (), lattice: bool = False, n_grids: int = 1):
-    """Momentum to velocity and gravity; the boundary conditions too unless
+                     colliders: tuple[str, ...] = (), lattice: bool = False, n_grids: int = 1,
+                     batched: bool = False):
+    """Momentum to velocity and gravity over the step ``control.dt``, at the
+    step's start ``control.t``; the boundary conditions too unless
     ``with_boundary`` is False (contact comes first, then :func:`make_boundary`).
     The node positions are P2G's mass-weighted ones, or, ``lattice`` (the
     Eulerian scheme, whose reference grid is the current one), the lattice
-    positions of the layout (mpm.stencil.make_node_position); ``positioned``
-    0 (at run time): P2G summed none, since no condition can reach a node in
-    this step, and the conditions are skipped."""
+    positions of the layout (mpm.stencil.make_node_position); with
+    ``control.positions`` 0, P2G summed none, since no condition can reach a
+    node in this step, and the conditions are skipped. ``batched``: nothing
+    in a step the driver skips (mpm.driver)."""
     S = t.scalar
     node_position = make_node_position(t, n_grids)
     Gv = wp.types.vector(n_grids, S)
@@ -264,8 +267,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     def grid_update(
         grid_m: wp.array(dtype=S),
         gravity: t.vec,
-        dt: S,
-        time: S,
+        control: StepControl,
         data: Data,
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
@@ -279,12 +281,17 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         n_boxes: int,
         grid_offsets: Gv,
         dx: S,
-        positioned: int,  # 0: P2G summed no positions (no condition can reach a node this step)
     ):
+        if wp.static(batched):
+            if control.skip[0] != wp.float64(0.0):
+                return
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
+        dt = S(control.dt[0])
+        time = S(control.t[0])
+        positioned = int(control.positions[0])
         vi = grid_v[i] / m + dt * gravity
         if positioned != 0:
             if wp.static(lattice):
@@ -302,8 +309,9 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
 
 
 @functools.cache
-def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
-    """The boundary conditions as a pass of their own (after contact)."""
+def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), batched: bool = False):
+    """The boundary conditions as a pass of their own (after contact), at the
+    step's start ``control.t`` (``batched``: nothing in a skipped step)."""
     S = t.scalar
     conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
@@ -313,19 +321,22 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = ())
     def boundary(
         grid_m: wp.array(dtype=S),
         grid_q: wp.array(dtype=t.vec),
-        time: S,
+        control: StepControl,
         data: Data,
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
         grid_v: wp.array(dtype=t.vec),
         status: StepStatus,  # boundary_work += the energy the conditions gave
     ):
+        if wp.static(batched):
+            if control.skip[0] != wp.float64(0.0):
+                return
         i = wp.tid()
         m = grid_m[i]
         if m <= S(0.0):
             return
         vi = grid_v[i]
-        vb = conditions(vi, grid_q[i], m, grid_kin[i], grid_kin_id[i], time, data)
+        vb = conditions(vi, grid_q[i], m, grid_kin[i], grid_kin_id[i], S(control.t[0]), data)
         work(m, vi, vb, status)
         grid_v[i] = vb
 

@@ -611,7 +611,7 @@ class ImplicitSolve:
         step's rule with the implicit normal impulse."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
-            s.grid.m, self.reaction, s.grid.v, s.status.status])
+            s.grid.m, self.reaction, s.grid.v, s.buffer.status])
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,

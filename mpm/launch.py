@@ -74,3 +74,37 @@ class Launches:
             entry[2] = dim
         cmd.launch()
 
+
+
+class Counter:
+    """Counts, while entered, this process's kernel launches (``wp.launch``
+    and recorded launches) and device-to-host reads (``wp.array.numpy``: on a
+    GPU each is a synchronisation; on the CPU a view, counted the same)."""
+
+    def __init__(self):
+        self.launches = 0
+        self.reads = 0
+
+    def __enter__(self):
+        self._saved = (wp.launch, wp.Launch.launch, wp.array.numpy)
+        launch, recorded, numpy = self._saved
+
+        def counted_launch(*args, **kwargs):
+            if not kwargs.get("record_cmd"):
+                self.launches += 1
+            return launch(*args, **kwargs)
+
+        def counted_recorded(cmd, *args, **kwargs):
+            self.launches += 1
+            return recorded(cmd, *args, **kwargs)
+
+        def counted_numpy(array, *args, **kwargs):
+            self.reads += 1
+            return numpy(array, *args, **kwargs)
+
+        wp.launch, wp.Launch.launch, wp.array.numpy = counted_launch, counted_recorded, counted_numpy
+        return self
+
+    def __exit__(self, *exc):
+        wp.launch, wp.Launch.launch, wp.array.numpy = self._saved
+        return False

@@ -19,6 +19,16 @@ from .kernels import Kernel
 from .types import Types
 
 
+FIT_SLACK = 1.0e-3
+"""[cells] a box covers the stencils of positions this much beyond its
+bounds: a particle on a node of a grid (the compact kernel's grids sit a
+quarter cell off the lattice, where regular sampling puts particles) has its
+first stencil node at a floor the kernels round in their own precision, and a
+box that cut it off would clamp the stencil (mpm.stencil.make_locate) in one
+layout and not in another (float32 rounds u = X / dx by about 1e-5 cells on
+a 128-cell grid)."""
+
+
 class GridLayout:
     """Boxes of the bodies' reference grids and the device tables (first node,
     nodes per axis, offset into the flat arrays) per box b * G + g."""
@@ -34,6 +44,7 @@ class GridLayout:
         self.shape = np.ones((n_boxes, t.dim), np.int32)  # nodes per axis
         self.offset = np.zeros(n_boxes, np.int32)
         self.n_nodes = 0
+        self.version = 0  # commits that changed a box (a captured step must be captured again)
         self._changed = True  # a fit changed a box since the last commit (or none was made)
         G = kernel.n_grids
         self._shift = np.asarray(kernel.grids)[:, None] + kernel.offset  # [cells] per grid (row)
@@ -59,9 +70,10 @@ class GridLayout:
             self._fitted[body] = (xmin, xmax)
             xmin = np.min([a for a, _ in self._fitted.values()], axis=0)
             xmax = np.max([b for _, b in self._fitted.values()], axis=0)
-        # per grid (rows) the first stencil node of the lowest and highest position
-        lo = np.floor(xmin / self.dx - self._shift).clip(0, self._last).astype(np.int32)
-        hi = np.floor(xmax / self.dx - self._shift).clip(0, self._last).astype(np.int32)
+        # per grid (rows) the first stencil node of the lowest and highest position, either side of
+        # a node the kernels' own rounding may put it on (FIT_SLACK)
+        lo = np.floor(xmin / self.dx - self._shift - FIT_SLACK).clip(0, self._last).astype(np.int32)
+        hi = np.floor(xmax / self.dx - self._shift + FIT_SLACK).clip(0, self._last).astype(np.int32)
         shape = hi - lo + np.int32(k.support)
         # shared: every body's rows take body 0's boxes
         rows = self._grids if self.shared else self._grids[body]
@@ -77,6 +89,7 @@ class GridLayout:
         if not self._changed:
             return
         self._changed = False
+        self.version += 1
         sizes = np.prod(self.shape.astype(np.int64), axis=1)
         if self.shared:  # the grids of body 0, for everyone
             G = self.kernel.n_grids

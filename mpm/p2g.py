@@ -22,26 +22,27 @@ import warp as wp
 from .kernels import Kernel
 from .launch import warp_kernel
 from .materials.plastic import make_plastic_update
-from .status import StepStatus
+from .status import StepControl, StepStatus
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
 
 def make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
              with_body_force: bool = False, lagrangian: bool = True, with_stress: bool = True,
-             fused: bool = False):
+             fused: bool = False, batched: bool = False):
     """P2G for the particles of one material model: see :func:`_make_p2g`
     (``lagrangian`` False, the Eulerian scheme: no node positions, which sit
     on the lattice, and F^sn = I in the return mapping; ``fused``: stencils
     located from the reference positions, mpm.stencil.fuse)."""
     return _make_p2g(t, kernel, transfer, material, with_regions, with_body_force,
-                     lagrangian or not material.plastic, with_stress, fused, positions=lagrangian)
+                     lagrangian or not material.plastic, with_stress, fused, positions=lagrangian,
+                     batched=batched)
 
 
 @functools.cache
 def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: bool,
               with_body_force: bool, lagrangian: bool, with_stress: bool = True, fused: bool = False,
-              positions: bool = True):
+              positions: bool = True, batched: bool = False):
     """P2G for the particles of one material model (``material`` is its class);
     ``with_regions``: also the mass each node draws from kinematic regions;
     ``with_body_force``: add the impulse m_p b_p dt of a per-particle body
@@ -55,9 +56,13 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     A model that hardens records its largest stiffening factor per body in
     ``status`` (for the time step). ``with_stress`` False leaves the stress
     impulse out (the implicit integrator adds the stress of the step's end,
-    mpm.implicit); the return mapping and the energy stay. ``sum_positions``
-    0 (at run time) leaves the node positions out in a step where no
-    boundary condition can reach the body (mpm.solver)."""
+    mpm.implicit); the return mapping and the energy stay.
+
+    The step is ``control.dt`` (0 when not ``write``: the stored energy of a
+    state between steps); ``control.positions`` 0 leaves the node positions
+    out in a step where no boundary condition can reach the body
+    (mpm.criterion); ``batched``: nothing happens in a step the driver
+    skips (``control.skip``, mpm.driver)."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
@@ -110,10 +115,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         # Step:
         dx: S,
         K: S,
-        dt: S,
         start: int,
-        write: int,
-        sum_positions: int,  # 0: no boundary condition can reach a node this step (positions unused)
+        write: int,  # 0: the stored energy of a state between steps (no step, nothing stored)
         # Grid out:
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
@@ -121,10 +124,17 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         region: wp.array(dtype=wp.int32),
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
-        # Diagnostics out:
-        energy: wp.array(dtype=f64),
+        # Step figures out (elastic energy, stiffening), clock in:
         status: StepStatus,
+        control: StepControl,
     ):
+        if wp.static(batched):
+            if control.skip[0] != f64(0.0):
+                return
+        dt = S(0.0)
+        if write != 0:
+            dt = S(control.dt[0])
+        sum_positions = int(control.positions[0])
         p = wp.tid() + start
         b = body[p]
         m = mass[p]
@@ -150,7 +160,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
             if wp.static(needs_L):
                 L = Cp * wp.inverse(Fs)
             P, psi = stress_energy(Fs * F0, L, body_params[b])
-        wp.atomic_add(energy, 0, f64(volume[p] * psi))
+        wp.atomic_add(status.elastic, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
         if wp.static(not with_stress):
             stress = t.mat()

@@ -41,8 +41,11 @@ collapses (seen on the droplet with the compact kernel); keep is the
 default there.
 """
 
+import functools
 import math
 from dataclasses import dataclass
+
+import warp as wp
 
 from .params import param
 
@@ -161,3 +164,55 @@ class AULMPM:
 
 
 SCHEMES = {"empm": EMPM, "tlmpm": TLMPM, "aulmpm": AULMPM}
+
+
+@wp.struct
+class RuleParams:
+    """A-ULMPM's criterion on the device (:func:`make_update_rule`)."""
+
+    epsilon: wp.float64
+    eta: wp.float64
+    dJ_max: wp.float64
+    stretch_min: wp.float64
+
+
+def rule_params(scheme) -> RuleParams:
+    p = RuleParams()
+    p.epsilon, p.eta = float(getattr(scheme, "epsilon", 0.0) or 0.0), float(getattr(scheme, "eta", 0.0) or 0.0)
+    p.dJ_max, p.stretch_min = (float(getattr(scheme, "dJ_max", 0.0) or 0.0),
+                               float(getattr(scheme, "stretch_min", 0.0) or 0.0))
+    return p
+
+
+def rule_kind(scheme) -> str:
+    """``always`` (EMPM), ``never`` (TLMPM, or A-ULMPM with epsilon = inf),
+    or A-ULMPM's criterion (``paper`` or ``distortion``)."""
+    if scheme.name == "empm":
+        return "always"
+    if scheme.name == "tlmpm" or math.isinf(scheme.epsilon):
+        return "never"
+    return scheme.criterion
+
+
+@functools.cache
+def make_update_rule(kind: str):
+    """``updates(marked, count, max_dJ, min_stretch, params) -> bool`` on the
+    device, the scheme's rule (``updates`` above) for :func:`rule_kind`
+    ``kind``, in float64 with the host's comparisons."""
+    f64 = wp.float64
+
+    @wp.func
+    def updates(marked: f64, count: f64, max_dJ: f64, min_stretch: f64, params: RuleParams):
+        fire = bool(False)
+        if wp.static(kind == "always"):
+            fire = True
+        elif wp.static(kind != "never"):
+            fire = marked >= params.eta * count
+            if wp.static(kind == "distortion"):
+                bound = params.dJ_max
+                if params.epsilon > bound:  # max(dJ_max, epsilon)
+                    bound = params.epsilon
+                fire = fire or max_dJ >= bound or min_stretch < params.stretch_min
+        return fire
+
+    return updates

@@ -4,8 +4,15 @@ One formulation serves every scheme (mpm.schemes): each body has its own
 reference grid (mpm.layout); a step rasterises the particles to it (mpm.p2g),
 updates the nodal velocities - forward Euler, or backward Euler by Newton's
 method (mpm.integrators, mpm.implicit) - applies contact (mpm.contact) and
-the boundary conditions (mpm.conditions), interpolates back (mpm.g2p) and
-leaves the configuration update (mpm.configuration) to the scheme's rule.
+the boundary conditions (mpm.conditions), interpolates back (mpm.g2p), and
+the criterion (mpm.criterion) decides the configuration updates
+(mpm.configuration) on the device.
+
+Every stage reads the step and the time from the device's control block
+(mpm.status), so a step needs nothing from the host: :class:`mpm.Driver`
+runs k steps and reads back once. :meth:`Solver.advance` is the host's
+single step (the time and step given, the figures read back), for scripts
+and tests that step by hand.
 
 The solver compiles only what the model uses (mpm.plan lists it): one P2G
 per material model present, one configuration update per body's
@@ -23,7 +30,8 @@ import warp as wp
 from .conditions import Conditions
 from .configuration import References
 from .contact import Contact
-from .diagnostics import Diagnostics
+from .criterion import Criterion
+from .diagnostics import Diagnostics, diagnostic_names
 from .fracture import FractureMeasure
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
@@ -32,7 +40,7 @@ from .layout import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
-from .status import StatusBuffer, StepReport
+from .status import StepBuffer, StepReport
 from .stencil import fuse
 from .timestep import StepRule
 from .transfer import TRANSFERS, GridConstants, Transfers
@@ -62,17 +70,22 @@ class SolverOptions:
     quadratic and cubic kernels (a constant moment); not the compact kernel,
     whose sines (and K_p at the new position) would be evaluated twice more
     per step, nor the linear one"""
+    batched: bool = False
+    """compile the early exits and the device's configuration updates that
+    let :class:`mpm.Driver` run several steps between two read-backs
+    (its ``sync_every`` > 1; explicit integrator only)"""
 
 
 class Solver:
     """Advances a :class:`State` of a :class:`Model` with a scheme.
 
-    Public parts, for the integrators, observers and tests: ``layout`` and
+    Public parts, for the integrators, the driver and tests: ``layout`` and
     ``grid`` (the reference grids and their nodal fields), ``const`` (the
-    discretisation's constants), ``status`` (the step's figures,
-    mpm.status), ``transfers``, ``conditions``, ``contact`` (None without),
-    ``references``, ``implicit`` (the Newton solve, None when explicit),
-    ``timestep`` (the step limits), ``fracture`` and ``diagnostics``."""
+    discretisation's constants), ``buffer`` (the step's figures and the
+    device's control block, mpm.status), ``transfers``, ``conditions``,
+    ``contact`` (None without), ``references``, ``criterion``, ``implicit``
+    (the Newton solve, None when explicit), ``timestep`` (the step rule on
+    the host), ``fracture`` and ``diagnostics``."""
 
     def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
         self.model = model
@@ -85,23 +98,28 @@ class Solver:
             raise ValueError(f"transfer {opt.transfer!r}; accepted: {', '.join(TRANSFERS)}")
         if scene.contact == "shared" and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
+        implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched
+        forcing = scene.solution if getattr(scene.solution, "has_body_force", False) else None
+        if batched and (implicit or forcing):
+            raise ValueError("batched steps need the explicit integrator and no host-side body force")
         nb = self.n_bodies = len(scene.bodies)
         self.body_counts = np.array([c for _, c in model.body_ranges])  # particles not removed, per body
         self.removed = np.zeros(nb, np.int64)  # per body: particles removed at open faces so far
         self.kept: np.ndarray | None = None  # the particles not removed, by number (None: all of them)
-        implicit = isinstance(opt.integrator, Implicit)
-        eulerian = isinstance(scheme, EMPM)
+        self._kept_stale = False
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0)
-        self.status = StatusBuffer(nb, t.dim, dev)
-        self.contact = Contact(model, self.launch, implicit) if nb > 1 and scene.contact == "frictionless" else None
+        self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev)
+        control = self.buffer.control
+        self.contact = (Contact(model, self.launch, implicit, control, batched)
+                        if nb > 1 and scene.contact == "frictionless" else None)
         # the conditions act in the grid update, or after contact or the implicit solve
-        self.conditions = Conditions(model, self.launch, separate=self.contact is not None or implicit,
-                                     implicit=implicit, lattice=eulerian)
+        self.conditions = Conditions(model, self.launch, control, separate=self.contact is not None or implicit,
+                                     implicit=implicit, lattice=eulerian, batched=batched)
         # a moving grid needs node positions only where a condition can reach a node: with walls
-        # alone, P2G sums them only in steps where a body comes near a closed face (_positions_needed)
+        # alone, P2G sums them only in steps where a body comes near a closed face (mpm.criterion)
         self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact
                                 or implicit)
         projections = {b.material.project for b in scene.bodies}
@@ -109,35 +127,39 @@ class Solver:
         self.fused = fused and eulerian and not implicit
         # fused EMPM: G2P does the configuration update too when the bodies share one projection
         self.g2p_commits = self.fused and len(projections) == 1 and scheme.affine == "keep"
-        forcing = scene.solution if getattr(scene.solution, "has_body_force", False) else None
         self.transfers = Transfers(
-            model, self.launch, opt.transfer, lagrangian=not eulerian, fused=self.fused,
-            commit=self.g2p_commits, with_stress=not implicit, regions=self.conditions.regions,
-            forcing=forcing, record_dJ=opt.record_dJ, marks=scheme.tracks_marks(),
-            epsilon=getattr(scheme, "epsilon", None) or 0.0, track_energy=opt.track_energy,
-            track_J=opt.track_J, removal=self.conditions.open, bound_reach=self.free_flight,
-            project=next(iter(projections)) if self.g2p_commits else None)
+            model, self.launch, self.buffer, opt.transfer, lagrangian=not eulerian, fused=self.fused,
+            commit=self.g2p_commits, with_stress=not implicit, regions=self.conditions.regions, forcing=forcing,
+            record_dJ=opt.record_dJ, marks=scheme.tracks_marks(), epsilon=getattr(scheme, "epsilon", None) or 0.0,
+            track_energy=opt.track_energy, track_J=opt.track_J, removal=self.conditions.open,
+            bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
+            batched=batched)
         per_particle_K = k.moment is None and opt.transfer != "pic"  # K_p cached per particle
-        self.references = References(model, self.launch, self.layout, self.grid,
+        self.references = References(model, self.launch, self.layout, self.grid, control,
                                      transform=scheme.affine == "transform",
                                      gradients=opt.transfer != "mls" or k.gradient_affine, fused=self.fused,
                                      moment=per_particle_K)
-        self.diagnostics = Diagnostics(model, self.launch, per_particle_K)
+        self.criterion = Criterion(model, self.launch, self.buffer, self.layout, scheme, self.conditions,
+                                   free_flight=self.free_flight, commits=self.g2p_commits, batched=batched)
+        self.diagnostics = Diagnostics(model, self.launch, self.buffer, per_particle_K, batched)
         self.fracture = FractureMeasure(model)
         self.implicit = ImplicitSolve(self, opt.integrator) if implicit else None
         self.timestep = StepRule(model, self.conditions.collider_speed)
-        self._reach = model.dx * max(k.offset + 1.0, k.support - 1.0 - k.offset)  # [m] largest |r| of a stencil
-        self._positions = 1  # P2G sums the node positions in the next step
+        # the device moves references only in batches, and only where the scheme can move them
+        self.device_moves = batched and not self.g2p_commits and scheme.name != "tlmpm"
+        self.pad = 0.0  # [m] grids grown by this much on every side at a refit (batches: room for k steps)
         self._backup = None  # F^0s and history before an implicit step (plastic models, for a retry)
-        self.time = 0.0  # [s] simulated time of the state (kinematic regions and colliders depend on it)
+        self.time = 0.0  # [s] simulated time of the state, on the host (the device's is control.t)
         self.X0 = None  # [m] initial positions, float64 (after prepare)
+        self.buffer.set(alive=self.body_counts)
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
         """Every kernel this run compiles."""
-        parts = [self.transfers, self.conditions, self.contact, self.references, self.implicit]
+        parts = [self.transfers, self.conditions, self.contact, self.implicit]
         return ([k for part in parts if part is not None for k in part.kernels()]
-                + [self.diagnostics.kernel, self.fracture.kernel])
+                + self.references.kernels(gated=self.device_moves) + self.references.kernels()
+                + [self.criterion.kernel, self.diagnostics.kernel, self.fracture.kernel])
 
     def load(self) -> float:
         """Compile (or load from the cache) every kernel this run uses; seconds taken."""
@@ -151,114 +173,83 @@ class Solver:
         and record the neighbour pairs of the fracture measure."""
         m = self.model
         x = state.x.numpy()
-        self._positions = 1  # no bound before the first step
+        self.buffer.set(positions=1.0)  # no bound before the first step
         self.X0 = x.astype(np.float64)
         self.diagnostics.prepare(self.X0)
         self.fracture.prepare(x)
+        state.stencils.offset = self.layout.offset_d  # (the cached stencils are relative to their boxes)
         if self.fused:
             fuse(state.stencils, m.types, m.kernel, state.X, self.layout.lo_d, self.layout.offset_d, m.dx)
         lo = [x[s:s + c].min(axis=0) for s, c in m.body_ranges]
         hi = [x[s:s + c].max(axis=0) for s, c in m.body_ranges]
-        self.references.fit(range(self.n_bodies), lo, hi)
+        self.references.fit(range(self.n_bodies), lo, hi, self.pad)
         self.references.move(state, range(self.n_bodies), self.const)
 
-    # ------------------------------------------------------------------ step
-    def advance(self, state: State, dt: float, halvings: int = 0) -> StepReport:
-        """One step of ``dt`` [s], then the configuration updates the scheme
-        asks for. An implicit step whose Newton solve fails is retried with
-        half the step up to ``halvings`` times (the state is restored first);
-        ``report.dt`` is the step taken."""
-        for attempt in range(halvings + 1):
-            newton = self.step(state, dt)
-            if newton is None or newton.converged or attempt == halvings:
-                break
-            self._restore(state)
-            dt *= 0.5
-        if newton is not None and not newton.converged:
-            self._restore(state)  # the state the failed step started from
-            report = StepReport.failed(self.n_bodies)
-        else:
-            self._interpolate(state, self.model.types.scalar(dt))
-            report = self.report()
-        report.dt, report.newton, report.halvings = dt, newton, attempt
-        report.positioned = bool(self._positions)
-        if report.removed is not None:
-            self._count_removed(report)
-        if report.reason is not None:
-            self._positions = 1  # no bound from a failed step
-        else:
-            t0 = time.perf_counter()
-            report.updated = [b for b in range(self.n_bodies) if self.body_counts[b] > 0
-                              and self.scheme.updates(int(report.marked[b]), int(self.body_counts[b]),
-                                                     float(report.max_dJ[b]), float(report.min_stretch[b]))]
-            if report.updated:  # (G2P has moved the fused Eulerian references: only their grids follow)
-                self.references.fit(report.updated, report.box_lo, report.box_hi)
-                if not self.g2p_commits:
-                    self.references.move(state, report.updated, self.const)
-            report.update_time = time.perf_counter() - t0
-            self._positions = self._positions_needed(report)
-        return report
-
-    def step(self, state: State, dt: float) -> NewtonReport | None:
-        """Advance the grid of ``state`` by ``dt`` [s] in the current reference
-        configurations, up to the grid velocities (G2P follows in
-        :meth:`advance`); the implicit solve's report, or None (explicit)."""
-        t0 = self.time
-        self.step_time = self.model.types.scalar(t0)  # the conditions' clock [s]
-        self.time += dt
-        dt = self.model.types.scalar(dt)
+    # ------------------------------------------------------------------ a step on the device
+    def attempt(self, state: State) -> NewtonReport | None:
+        """Advance the grid of ``state`` by the device's step (``control.dt``,
+        from ``control.t``) in the current reference configurations, up to the
+        grid velocities; the implicit solve's report, or None (explicit)."""
+        self.step_time = self.model.types.scalar(self.time)  # the implicit constraints' clock [s]
+        self.buffer.reset()
         self._clear()
-        self._apply_forcing(t0)
+        self._apply_forcing()
         self._save(state)
-        self._rasterize(state, dt)
-        self._update_grid(dt)
-        newton = self._solve(state, dt)
+        self._rasterize(state)
+        self._update_grid()
+        newton = self._solve(state)
         if newton is not None and not newton.converged:
-            self.time = t0
             return newton
         self._resolve_contact()
         self._apply_boundary()
         return newton
 
-    # the stages
+    def interpolate(self, state: State) -> None:
+        """G2P (mpm.g2p): velocities, affine matrices, positions, F^sn, the step's figures."""
+        self.transfers.interpolate(state, self.grid, self.layout, self.const)
+
+    def decide(self) -> None:
+        """The criterion: configuration updates, alive counts, positions (mpm.criterion)."""
+        self.criterion.decide()
+
+    def move(self, state: State) -> None:
+        """The configuration updates the criterion asked for, where the grids cover them (batches)."""
+        if self.device_moves:
+            self.references.move(state, range(self.n_bodies), self.const, gated=True)
+
+    # the stages of an attempt
     def _clear(self) -> None:
-        """Zero the grid (the node positions unless on the lattice) and the step's figures."""
-        lattice = isinstance(self.scheme, EMPM)
-        self.grid.clear(self.layout.n_nodes, positions=not lattice and bool(self._positions))
-        self.status.reset()
+        """Zero the grid (the node positions unless on the lattice or not summed)."""
+        self.grid.clear(self.layout.n_nodes, positions=not isinstance(self.scheme, EMPM))
 
-    def _apply_forcing(self, t0: float) -> None:
-        """A manufactured solution's body force at the step's start ``t0`` [s] (host)."""
+    def _apply_forcing(self) -> None:
+        """A manufactured solution's body force at the step's start (host)."""
         if self.transfers.forcing is not None:
-            self.transfers.apply_forcing(self.X0, t0)
+            self.transfers.apply_forcing(self.X0, self.time)
 
-    def _rasterize(self, state: State, dt, write: bool = True) -> None:
+    def _rasterize(self, state: State, write: bool = True) -> None:
         """P2G (mpm.p2g); the plastic return mapping stored when ``write``."""
-        self.transfers.rasterize(state, self.grid, self.layout, self.const, dt, self.status.status, write,
-                                 self._positions)
+        self.transfers.rasterize(state, self.grid, self.layout, self.const, write)
 
-    def _update_grid(self, dt) -> None:
+    def _update_grid(self) -> None:
         """Momentum to velocity, gravity, and the conditions unless they come later."""
-        self.conditions.update_grid(self.grid, self.layout, self.const, dt, self.step_time, self.status.status,
-                                    self._positions)
+        self.conditions.update_grid(self.grid, self.layout, self.const, self.buffer.status)
 
-    def _solve(self, state: State, dt) -> NewtonReport | None:
+    def _solve(self, state: State) -> NewtonReport | None:
         """Backward Euler by Newton's method (mpm.implicit); None when explicit."""
-        return self.implicit.solve(state, dt) if self.implicit is not None else None
+        if self.implicit is None:
+            return None
+        return self.implicit.solve(state, self.model.types.scalar(self.dt))
 
     def _resolve_contact(self) -> None:
         """Frictionless contact between bodies (mpm.contact)."""
         if self.contact is not None:
-            self.contact.resolve(self.grid, self.layout, self.status.status)
+            self.contact.resolve(self.grid, self.layout, self.buffer.status)
 
     def _apply_boundary(self) -> None:
         """The conditions after contact or the implicit solve."""
         if self.conditions.boundary is not None:
-            self.conditions.apply(self.grid, self.layout, self.step_time, self.status.status)
-
-    def _interpolate(self, state: State, dt) -> None:
-        """G2P (mpm.g2p): velocities, affine matrices, positions, F^sn, the step's figures."""
-        self.transfers.interpolate(state, self.grid, self.layout, self.const, dt, self.status.status)
+            self.conditions.apply(self.grid, self.layout, self.buffer.status)
 
     def _save(self, state: State) -> None:
         """Keep F^0s and the history before an implicit step of a plastic
@@ -270,62 +261,105 @@ class Solver:
         wp.copy(self._backup[0], state.F0s)
         wp.copy(self._backup[1], state.history)
 
-    def _restore(self, state: State) -> None:
-        """Undo a failed implicit step (the grid is scratch; only P2G's plastic
-        write-back and the clock changed the state)."""
+    def restore(self, state: State) -> None:
+        """Undo a failed implicit attempt (the grid is scratch; only P2G's
+        plastic write-back changed the state)."""
         if self._backup is not None:
             wp.copy(state.F0s, self._backup[0])
             wp.copy(state.history, self._backup[1])
 
-    # ------------------------------------------------------------ read back
-    def report(self) -> StepReport:
-        """Stability figures and criterion counts of the last step (one small
-        device-to-host copy)."""
-        return StepReport.of(self.status.read(), self.model.dim, energy=self.options.track_energy,
-                             reach=self.free_flight)
+    # ------------------------------------------------------------------ the host's side
+    def advance(self, state: State, dt: float, halvings: int = 0) -> StepReport:
+        """One step of ``dt`` [s] from ``self.time``, then the configuration
+        updates the scheme asks for. An implicit step whose Newton solve
+        fails is retried with half the step up to ``halvings`` times (the
+        state is restored first); ``report.dt`` is the step taken."""
+        self.schedule(dt)
+        newton, dt, attempts = self.solve_step(state, dt, halvings)
+        if newton is not None and not newton.converged:
+            report = StepReport.failed(self.n_bodies)
+        else:
+            self.interpolate(state)
+            self.decide()
+            report = self.report()
+            self.time += dt
+        report.dt, report.newton, report.halvings = dt, newton, attempts
+        self.settle(state, report)
+        return report
 
-    def _positions_needed(self, report: StepReport) -> int:
-        """Whether the next step's P2G must sum the node positions (1) or
-        no boundary condition can reach a node (0). With walls alone (no
-        regions, colliders, contact or implicit solve) a condition acts on a
-        node closer than the wall band to a closed face. A node sits at a
-        mass-weighted mean of x_p + F^sn r over its particles, |(F^sn r)_d| <=
-        |F^sn|_inf max_k |r_k|, so every node of body b lies in its particles'
-        box grown by |F^sn|_inf (1 after a configuration update) times the
-        stencil's reach."""
-        if not self.free_flight or report.max_F_norm is None:
-            return 1
-        reach = self._reach * np.maximum(report.max_F_norm, 1.0)[:, None]  # [m] per body
-        near = self.conditions.near_wall(report.box_lo - reach, report.box_hi + reach)
-        live = self.body_counts > 0
-        return int(bool(np.any(near[live])) or not np.all(np.isfinite(reach[live])))
+    def schedule(self, dt: float) -> None:
+        """The next step on the device: ``dt`` [s] from the host's time (the
+        steps of :meth:`attempt` by hand)."""
+        self.dt = dt
+        self.buffer.set(t=self.time, dt=dt)
 
-    def _count_removed(self, report: StepReport) -> None:
-        """Per body, the particles G2P removed at open faces (mass 0): the
-        counts the criterion divides by shrink with them."""
-        mass = self.model.mass.numpy()
-        alive = np.array([int(np.count_nonzero(mass[start:start + count]))
-                          for start, count in self.model.body_ranges])
-        report.removed = self.body_counts - alive
-        self.removed += report.removed
-        self.body_counts = alive
-        self.kept = np.flatnonzero(mass > 0)
+    def solve_step(self, state: State, dt: float, halvings: int) -> tuple[NewtonReport | None, float, int]:
+        """:meth:`attempt` with up to ``halvings`` retries at half the step
+        (the device's ``control.dt`` follows); (report, step taken, retries)."""
+        for attempt in range(halvings + 1):
+            self.dt = dt
+            newton = self.attempt(state)
+            if newton is None or newton.converged or attempt == halvings:
+                break
+            self.restore(state)
+            dt *= 0.5
+            self.buffer.set(dt=dt)
+        if newton is not None and not newton.converged:
+            self.restore(state)  # the state the failed step started from
+        return newton, dt, attempt
+
+    def settle(self, state: State, report: StepReport) -> None:
+        """The host's part of a completed step: the particles removed at open
+        faces, and the configuration updates the device left to it (every
+        update when the steps are not batched: the grids follow tightly)."""
+        self.count_removed(report)
+        self.refresh_kept()
+        if report.reason is not None:
+            return
+        t0 = time.perf_counter()
+        bodies = report.regrid if self.options.batched else report.updated
+        if bodies:
+            self.references.fit(bodies, report.box_lo, report.box_hi, self.pad)
+            if not self.g2p_commits:  # (G2P has moved the fused Eulerian references)
+                self.references.move(state, bodies, self.const)
+        if report.host_update or report.regrid:
+            self.buffer.set(host_update=0.0, regrid=np.zeros(self.n_bodies))
+        report.update_time = time.perf_counter() - t0
+
+    def count_removed(self, report: StepReport) -> None:
+        """Per body, the particles G2P removed at open faces in this step
+        (mass 0): the counts the criterion divides by shrink with them."""
+        if report.removed is not None:
+            self.removed += report.removed
+            self.body_counts = self.body_counts - report.removed
+            self._kept_stale = True
+
+    def refresh_kept(self) -> None:
+        """The particles not removed, by number, from the masses (after removals)."""
+        if self._kept_stale:
+            self.kept = np.flatnonzero(self.model.mass.numpy() > 0)
+            self._kept_stale = False
+
+    def report(self, values: dict | None = None) -> StepReport:
+        """The step's report from the buffer (one device-to-host copy), or from
+        a history row's ``values`` (mpm.status.StepBuffer.values)."""
+        v = values if values is not None else self.buffer.read()
+        return StepReport.of(v, self.model.dim, energy=self.options.track_energy, reach=self.free_flight)
 
     def step_energy(self) -> float:
-        """Elastic energy [J] of the state the last step started from (P2G
-        evaluates it with the stress)."""
-        return float(self.transfers.energy.numpy()[0])
+        """Elastic energy [J] of the state the last step started from (its P2G)."""
+        return float(self.buffer.view("elastic").numpy()[0])
 
     def measure(self, state: State, elastic: bool = True) -> np.ndarray:
         """Diagnostics of ``state`` in the order of mpm.diagnostics.diagnostic_names
         (float64). ``elastic=False`` leaves the elastic energy NaN (take it
-        from :meth:`step_energy` of the next step); ``elastic=True`` runs a
-        P2G pass for it, which overwrites the scratch grid (harmless between
-        steps)."""
+        from the next step's P2G); ``elastic=True`` runs a P2G pass for it,
+        which overwrites the scratch grid (harmless between steps)."""
         out = self.diagnostics.measure(state)
         if elastic:
+            self.buffer.reset()
             self._clear()
-            self._rasterize(state, self.model.types.scalar(0.0), write=False)
+            self._rasterize(state, write=False)
             out[self.diagnostics.names.index("elastic_energy")] = self.step_energy()
         return out
 

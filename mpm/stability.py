@@ -36,10 +36,12 @@ with the next step's P2G), so the energy criterion sees a state one step
 behind the other two.
 """
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 DETECTION_ACTIONS = ("stop", "warn", "off")
 CRITERIA = ("energy", "speed", "inversion")
@@ -186,7 +188,163 @@ class Detector:
         self.fired.update(t.criterion for t in out)
         return out
 
+    def trip(self, record) -> Trip:
+        """The trip of a device record (:func:`make_detection`), with the host's message."""
+        code, body, value, limit, scale, work = (float(x) for x in record)
+        code, b = int(code), int(body)
+        o = self.options
+        if code == 0:
+            return Trip("energy", None, value, limit,
+                        f"total energy grew by {value:.3g} x its scale {scale:.4g} J beyond the boundaries' work "
+                        f"{work:.4g} J (detect.energy_growth = {o.energy_growth:g})")
+        name, model = self.names[b], self.materials[b].name
+        if code == 1:
+            return Trip("speed", name, value, limit,
+                        f"particle speed {value:.4g} m/s in body '{name}' above the limit {limit:.4g} m/s "
+                        f"(detect.speed_factor = {o.speed_factor:g})")
+        if code == 2:
+            return Trip("inversion", name, value, limit,
+                        f"det F = {value:.4g} <= {limit:g} in body '{name}', whose model ({model}) cannot invert")
+        return Trip("inversion", name, value, limit,
+                    f"a singular value of F = {value:.4g} < {limit:g} in body '{name}' (degenerate), whose model "
+                    f"({model}) cannot invert")
+
+    def sync(self, values: dict) -> None:
+        """The running state from the device's control block (mpm.status values)."""
+        self.E0 = float(values["e0"][0]) if values["e0_set"][0] else None
+        self.work, self.scale = float(values["work"][0]), float(values["escale"][0])
+        self.growth = float(values["growth"][0])
+        fired = int(values["fired"][0])
+        self.fired = {c for i, c in enumerate(CRITERIA) if fired & (1 << i)}
+
     def summary(self) -> dict:
         """metrics.json ``detect``."""
         return {"action": self.options.action, "energy_growth_max": self.growth if self.energy_on else None,
                 "energy_scale": self.scale, "boundary_work": self.work, "fired": sorted(self.fired)}
+
+
+# ---------------------------------------------------------------- on the device
+CRITERION_BIT = {name: 1 << i for i, name in enumerate(CRITERIA)}
+
+
+@wp.struct
+class DetectParams:
+    """The criteria's constants for one run (float64; the per-body arrays
+    indexed by body)."""
+
+    energy_growth: wp.float64
+    speed_factor: wp.float64
+    min_J: wp.float64
+    min_stretch: wp.float64
+    speed_base: wp.float64  # [m/s] the boundary's speed plus the free fall's
+    n_grids: wp.float64
+    check_J: wp.array(dtype=wp.float64)  # per body: 1 where the model cannot invert
+
+
+def detect_params(detector: Detector, device) -> DetectParams:
+    p = DetectParams()
+    o = detector.options
+    p.energy_growth, p.speed_factor, p.min_J, p.min_stretch = (o.energy_growth, o.speed_factor, o.min_J,
+                                                                o.min_stretch)
+    p.speed_base, p.n_grids = detector.speed_base, float(detector.n_grids)
+    p.check_J = wp.array(detector.check_J.astype(np.float64), dtype=wp.float64, device=device)
+    return p
+
+
+@functools.cache
+def make_detection(energy_on: bool):
+    """``energy(control, status, params) -> tripped`` and ``step(control,
+    status, laws, params, record) -> tripped``: :meth:`Detector.energy` and
+    :meth:`Detector.step` on the device, the same float64 arithmetic, their
+    running state in the control block (mpm.status) and every new trip
+    recorded in the step's status (TRIP_SIZE values: the criterion's code -
+    0 energy, 1 speed, 2 inversion by det F, 3 by a singular value - the
+    body, the value, the limit, the energy scale, the boundaries' work) for
+    the host's messages (:meth:`Detector.trip`)."""
+    from .status import TRIP_SIZE, StepControl, StepStatus
+    from .timestep import BodyLaws, pymax, pymin, wave_speed
+
+    f64 = wp.float64
+    inf = f64(math.inf)
+
+    @wp.func
+    def record(status: StepStatus, control: StepControl, criterion: int, body: f64, value: f64, limit: f64,
+               scale: f64):
+        """A trip, unless its criterion was reported before this call's batch (``fired``)."""
+        fired = int(control.fired[0])
+        bit = 1 << wp.min(criterion, 2)  # (3: inversion by a singular value)
+        if (fired & bit) != 0:
+            return False
+        n = int(status.trips[0])
+        if n * TRIP_SIZE < status.trip.shape[0]:
+            k = n * TRIP_SIZE
+            status.trip[k] = f64(criterion)
+            status.trip[k + 1] = body
+            status.trip[k + 2] = value
+            status.trip[k + 3] = limit
+            status.trip[k + 4] = scale
+            status.trip[k + 5] = control.work[0]
+            status.trips[0] = f64(n + 1)
+        return True
+
+    @wp.func
+    def energy(control: StepControl, status: StepStatus, params: DetectParams):
+        """The energy criterion for the state the step started from (its kinetic
+        and potential energy from the last G2P, its elastic energy from this
+        step's P2G); the new state's energies are kept for the next step."""
+        tripped = bool(False)
+        if wp.static(energy_on):
+            kinetic, potential = control.kinetic_last[0], control.potential_last[0]
+            elastic = status.elastic[0]
+            E = kinetic + elastic + potential
+            if control.e0_set[0] == f64(0.0):
+                control.e0[0] = E
+                control.e0_set[0] = f64(1.0)
+            scale = control.escale[0]
+            growth = (E - control.e0[0] - control.work[0]) / scale
+            control.escale[0] = pymax(scale, kinetic + pymax(elastic, f64(0.0)))
+            if not wp.isfinite(growth):
+                growth = inf
+            control.growth[0] = pymax(control.growth[0], growth)
+            if growth > params.energy_growth:
+                tripped = record(status, control, 0, f64(-1.0), growth, params.energy_growth, scale)
+                control.fired[0] = f64(int(control.fired[0]) | 1)
+        control.kinetic_last[0] = status.kinetic[0]
+        control.potential_last[0] = status.potential[0]
+        return tripped
+
+    @wp.func
+    def step(control: StepControl, status: StepStatus, laws: BodyLaws, params: DetectParams, n_bodies: int):
+        """Speed and inversion after the step; its boundaries' work is added."""
+        control.work[0] = control.work[0] + status.boundary_work[0] / params.n_grids
+        tripped = bool(False)
+        fired = int(0)
+        for b in range(n_bodies):
+            min_J = status.min_J[b]
+            J = f64(1.0)
+            if wp.isfinite(min_J):
+                J = min_J
+            stiff = f64(1.0)
+            if wp.isfinite(status.stiffening[b]):
+                stiff = status.stiffening[b]
+            c = wave_speed(laws, b, pymin(pymax(J, f64(1.0e-3)), f64(1.0))) * wp.sqrt(pymax(stiff, f64(1.0)))
+            limit = params.speed_factor * (c + params.speed_base)
+            speed = wp.sqrt(status.max_speed2[b])
+            if not (speed <= limit):
+                if record(status, control, 1, f64(b), speed, limit, f64(0.0)):
+                    tripped = True
+                    fired = fired | 2
+            check = params.check_J[b] != f64(0.0)
+            if check and wp.isfinite(min_J) and min_J <= params.min_J:
+                if record(status, control, 2, f64(b), J, params.min_J, f64(0.0)):
+                    tripped = True
+                    fired = fired | 4
+            s = wp.sqrt(status.min_F_stretch2[b])
+            if check and wp.isfinite(s) and s < params.min_stretch:
+                if record(status, control, 3, f64(b), s, params.min_stretch, f64(0.0)):
+                    tripped = True
+                    fired = fired | 4
+        control.fired[0] = f64(int(control.fired[0]) | fired)
+        return tripped
+
+    return energy, step

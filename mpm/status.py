@@ -1,11 +1,23 @@
-"""What a step leaves on the device for the host: its stability figures.
+"""What a step leaves on the device for the host: its figures, and the
+device-side clock and decisions that let several steps run without the host.
 
-The kernels of a step accumulate into a :class:`StepStatus`, a Warp struct
-with one float64 array per figure (:data:`FIELDS`: one value for the step,
-one per body, or one per body and axis). The arrays are views into one flat
-buffer (:class:`StatusBuffer`), so that resetting the figures before a step is
-one copy, reading them back is one copy, and a step's figures can be kept in
-a history row as they are. :class:`StepReport` is the host's typed reading.
+One flat float64 buffer (:class:`StepBuffer`) holds three regions, each a
+Warp struct of views (one array per quantity, :data:`FIELDS` and
+:data:`CONTROL`):
+
+* :class:`StepStatus`, reset before every step: what the step's kernels
+  accumulate (G2P's speeds, counts and bounds, P2G's elastic energy, the
+  boundary conditions' work, contact), the blow-up detection's trips, and
+  the diagnostics of the new state when they are measured (mpm.diagnostics);
+* :class:`StepControl`, kept from step to step: the time, the step taken
+  and the next one (chosen on the device from the last step's figures,
+  mpm.timestep), the step count, why the run must stop or wait for the host
+  (``halt``, :data:`HALTS`), the configuration updates the criterion asked
+  for (mpm.criterion), and the detection's running state (mpm.stability).
+
+Resetting the status is one copy; reading everything back is one copy; a
+step's whole buffer is one row of the history the host reads every k steps
+(mpm.driver). :class:`StepReport` is the host's typed reading of a row.
 """
 
 from __future__ import annotations
@@ -16,14 +28,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-STEP, BODY, BOX = "step", "body", "box"  # one value; one per body; one per body and axis
+STEP, BODY, BOX, TRIP, DIAG, AXIS = "step", "body", "box", "trip", "diag", "axis"
+TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stability)
+
+# why the steps stopped: the host acts, then (PAUSE, REGRID) the run goes on
+HALTS = ("running", "done", "pause", "regrid", "nonfinite", "outside", "detection", "collapse")
+(RUNNING, DONE, PAUSE, REGRID, NONFINITE, OUTSIDE, DETECTION, COLLAPSE) = range(len(HALTS))
 
 
 @dataclass(frozen=True)
 class Field:
     name: str
-    per: str  # STEP, BODY or BOX
-    reset: float  # the value before a step (the identity of its reduction)
+    per: str  # STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS
+    reset: float  # the value before a step (the identity of its reduction), or at the start
     doc: str
 
 
@@ -34,8 +51,11 @@ FIELDS = (
     Field("boundary_work", STEP, 0.0, "positive work of the boundary conditions on the grid, all grids [J]"),
     Field("kinetic", STEP, 0.0, "kinetic energy of the new state [J] (track_energy)"),
     Field("potential", STEP, 0.0, "its gravitational potential energy -sum m g . x [J] (track_energy)"),
-    Field("removed", STEP, 0.0, "particles removed at open faces in this step"),
+    Field("elastic", STEP, 0.0, "elastic energy of the state the step started from [J] (P2G)"),
     Field("contact_nodes", STEP, 0.0, "body nodes whose bin was in contact (mpm.contact)"),
+    Field("trips", STEP, 0.0, "detection trips recorded in this step"),
+    Field("positioned", STEP, 0.0, "1: P2G summed the node positions in this step"),
+    Field("removed", BODY, 0.0, "particles removed at open faces in this step"),
     Field("marked", BODY, 0.0, "particles with dJ >= epsilon (A-ULMPM)"),
     Field("max_dJ", BODY, 0.0, "the largest dJ = |det F^sn - 1|"),
     Field("min_J", BODY, math.inf, "the smallest det F (compression)"),
@@ -47,74 +67,109 @@ FIELDS = (
     Field("max_F_norm", BODY, 0.0, "the largest |F^sn|_inf (walls-only Lagrangian scenes)"),
     Field("box_lo", BOX, math.inf, "bounding box of the new positions, lower corner [m]"),
     Field("box_hi", BOX, -math.inf, "upper corner [m]"),
+    Field("trip", TRIP, 0.0, "the trips' records (TRIP_SIZE values each, mpm.stability)"),
+    Field("diagnostics", DIAG, 0.0, "the new state's diagnostics as summed (mpm.diagnostics)"),
+)
+
+CONTROL = (
+    Field("t", STEP, 0.0, "time of the state [s]"),
+    Field("dt", STEP, math.inf, "the next step [s]"),
+    Field("step", STEP, 0.0, "steps completed"),
+    Field("halt", STEP, 0.0, "0: the next step runs; else why not (HALTS)"),
+    Field("skip", STEP, 0.0, "1: the kernels of this step do nothing (the steps halted before it)"),
+    Field("positions", STEP, 1.0, "1: P2G sums the node positions in the next step"),
+    Field("host_update", STEP, 0.0, "1: a body's configuration update waits for the host (mpm.criterion)"),
+    Field("dt_step", STEP, 0.0, "the step just taken [s]"),
+    Field("fresh_step", STEP, math.nan, "the step a fresh reference would have allowed it [s]"),
+    Field("factor_step", STEP, 1.0, "its reference factor, dt / fresh of the binding body"),
+    Field("landing_step", STEP, 0.0, "1: it was shortened to land on the end"),
+    Field("dt_limit", STEP, math.inf, "the rule's next step before landing on the end [s]"),
+    Field("dt_request", STEP, math.inf, "the next step after landing on the end, before any halving [s]"),
+    Field("dt_fresh", STEP, math.nan, "the step a fresh reference would allow [s]"),
+    Field("factor", STEP, 1.0, "the next step's reference factor"),
+    Field("binding", STEP, -1.0, "the term that bound the next step (mpm.timestep.BINDINGS)"),
+    Field("dt0", STEP, 0.0, "the first adaptive step [s]"),
+    Field("dt0_set", STEP, 0.0, "1 once dt0 is taken"),
+    Field("scale", STEP, 1.0, "the implicit step's factor after halvings"),
+    Field("stop_step", STEP, math.inf, "pause (PAUSE) once this many steps are done"),
+    Field("stop_time", STEP, math.inf, "pause once this time is reached [s]"),
+    Field("e0", STEP, 0.0, "detection: the total energy of the first state checked [J]"),
+    Field("e0_set", STEP, 0.0, "detection: 1 once e0 is taken"),
+    Field("work", STEP, 0.0, "detection: the boundaries' work so far [J]"),
+    Field("escale", STEP, 0.0, "detection: the energy scale [J]"),
+    Field("growth", STEP, -math.inf, "detection: the largest relative growth seen"),
+    Field("kinetic_last", STEP, 0.0, "detection: kinetic energy of the last state [J]"),
+    Field("potential_last", STEP, 0.0, "detection: its potential energy [J]"),
+    Field("fired", STEP, 0.0, "detection: criteria reported so far (bits of mpm.stability.CRITERIA)"),
+    Field("alive", BODY, 0.0, "particles not removed"),
+    Field("update", BODY, 0.0, "1: the body's reference configuration moves after this step"),
+    Field("regrid", BODY, 0.0, "1: it must, but its grid does not cover it: the host refits"),
+    Field("center", AXIS, 0.0, "centre of the angular momentum scale [m] (mpm.diagnostics)"),
 )
 
 
-@wp.struct
-class StepStatus:
-    """The figures of one step on the device (see :data:`FIELDS`; per-body
-    figures at index b, per-axis ones at b * dim + d)."""
-
-    max_v2: wp.array(dtype=wp.float64)
-    nonfinite: wp.array(dtype=wp.float64)
-    outside: wp.array(dtype=wp.float64)
-    boundary_work: wp.array(dtype=wp.float64)
-    kinetic: wp.array(dtype=wp.float64)
-    potential: wp.array(dtype=wp.float64)
-    removed: wp.array(dtype=wp.float64)
-    contact_nodes: wp.array(dtype=wp.float64)
-    marked: wp.array(dtype=wp.float64)
-    max_dJ: wp.array(dtype=wp.float64)
-    min_J: wp.array(dtype=wp.float64)
-    min_stretch2: wp.array(dtype=wp.float64)
-    max_rate2: wp.array(dtype=wp.float64)
-    stiffening: wp.array(dtype=wp.float64)
-    max_speed2: wp.array(dtype=wp.float64)
-    min_F_stretch2: wp.array(dtype=wp.float64)
-    max_F_norm: wp.array(dtype=wp.float64)
-    box_lo: wp.array(dtype=wp.float64)
-    box_hi: wp.array(dtype=wp.float64)
+def _struct(name: str, fields: tuple[Field, ...], doc: str):
+    """A Warp struct with one float64 array per field."""
+    cls = type(name, (), {"__annotations__": {f.name: wp.array(dtype=wp.float64) for f in fields},
+                          "__doc__": doc, "__module__": __name__})
+    return wp.struct(cls)
 
 
-assert list(StepStatus.vars) == [f.name for f in FIELDS], "StepStatus and FIELDS disagree"
+StepStatus = _struct("StepStatus", FIELDS, "The figures of one step on the device (FIELDS; per body at "
+                                           "index b, per body and axis at b * dim + d).")
+StepControl = _struct("StepControl", CONTROL, "The device's clock and decisions (CONTROL).")
 
 
-class StatusBuffer:
-    """The flat float64 buffer behind a :class:`StepStatus`: ``status`` (the
-    struct the kernels take), ``flat`` (the buffer), :meth:`reset`,
-    :meth:`read`."""
+class StepBuffer:
+    """The flat float64 buffer behind a :class:`StepStatus` (``status``) and a
+    :class:`StepControl` (``control``): :meth:`reset` (the status), :meth:`read`,
+    ``flat`` (one row of the history)."""
 
-    def __init__(self, n_bodies: int, dim: int, device):
-        sizes = {STEP: 1, BODY: n_bodies, BOX: n_bodies * dim}
+    def __init__(self, n_bodies: int, dim: int, n_diagnostics: int, device, max_trips: int | None = None):
         self.n_bodies, self.dim = n_bodies, dim
+        self.max_trips = max_trips if max_trips is not None else 1 + 3 * n_bodies
+        sizes = {STEP: 1, BODY: n_bodies, BOX: n_bodies * dim, TRIP: TRIP_SIZE * self.max_trips,
+                 DIAG: n_diagnostics, AXIS: dim}
         self.slices: dict[str, slice] = {}
         start = 0
-        for f in FIELDS:
+        for f in FIELDS + CONTROL:
             self.slices[f.name] = slice(start, start + sizes[f.per])
             start += sizes[f.per]
         self.size = start
-        reset = np.empty(self.size)
-        for f in FIELDS:
-            reset[self.slices[f.name]] = f.reset
+        self.status_size = self.slices[CONTROL[0].name].start
+        self.initial = np.empty(self.size)
+        for f in FIELDS + CONTROL:
+            self.initial[self.slices[f.name]] = f.reset
         with wp.ScopedDevice(device):
-            self.flat = wp.array(reset, dtype=wp.float64)
-            self._reset = wp.array(reset, dtype=wp.float64)
-        self.status = StepStatus()
+            self.flat = wp.array(self.initial, dtype=wp.float64)
+            self._reset = wp.array(self.initial[:self.status_size], dtype=wp.float64)
+        self._status_view = self.flat[:self.status_size]
+        self.status, self.control = StepStatus(), StepControl()
         for f in FIELDS:
-            s = self.slices[f.name]
-            setattr(self.status, f.name, self.flat[s.start:s.stop])
+            setattr(self.status, f.name, self.view(f.name))
+        for f in CONTROL:
+            setattr(self.control, f.name, self.view(f.name))
+
+    def view(self, name: str) -> wp.array:
+        s = self.slices[name]
+        return self.flat[s.start:s.stop]
 
     def reset(self) -> None:
-        """Every figure to its reduction's identity (one device copy)."""
-        wp.copy(self.flat, self._reset)
+        """The status to its reductions' identities (one device copy); the control stays."""
+        wp.copy(self._status_view, self._reset)
 
     def values(self, flat: np.ndarray) -> dict[str, np.ndarray]:
-        """A flat buffer's values by field name (views)."""
+        """A buffer's (or a history row's) values by field name (views)."""
         return {name: flat[s] for name, s in self.slices.items()}
 
     def read(self) -> dict[str, np.ndarray]:
-        """The figures on the host, by field name (one device-to-host copy)."""
+        """Everything on the host, by field name (one device-to-host copy)."""
         return self.values(self.flat.numpy().copy())
+
+    def set(self, **values) -> None:
+        """Write control values from the host (host-to-device copies)."""
+        for name, v in values.items():
+            self.view(name).assign(np.atleast_1d(np.asarray(v, np.float64)))
 
 
 @dataclass
@@ -147,6 +202,13 @@ class StepReport:
     max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (walls-only Lagrangian scenes)
     contact_nodes: int = 0  # body nodes whose bin was in contact in this step (mpm.contact)
     positioned: bool = True  # the node positions were available (False: not summed)
+    regrid: list[int] = field(default_factory=list)  # bodies whose grids the host refits (mpm.criterion)
+    host_update: bool = False  # the host moves a reference configuration (its diagnostics wait for it)
+    step: int = 0  # steps completed after this one (0: a step the host took by hand)
+    time: float = 0.0  # [s] the time after it (the host's step: its solver's time)
+    halt: int = 0  # why the steps stopped after it (mpm.status.HALTS)
+    diagnostics: np.ndarray | None = None  # the new state's diagnostics as summed (when measured)
+    trips: np.ndarray | None = None  # the detection's new trips (TRIP_SIZE values each, mpm.stability)
     elastic: float = float("nan")  # [J] elastic energy of the state the step started from (its P2G)
     dt_fresh: float = float("nan")  # [s] the step a freshly updated reference would have allowed
     wall_time: float = 0.0  # [s] host time the step took
@@ -158,10 +220,11 @@ class StepReport:
 
     @classmethod
     def of(cls, v: dict[str, np.ndarray], dim: int, energy: bool, reach: bool) -> "StepReport":
-        """The report of the figures ``v`` (:meth:`StatusBuffer.values`);
-        ``energy``: they hold the kinetic and potential energy; ``reach``:
-        the largest |F^sn|_inf."""
+        """The report of the step buffer's values ``v`` (:meth:`StepBuffer.values`);
+        ``energy``: they hold the kinetic and potential energy; ``reach``: the
+        largest |F^sn|_inf."""
         nb = len(v["marked"])
+        removed = v["removed"]
         return cls(
             max_speed=float(np.sqrt(v["max_v2"][0])), nonfinite=int(v["nonfinite"][0]),
             outside=int(v["outside"][0]), marked=v["marked"].astype(np.int64), max_dJ=v["max_dJ"].copy(),
@@ -171,9 +234,14 @@ class StepReport:
             min_F_stretch=np.sqrt(v["min_F_stretch2"]),
             max_F_norm=v["max_F_norm"].copy() if reach else None,
             boundary_work=float(v["boundary_work"][0]), contact_nodes=int(v["contact_nodes"][0]),
-            removed=np.zeros(nb, np.int64) if v["removed"][0] > 0 else None,
+            removed=removed.astype(np.int64) if removed.any() else None,
             kinetic=float(v["kinetic"][0]) if energy else float("nan"),
-            potential=float(v["potential"][0]) if energy else float("nan"))
+            potential=float(v["potential"][0]) if energy else float("nan"),
+            updated=[b for b in range(nb) if v["update"][b]], regrid=[b for b in range(nb) if v["regrid"][b]],
+            host_update=bool(v["host_update"][0]), positioned=bool(v["positioned"][0]),
+            elastic=float(v["elastic"][0]), dt=float(v["dt_step"][0]), dt_fresh=float(v["fresh_step"][0]),
+            step=int(v["step"][0]), time=float(v["t"][0]), halt=int(v["halt"][0]),
+            diagnostics=v["diagnostics"].copy(), trips=v["trip"][:TRIP_SIZE * int(v["trips"][0])].copy())
 
     @property
     def reason(self) -> str | None:

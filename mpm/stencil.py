@@ -161,7 +161,9 @@ def make_stencil_cache(t: Types, kernel: Kernel):
 
     @wp.struct
     class StencilCache:
-        base: wp.array(dtype=wp.int32)  # flat index of the first stencil node
+        # the first stencil node's flat index within its box (the box's offset is added where it is
+        # read: a refit of another body moves the boxes' offsets, not this box)
+        base: wp.array(dtype=wp.int32)
         fx: wp.array(dtype=t.vec)  # X / dx - o_g - base
         W: wp.array(dtype=Wm)  # per-axis kernel weights
         dW: wp.array(dtype=Wm)  # and their derivatives (gradient-based transfers)
@@ -169,7 +171,7 @@ def make_stencil_cache(t: Types, kernel: Kernel):
         # fused: where the stencils are located from
         X: wp.array(dtype=t.vec)  # reference positions [m]
         lo: wp.array(dtype=t.ivec)  # layout: first node of box b * G + g
-        offset: wp.array(dtype=wp.int32)  # layout: its offset in the flat grid arrays
+        offset: wp.array(dtype=wp.int32)  # layout: per box, its offset in the flat grid arrays
         grid_offsets: Gv  # the kernel grids' offsets [cells]
         inv_dx: t.scalar  # [1/m]
 
@@ -238,7 +240,7 @@ def make_cached(t: Types, kernel: Kernel, with_gradients: bool, fused: bool = Fa
         dW = Wm()
         if wp.static(with_gradients):
             dW = cache.dW[k]
-        return strides(shape[box]), cache.base[k], cache.fx[k], cache.W[k], dW
+        return strides(shape[box]), cache.offset[box] + cache.base[k], cache.fx[k], cache.W[k], dW
 
     return reference, cached
 

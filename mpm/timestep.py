@@ -15,10 +15,13 @@ step the body would be allowed right after a configuration update, so
 quantity A-ULMPM's step-driven criterion watches, mpm.schemes).
 """
 
-from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
 
 STRAIN_STEP = 0.25  # dt |L| <= STRAIN_STEP * cfl: the strain increment of one step
 TERMS = ("wave", "viscous", "strain_rate")
@@ -118,3 +121,82 @@ class StepRule:
         ``max_speed`` before the first), the colliders' included."""
         speed = report.max_speed if report is not None else max_speed
         return displacement_dt(self.model.dx, max(speed, self.collider_speed), fraction)
+
+
+# ---------------------------------------------------------------- on the device
+BINDINGS = TERMS + ("dt_max", "fixed", "displacement")  # what bound a step: mpm.status ``binding``
+
+
+@wp.struct
+class BodyLaws:
+    """Per body, what the step rule needs of its material (mpm.materials
+    ``wave_speed_law``, ``kinematic_viscosity``), float64."""
+
+    c0: wp.array(dtype=wp.float64)  # [m/s] the wave speed at rest
+    a: wp.array(dtype=wp.float64)  # c(J) = sqrt(a J^b / rho) when b != 0
+    b: wp.array(dtype=wp.float64)
+    rho: wp.array(dtype=wp.float64)  # [kg/m^3]
+    nu: wp.array(dtype=wp.float64)  # [m^2/s] kinematic viscosity
+
+
+def body_laws(materials, device) -> BodyLaws:
+    laws = BodyLaws()
+    rows = np.array([m.wave_speed_law() for m in materials], dtype=np.float64).reshape(-1, 4)
+    with wp.ScopedDevice(device):
+        laws.c0, laws.a, laws.b, laws.rho = (wp.array(rows[:, k].copy(), dtype=wp.float64) for k in range(4))
+        laws.nu = wp.array([m.kinematic_viscosity() for m in materials], dtype=wp.float64)
+    return laws
+
+
+@wp.func
+def pymin(a: wp.float64, b: wp.float64):
+    """Python's min(a, b): b only if b < a (NaN never wins)."""
+    if b < a:
+        return b
+    return a
+
+
+@wp.func
+def pymax(a: wp.float64, b: wp.float64):
+    """Python's max(a, b): b only if b > a."""
+    if b > a:
+        return b
+    return a
+
+
+@wp.func
+def wave_speed(laws: BodyLaws, i: int, J: wp.float64):
+    """Body i's wave speed at volume ratio J [m/s]."""
+    if laws.b[i] == wp.float64(0.0):
+        return laws.c0[i]
+    return wp.sqrt(laws.a[i] * wp.pow(J, laws.b[i]) / laws.rho[i])
+
+
+@functools.cache
+def make_step_rule(dim: int):
+    """``limits(dx, s, c, speed, cfl, nu, rate) -> (wave, viscous, strain_rate,
+    fresh)``: :func:`step_limits` on the device, the same float64 arithmetic."""
+    f64 = wp.float64
+    inf = f64(math.inf)
+    two_dim = 2.0 * dim
+
+    @wp.func
+    def terms(dx: f64, s: f64, c: f64, speed: f64, cfl: f64, nu: f64):
+        wave = cfl * s * dx / (c + speed)
+        viscous = inf
+        if nu > f64(0.0):
+            h = s * dx
+            viscous = cfl * (h * h) / (f64(two_dim) * nu)
+        return wave, viscous
+
+    @wp.func
+    def limits(dx: f64, s: f64, c: f64, speed: f64, cfl: f64, nu: f64, rate: f64):
+        wave, viscous = terms(dx, s, c, speed, cfl, nu)
+        strain = inf
+        if rate > f64(0.0):
+            strain = f64(STRAIN_STEP) * cfl / rate
+        wave1, viscous1 = terms(dx, f64(1.0), c, speed, cfl, nu)
+        fresh = pymin(pymin(wave1, viscous1), strain)
+        return wave, viscous, strain, fresh
+
+    return limits

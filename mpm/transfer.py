@@ -57,18 +57,19 @@ class Transfers:
     ``removal``: particles leave at open faces; ``marks``: count dJ >=
     epsilon; ``epsilon``: the criterion's threshold."""
 
-    def __init__(self, model, launch, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
+    def __init__(self, model, launch, buffer, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
                  with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
-                 track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None):
+                 track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None,
+                 batched: bool = False):
         t, k = model.types, model.kernel
-        self.model, self.launch = model, launch
+        self.model, self.launch, self.buffer = model, launch, buffer
         self.forcing = forcing
         self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, forcing is not None, lagrangian=lagrangian,
-                              with_stress=with_stress, fused=fused), g) for g in model.groups]
+                              with_stress=with_stress, fused=fused, batched=batched), g) for g in model.groups]
         self.g2p = make_g2p(t, k, transfer, record_dJ, marks, lagrangian=lagrangian,
                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
                             track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
-                            bound_reach=bound_reach, commit=commit, project=project)
+                            bound_reach=bound_reach, commit=commit, project=project, batched=batched)
         margin = k.margin * model.dx
         open_code = WALL_TYPES.index("open")
         self.inside_lo = t.vec(*([margin] * t.dim))
@@ -77,7 +78,6 @@ class Transfers:
         self.open_hi = t.vec(*[float(c == open_code) for c in model.wall_codes[1]])
         self.epsilon = t.scalar(epsilon if np.isfinite(epsilon) else 0.0)
         with wp.ScopedDevice(model.device):
-            self.energy = wp.zeros(1, dtype=wp.float64)  # elastic energy of the state P2G starts from [J]
             # body force per unit mass [m/s^2] of a manufactured solution, set every step
             self.body_force = wp.zeros(model.n_particles if forcing else 1, dtype=t.vec)
 
@@ -90,24 +90,24 @@ class Transfers:
         b = self.forcing.body_force(X0, time)
         self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
 
-    def rasterize(self, state, grid, layout, const, dt, status, write: bool, positions: int) -> None:
-        """P2G: the plastic return mapping (stored when ``write``), mass,
-        momentum with the stress impulse, node positions (``positions``), the
-        elastic energy into ``energy``."""
-        m = self.model
-        self.energy.zero_()
+    def rasterize(self, state, grid, layout, const, write: bool) -> None:
+        """P2G over the device's step: the plastic return mapping (stored when
+        ``write``; else a state's stored energy, no step), mass, momentum with
+        the stress impulse, node positions, the elastic energy into the
+        step's status."""
+        m, b = self.model, self.buffer
         for kernel, g in self.p2g:
             self.launch(kernel, g.count, [
                 m.mass, m.volume, m.body, m.body_params, layout.shape_d, state.x, state.v, state.C,
-                state.F0s, state.Fsn, self.body_force, state.history, state.stencils, const.dx, const.K, dt,
-                g.start, int(write), positions, grid.m, grid.v, grid.q, m.region, grid.kin, grid.kin_id,
-                self.energy, status])
+                state.F0s, state.Fsn, self.body_force, state.history, state.stencils, const.dx, const.K,
+                g.start, int(write), grid.m, grid.v, grid.q, m.region, grid.kin, grid.kin_id, b.status,
+                b.control])
 
-    def interpolate(self, state, grid, layout, const, dt, status) -> None:
-        """G2P: velocities, affine matrices, positions, F^sn, the criterion and
-        the step's figures."""
-        m = self.model
+    def interpolate(self, state, grid, layout, const) -> None:
+        """G2P over the device's step: velocities, affine matrices, positions,
+        F^sn, the criterion's counts and the step's figures."""
+        m, b = self.model, self.buffer
         self.launch(self.g2p, m.n_particles, [
-            m.body, layout.shape_d, grid.v, state.stencils, const.dx, const.K, dt, self.epsilon,
-            self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, status,
+            m.body, layout.shape_d, grid.v, state.stencils, const.dx, const.K, b.control, self.epsilon,
+            self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
             m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params])

@@ -89,6 +89,12 @@ class Material:
         at volume ratio J; solids take their value at rest."""
         raise NotImplementedError
 
+    def wave_speed_law(self) -> tuple[float, float, float, float]:
+        """(c0, a, b, rho) of :meth:`wave_speed` for the device's step rule
+        (mpm.timestep): c(J) = c0 when b == 0, else sqrt(a J^b / rho) (a
+        weakly compressible fluid's speed grows under compression)."""
+        return self.wave_speed(), 0.0, 0.0, self.rho
+
     def kinematic_viscosity(self) -> float:
         """Kinematic viscosity [m^2/s] (for the diffusive time-step limit)."""
         return 0.0

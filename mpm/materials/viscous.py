@@ -99,6 +99,9 @@ class Viscous(Material):
         # grows fast under compression (J^-6 for gamma = 7)
         return math.sqrt(self.K * self.gamma * J ** (1.0 - self.gamma) / self.rho)
 
+    def wave_speed_law(self):
+        return self.wave_speed(), self.K * self.gamma, 1.0 - self.gamma, self.rho
+
     def kinematic_viscosity(self):
         return self.viscosity / self.rho
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import warp as wp
 
 import mpm
-from mpm.launch import Launches, kernel_name
+from mpm.launch import Counter, Launches, kernel_name
 
 from .runs import QUIET, interleaved, spec_for, step_ms, timed
 from ..run.runner import execute, solver_options
@@ -103,16 +103,25 @@ STAGES = {
 }
 
 
-def _solver(spec):
-    """A prepared solver of ``spec`` and its state, one step taken (the first
-    step sizes the grid arrays), and the step size."""
+def _driver(spec, sync_every: int | None = None):
+    """A started driver of ``spec`` (mpm.Driver, no observers, no detection,
+    reading back every ``sync_every`` steps: None, the run's own choice), one
+    batch taken (the first steps size the grid arrays and compile nothing
+    later)."""
+    from ..run.runner import step_policy, sync_every as run_sync_every
+
+    k = sync_every if sync_every is not None else run_sync_every(spec)
+    options = solver_options(spec)
+    options.batched = k > 1
     model, state = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
-    solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+    solver = mpm.Solver(model, spec.scheme, options)
+    policy = step_policy(spec)
+    policy.steps, policy.duration = 10**9, None
+    driver = mpm.Driver(solver, state, policy, mpm.Detection(action="off"), sync_every=k)
     solver.load()
-    solver.prepare(state)
-    dt = solver.timestep.stable_dt(spec.run.cfl)
-    solver.advance(state, dt)
-    return solver, state, dt
+    driver.start()
+    driver.advance()
+    return driver
 
 
 class _Counted:
@@ -163,13 +172,16 @@ class _Counted:
         wp.launch, wp.copy, wp.array.zero_, Launches.__call__ = self._saved
 
 
-def launches_per_step(spec, steps: int = 5) -> tuple[float, float]:
-    """Warp kernel launches and array copies/fills per solver step (no logging)."""
-    solver, state, dt = _solver(spec)
-    with _Counted(spec.run.device) as c:
-        for _ in range(steps):
-            solver.advance(state, dt)
-    return c.launches / steps, c.memory / steps
+def launches_per_step(spec, steps: int = 5, sync_every: int | None = None) -> tuple[float, float, float]:
+    """Warp kernel launches, array copies and fills, and device-to-host reads
+    per step of the driver (no logging, no detection)."""
+    driver = _driver(spec, sync_every)
+    first = driver.step
+    with _Counted(spec.run.device) as c, Counter() as r:
+        while driver.step < first + steps:
+            driver.advance()
+    n = driver.step - first
+    return c.launches / n, c.memory / n, r.reads / n
 
 
 PROFILE_CASES = {"ball_2d (128^2)": ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated"],
@@ -178,21 +190,22 @@ PROFILE_CASES = {"ball_2d (128^2)": ["scene=elastic_ball_2d", "scene.resolution=
 
 def profile(steps: int = 20, rounds: int = 3) -> list[dict]:
     """Where a step's time goes, per kernel (each launch timed, synchronised
-    on CUDA) and the rest of Solver.advance (host work: read-back, the
+    on CUDA) and the rest of the driver's step (host work: read-back, the
     layout, Python), EMPM with the defaults; the fastest of ``rounds``."""
     rows = []
     for case, over in PROFILE_CASES.items():
         spec = spec_for(over + ["scheme=empm"])
-        solver, state, dt = _solver(spec)
+        driver = _driver(spec)
         best = None
         for _ in range(rounds):
             with _Counted(spec.run.device) as c:
                 t0 = time.perf_counter()
-                for _ in range(steps):
-                    solver.advance(state, dt)
-                total = 1e3 * (time.perf_counter() - t0) / steps
+                first = driver.step
+                while driver.step < first + steps:
+                    driver.advance()
+                total = 1e3 * (time.perf_counter() - t0) / (driver.step - first)
             if best is None or total < best[0]:
-                best = (total, {k: v / steps for k, v in c.ms.items()})
+                best = (total, {k: v / (driver.step - first) for k, v in c.ms.items()})
         total, ms = best
         for name, t in sorted(ms.items(), key=lambda kv: -kv[1]):
             rows.append({"case": case, "part": name, "ms": t, "share": t / total})
@@ -210,15 +223,15 @@ def bench_stages(workdir: Path, steps: int = 300, rounds: int = 5) -> list[dict]
     base = step_ms(best["plain step"])
     rows = []
     for name, m in best.items():
-        launches, memory = launches_per_step(spec_for(runs[name]))
+        launches, memory, reads = launches_per_step(spec_for(runs[name]))
         rows.append({"stage": name, "particles": m["particles"], "step_ms": m["step_time_ms"],
                      "log_ms": m["log_time_ms"] or 0.0, "vs_plain": step_ms(m) / base,
-                     "launches": launches, "copies_fills": memory})
+                     "launches": launches, "copies_fills": memory, "reads": reads})
     return rows
 
 
 def print_profile(rows: list[dict]) -> None:
-    print("\nprofile of a step (EMPM, defaults, Solver.advance; each launch timed)")
+    print("\nprofile of a step (EMPM, defaults, mpm.Driver; each launch timed)")
     print(f"{'case':<17} {'part':<34} {'ms/step':>8} {'share':>6}")
     for r in rows:
         print(f"{r['case']:<17} {r['part']:<34} {r['ms']:>8.3f} {100 * r['share']:>5.0f}%")

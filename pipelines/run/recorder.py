@@ -83,8 +83,10 @@ class Recorder(mpm.Observer):
         return self.driver.time if self.driver is not None else 0.0
 
     # ------------------------------------------------------------ build
-    def build(self, policy: mpm.StepPolicy, options: mpm.SolverOptions) -> None:
-        """The model, the state, the solver (compiled) and the driver."""
+    def build(self, policy: mpm.StepPolicy, options: mpm.SolverOptions, sync_every: int = 1,
+              graph: bool | None = None) -> None:
+        """The model, the state, the solver (compiled) and the driver (reading
+        back every ``sync_every`` steps; ``graph``: as a CUDA graph)."""
         spec, run, log = self.spec, self.spec.run, self.spec.log
         self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
         self.solver = mpm.Solver(self.model, spec.scheme, options)
@@ -116,7 +118,9 @@ class Recorder(mpm.Observer):
         self.stretch_names = per_body("min_stretch")
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
-        self.driver = mpm.Driver(self.solver, self.state, policy, spec.detect, [self])
+        self.driver = mpm.Driver(self.solver, self.state, policy, spec.detect, [self], sync_every=sync_every,
+                                 graph=graph, measure=log.scalars)
+        self.metrics["sync_every"] = self.driver.k
         self.built = True
 
     def meta(self) -> RunMeta:
@@ -174,13 +178,27 @@ class Recorder(mpm.Observer):
         t1 = time.perf_counter()
         last = not driver.running
         if log.scalars or last:
-            self.measure(self.row_extra(report))
+            self.measure(self.row_extra(report, driver.current), report.diagnostics)
+        if not driver.current:  # the device has moved on: the state is read at the batch's last step
+            return
         if log.particles and self.frame_due(last):
             self.particles()
             self.log_ms.append(1e3 * (time.perf_counter() - t1))
         if self.step % log.fracture_every == 0:
             self.log_fracture()
         self.progress.update(self.step, self.t, self.step_ms[-1])
+
+    def wants(self, driver: mpm.Driver) -> tuple[float, float]:
+        """The next particle frame and fracture measure: the steps of a batch end there."""
+        log = self.spec.log
+        step = (self.step // log.fracture_every + 1) * log.fracture_every
+        when = math.inf
+        if log.particles:
+            if log.every is not None:
+                step = min(step, (self.step // log.every + 1) * log.every)
+            else:
+                when = self._next_frame
+        return float(step), when
 
     def on_event(self, driver: mpm.Driver, event: mpm.Event) -> None:
         self.sink.event(event.step, event.time, event.text, level=event.level, **event.values)
@@ -208,10 +226,12 @@ class Recorder(mpm.Observer):
         self.sink.event(self.step, self.t, f"unstable: {outcome.reason}", level="ERROR", **where, **outcome.values)
 
     # ------------------------------------------------------------ scalars
-    def measure(self, extra: dict) -> None:
-        """Measure the state just reached; its elastic energy arrives with the
-        next step's P2G (or from :meth:`finish`)."""
-        self._pending[:] = [self.step, self.t, self.solver.measure(self.state, elastic=False), extra]
+    def measure(self, extra: dict, diagnostics: np.ndarray | None = None) -> None:
+        """The state just reached (its ``diagnostics``, as the driver measured
+        them, or measured now); its elastic energy arrives with the next step's
+        P2G (or from :meth:`finish`)."""
+        d = diagnostics.copy() if diagnostics is not None else self.solver.measure(self.state, elastic=False)
+        self._pending[:] = [self.step, self.t, d, extra]
 
     def emit(self, elastic_energy: float) -> None:
         step, t, d, extra = self._pending
@@ -224,7 +244,9 @@ class Recorder(mpm.Observer):
             self.sink.scalars(step, t, row)
         self._pending.clear()
 
-    def row_extra(self, report: mpm.StepReport) -> dict:
+    def row_extra(self, report: mpm.StepReport, current: bool = True) -> dict:
+        """The step's scalars besides the diagnostics (the errors against a
+        closed-form solution only where the state is ``current``)."""
         extra = {"dt": report.dt, "dt_fresh": report.dt_fresh, "max_speed": report.max_speed,
                  "config_updates": float(self.updates.sum())}
         if self.scheme.tracks_marks():
@@ -233,7 +255,7 @@ class Recorder(mpm.Observer):
         if self.scheme.name != "empm":  # the narrowest reference cell (1 in EMPM)
             for name, s in zip(self.stretch_names, report.min_stretch):
                 extra[name] = float(s)
-        if self.solution is not None:
+        if self.solution is not None and current:
             extra.update(self.errors())
         if self.solver.conditions.open:
             extra["removed"] = float(self.solver.removed.sum())

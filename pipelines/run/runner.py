@@ -49,13 +49,26 @@ def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
     }
 
 
+def sync_every(spec: RunSpec) -> int:
+    """Steps between two read-backs (mpm.driver): run.sync_every, else 10 on
+    CUDA and 1 on the CPU; 1 under the implicit integrator and with a
+    manufactured solution's body force (both need the host every step)."""
+    host_steps = spec.integrator.name == "implicit" or getattr(spec.scene.solution, "has_body_force", False)
+    k = getattr(spec.run, "sync_every", None)
+    if k is None:
+        k = mpm.driver.SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
+    return 1 if host_steps else int(k)
+
+
 def solver_options(spec: RunSpec) -> mpm.SolverOptions:
     """What the solver compiles for this run: dJ only when it is logged, the
-    detection's measurements only when it is on."""
+    detection's measurements only when it is on, the batched steps' early
+    exits only when the host reads back less than every step."""
     detect = spec.detect.action != "off"
     return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer,
                              integrator=spec.integrator, track_energy=detect, fuse=spec.run.fuse,
-                             track_J=detect and any(not b.material.invertible for b in spec.scene.bodies))
+                             track_J=detect and any(not b.material.invertible for b in spec.scene.bodies),
+                             batched=sync_every(spec) > 1)
 
 
 def step_policy(spec: RunSpec) -> mpm.StepPolicy:
@@ -142,7 +155,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     except ValueError:  # not the main thread
         pass
     try:
-        run.build(step_policy(spec), solver_options(spec))
+        run.build(step_policy(spec), solver_options(spec), sync_every(spec), getattr(spec.run, "graph", None))
         sink.start(run.meta())
         driver = run.driver
         driver.start()

@@ -84,7 +84,7 @@ def test_contact_matches_the_lattice_rule(scheme, kernel):
     def checked():
         n = solver.layout.n_nodes
         m, v, q = (a.numpy()[:n].copy() for a in (solver.grid.m, solver.grid.v, solver.grid.q))
-        before = solver.status.read()["contact_nodes"][0]
+        before = solver.buffer.read()["contact_nodes"][0]
         contact()
         offset = solver.layout.offset
         body = (np.searchsorted(offset, np.arange(n), side="right") - 1) // G
@@ -93,7 +93,7 @@ def test_contact_matches_the_lattice_rule(scheme, kernel):
         got = solver.grid.v.numpy()[:n]
         scale = np.abs(v).max()
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * scale)
-        assert solver.status.read()["contact_nodes"][0] - before == in_contact.sum()
+        assert solver.buffer.read()["contact_nodes"][0] - before == in_contact.sum()
         assert not solver.contact.M.numpy().any() and not solver.contact.P.numpy().any()
         seen.append((int(in_contact.sum()), int((np.abs(want - v) > 0).any(axis=1).sum()), crowded))
 

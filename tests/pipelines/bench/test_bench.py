@@ -16,20 +16,24 @@ SMALL = ["scene=elastic_ball_2d", "scene.resolution=32", "scheme=empm", "detect.
 def test_a_step_launches_only_the_stages_the_scene_needs():
     """One body, explicit EMPM: P2G, grid update, G2P (which does the
     configuration update with the quadratic kernel; the compact kernel's is a
-    launch of its own). Two bodies with contact add splat, correct, clear and
-    the boundary pass (mpm.solver.Solver.plan)."""
-    launches, _ = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
-    assert launches == 3
-    launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["kernel=compact"]), steps=3)
-    assert launches == 4
+    launch of its own), the criterion and the driver's policy (one thread
+    each, mpm.criterion, mpm.policy). Two bodies with contact add splat,
+    correct, clear and the boundary pass (mpm.plan). At k = 1 the host reads
+    the step's history row once and nothing else; at k = 10 once per batch."""
+    launches, _, reads = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
+    assert launches == 3 + 2 and reads == 1
+    launches, _, _ = bench_scale.launches_per_step(spec_for(SMALL + ["kernel=compact"]), steps=3)
+    assert launches == 4 + 2
     two = SMALL + [bench_scale.TWO_BALLS, "scene.contact=frictionless"]
-    launches, _ = bench_scale.launches_per_step(spec_for(two), steps=3)
-    assert launches == 3 + 3 + 1
-    launches, _ = bench_scale.launches_per_step(spec_for(two + ["run.fuse=false"]), steps=3)
-    assert launches == 3 + 3 + 1 + 2  # and an update per body
+    launches, _, _ = bench_scale.launches_per_step(spec_for(two), steps=3)
+    assert launches == 3 + 3 + 1 + 2
+    launches, _, _ = bench_scale.launches_per_step(spec_for(two + ["run.fuse=false"]), steps=3)
+    assert launches == 3 + 3 + 1 + 2 + 2  # and an update per body
     # TLMPM never updates its configuration
-    launches, _ = bench_scale.launches_per_step(spec_for(SMALL + ["scheme=tlmpm"]), steps=3)
-    assert launches == 3
+    launches, _, _ = bench_scale.launches_per_step(spec_for(SMALL + ["scheme=tlmpm"]), steps=3)
+    assert launches == 3 + 2
+    launches, _, reads = bench_scale.launches_per_step(spec_for(SMALL), steps=30, sync_every=10)
+    assert launches == 3 + 2 and reads == 0.1
 
 
 def test_memory_counts_each_array_once():
