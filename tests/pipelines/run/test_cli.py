@@ -97,7 +97,7 @@ BAD_INPUTS = [
     (["scene.bodies=[]"], "scene.bodies: empty; accepted: at least one body"),
     (["integrator=implicit", "integrator.newton_max=0"], "integrator.newton_max: 0 out of range"),
     (["scheme=aulmpm", "scheme.criterion=foo"], "scheme.criterion: 'foo' unknown; accepted: paper, distortion"),
-    (["detect.speed_factor=0"], "detect.speed_factor: 0.0; accepted: a number > 0"),
+    (["detect.speed_factor=0"], "detect.speed_factor: 0.0 out of range; accepted: 0.0 < speed_factor"),
     (["scene=viscous_cup", "scene.colliders.0.boundary=glue"],
      "scene.colliders[0].boundary: 'glue' unknown; accepted: sticky, slip, separate"),
     (["log.fps=0"], "log.fps: 0.0 out of range; accepted: log.fps > 0.0"),
