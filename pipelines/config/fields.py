@@ -130,7 +130,7 @@ def describe_type(tp, meta: Mapping) -> str:
     elif dataclasses.is_dataclass(base) or meta.get("family"):
         text = "a mapping"
     else:
-        text = "see the doc"
+        text = "a value"
     return text + (", or null" if optional else "")
 
 
@@ -189,9 +189,9 @@ def value(key: str, v, f: dataclasses.Field, tp, ctx: Context):
     """One field's value, converted and checked."""
     meta = f.metadata
     optional, base = unwrap(tp)
-    if v is None:
-        if optional or base is Any:
-            return None
+    if v is None and (optional or (base is Any and not meta.get("parse"))):
+        return None
+    if v is None and not meta.get("parse"):
         raise ConfigError(key, f"missing; accepted: {describe_type(tp, meta)}")
     if meta.get("parse"):
         return meta["parse"](key, v, ctx)
