@@ -36,8 +36,8 @@ class Implicit:
                               gt=0.0, lt=1.0)
     cg_max: int = param(400, "conjugate-gradient iterations per Newton iteration at most [-]", ge=1)
     cg_tol: float = param(1.0e-3, "CG stops at |r| <= cg_tol |Newton residual| [-]", gt=0.0, lt=1.0)
-    line_search: bool = True  # backtracking on the incremental potential (Armijo)
-    psd: bool = True  # project each particle's stress differential to semi-definite
+    line_search: bool = param(True, "backtracking on the incremental potential (Armijo)")
+    psd: bool = param(True, "project each particle's stress differential to semi-definite")
     displacement: float = param(0.5, "adaptive step: a particle moves at most this fraction "
                                      "of a cell per step [-]", gt=0.0)
     halvings: int = param(6, "adaptive step: retries with half the step after a failed "

@@ -1,7 +1,7 @@
 """Declared parameter ranges for plain dataclasses.
 
 A field made with :func:`param` carries its unit, its doc and its accepted
-range; :func:`violations` lists the fields whose values fall outside. The
+range (or accepted names); :func:`violations` lists the fields whose values fall outside. The
 solver calls it before allocating anything, the pipeline turns each violation
 into a one-line message naming the configuration key.
 """
@@ -13,11 +13,13 @@ import math
 from typing import Any, Iterator
 
 
-def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, inf=False):
+def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, inf=False, choices=None):
     """A dataclass field with a documented, checked range (bounds may be None;
-    ``inf``: +infinity is accepted; None values are not checked)."""
+    ``inf``: +infinity is accepted; None values are not checked) or, for a
+    name, the tuple of accepted ``choices``."""
     return dataclasses.field(
-        default=default, metadata={"doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le, "inf": inf}
+        default=default,
+        metadata={"doc": doc, "gt": gt, "ge": ge, "lt": lt, "le": le, "inf": inf, "choices": choices},
     )
 
 

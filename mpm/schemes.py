@@ -132,8 +132,11 @@ class AULMPM:
                                        "max(dJ_max, epsilon) [-]", gt=0.0, inf=True)
     stretch_min: float | None = param(None, "distortion: also update when a reference cell is "
                                             "squeezed below this fraction of its width [-]", ge=0.0, lt=1.0)
-    affine: str | None = None  # keep | transform; None: the scene kind's default
-    criterion: str | None = None  # paper | distortion; None: the scene kind's default
+    affine: str | None = param(None, "C over an update: transform (re-expressed in the new reference) or "
+                                     "keep; null: the scene kind's default", choices=AFFINE)
+    criterion: str | None = param(None, "paper (eq. 33 as published: epsilon, eta only) or distortion "
+                                        "(also dJ_max, stretch_min); null: the scene kind's default",
+                                  choices=CRITERIA)
 
     def resolved(self, kind: str) -> "AULMPM":
         """Defaults filled in for a scene of ``kind`` (:func:`scene_kind`)."""

@@ -43,6 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .params import param, violations
+
 DETECTION_ACTIONS = ("stop", "warn", "off")
 CRITERIA = ("energy", "speed", "inversion")
 FLOOR_SPEED = 1.0e-3  # of the slowest wave speed: the kinetic-energy floor of the energy scale
@@ -52,24 +54,23 @@ FLOOR_SPEED = 1.0e-3  # of the slowest wave speed: the kinetic-energy floor of t
 class Detection:
     """Options of the blow-up detection."""
 
-    action: str = "stop"  # stop: the run ends unstable; warn: an event, the run goes on; off
-    energy_growth: float = 0.5  # energy growth beyond the boundaries' work, in units of the energy scale
-    speed_factor: float = 10.0  # particle speed limit, in units of the speed scale (module docstring)
-    min_J: float = 0.0  # det F at or below this is inversion (models that cannot invert)
-    min_stretch: float = 1.0e-3  # a singular value of F below this is degenerate (same models)
+    action: str = param("stop", "stop: the run ends unstable; warn: an event, the run goes on; off",
+                        choices=DETECTION_ACTIONS)
+    energy_growth: float = param(0.5, "energy growth beyond the boundaries' work, in units of the energy "
+                                      "scale [-]", gt=0.0)
+    speed_factor: float = param(10.0, "particle speed limit, in units of the speed scale (module "
+                                      "docstring) [-]", gt=0.0)
+    min_J: float = param(0.0, "det F at or below this is inversion (models that cannot invert) [-]",
+                         ge=0.0, lt=1.0)
+    min_stretch: float = param(1.0e-3, "a singular value of F below this is degenerate (same models) [-]",
+                               ge=0.0, lt=1.0)
 
     def problems(self) -> list[tuple[str, str]]:
         out = []
         if self.action not in DETECTION_ACTIONS:
-            out.append(("action", f"{self.action!r}; accepted: {', '.join(DETECTION_ACTIONS)}"))
-        if not self.energy_growth > 0:
-            out.append(("energy_growth", f"{self.energy_growth}; accepted: a number > 0"))
-        if not self.speed_factor > 0:
-            out.append(("speed_factor", f"{self.speed_factor}; accepted: a number > 0"))
-        if not (0.0 <= self.min_J < 1.0):
-            out.append(("min_J", f"{self.min_J}; accepted: 0 <= min_J < 1"))
-        if not (0.0 <= self.min_stretch < 1.0):
-            out.append(("min_stretch", f"{self.min_stretch}; accepted: 0 <= min_stretch < 1"))
+            out.append(("action", f"{self.action!r} unknown; accepted: {', '.join(DETECTION_ACTIONS)}"))
+        for name, value, accepted in violations(self):
+            out.append((name, f"{value} out of range; accepted: {accepted}"))
         return out
 
 

@@ -24,7 +24,9 @@ schema.register()
 
 
 def group_options(group: str) -> list[str]:
-    return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
+    """The options of a config group: defined in code (material, scheme,
+    integrator, kernel) or files in conf/<group>/."""
+    return schema.options(group)
 
 
 def compose_cfg(overrides: list[str]):

@@ -134,8 +134,8 @@ class NACC(Plastic):
                             gt=0.0)
     friction_angle: float | None = param(None, "friction angle [deg], instead of M: "
                                                "M = 6 sin phi / (3 - sin phi)", gt=0.0, lt=90.0)
-    hardening: bool = True
-    """alpha follows the plastic volume change (false: the ellipse never changes)"""
+    hardening: bool = param(True, "alpha follows the plastic volume change (false: the ellipse never "
+                                  "changes)")
 
     def slope(self) -> float:
         return self.M if self.friction_angle is None else friction_to_M(self.friction_angle)

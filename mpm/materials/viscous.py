@@ -87,7 +87,8 @@ class Viscous(Material):
     flows = True
     fluid = True
 
-    K: float = param(2.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]", gt=0.0)
+    K: float = param(1.0e5, "pressure stiffness K of p = K (J^-gamma - 1) [Pa]; the default's sound "
+                            "speed sqrt(K gamma / rho) is 26 m/s", gt=0.0)
     gamma: float = param(7.0, "Tait exponent gamma [-]", gt=1.0)
     viscosity: float = param(1.0, "dynamic viscosity eta [Pa s]", ge=0.0)
 

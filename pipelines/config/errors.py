@@ -9,7 +9,7 @@ from hydra.errors import MissingConfigException, OverrideParseException
 from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, OmegaConfBaseException,
                               ValidationError)
 
-from .validate import ConfigError
+from .fields import ConfigError
 
 EXIT_CONFIG = 2
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}  # of a run, by status
@@ -34,7 +34,7 @@ def describe(exc: BaseException) -> str | None:
         missing = exc.missing_cfg_file or ""
         if "/" in missing and exc.options is not None:
             group, option = missing.rsplit("/", 1)
-            options = sorted(o for o in exc.options if not o.endswith("_schema"))
+            options = sorted(exc.options)
             return f"{group}={option}: unknown option; accepted: {', '.join(options)}"
         return _first_line(exc)
     if isinstance(exc, OverrideParseException):

@@ -84,6 +84,8 @@ BAD_INPUTS = [
     # ranges, sizes, names and shapes of every group
     (["run.cfl=0"], "run.cfl: 0.0 out of range; accepted: run.cfl > 0.0, run.cfl <= 1.0"),
     (["run.dt_collapse=2"], "run.dt_collapse: 2.0 out of range"),
+    (["run.sync_every=0"], "run.sync_every: 0 out of range; accepted: run.sync_every >= 1"),
+    (["run.graph=maybe"], "run.graph: 'maybe' is not true or false; accepted: true, false"),
     (["scene.resolution=2.5"], "scene.resolution: '2.5' is not an integer"),
     (["scene.domain=[0,1]"], "scene.domain[0]: 0.0 out of range; accepted: scene.domain[0] > 0.0"),
     (["scene.gravity=[0]"], "scene.gravity: [0.0]; accepted: a list of 2 numbers"),
@@ -97,7 +99,7 @@ BAD_INPUTS = [
     (["scene.bodies=[]"], "scene.bodies: empty; accepted: at least one body"),
     (["integrator=implicit", "integrator.newton_max=0"], "integrator.newton_max: 0 out of range"),
     (["scheme=aulmpm", "scheme.criterion=foo"], "scheme.criterion: 'foo' unknown; accepted: paper, distortion"),
-    (["detect.speed_factor=0"], "detect.speed_factor: 0.0; accepted: a number > 0"),
+    (["detect.speed_factor=0"], "detect.speed_factor: 0.0 out of range; accepted: 0.0 < speed_factor"),
     (["scene=viscous_cup", "scene.colliders.0.boundary=glue"],
      "scene.colliders[0].boundary: 'glue' unknown; accepted: sticky, slip, separate"),
     (["log.fps=0"], "log.fps: 0.0 out of range; accepted: log.fps > 0.0"),

@@ -1,0 +1,194 @@
+"""Rigid colliders (:mod:`mpm.colliders`): one dataclass per ``type``, the
+keys every collider has (boundary, friction, container, motion) and each
+type's geometry, and the :class:`mpm.Collider` it builds."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, List, Optional
+
+import numpy as np
+
+import mpm
+from mpm.colliders import BOUNDARIES
+from mpm.meshes import MeshShape
+
+from .fields import ConfigError, Context, Family, number, setting, vector
+from .shapes import axis_in, mesh_file
+
+
+def _nonzero(key: str, value, ctx: Context) -> tuple:
+    v = vector(key, value, ctx.dim)
+    if np.linalg.norm(v) == 0.0:
+        raise ConfigError(key, f"{list(v)}; accepted: a non-zero vector")
+    return v
+
+
+def _normals(key: str, value, ctx: Context) -> tuple:
+    if not isinstance(value, list) or len(value) != 2:
+        raise ConfigError(key, f"{value!r}; accepted: two vectors of {ctx.dim} numbers")
+    return tuple(_nonzero(f"{key}[{i}]", n, ctx) for i, n in enumerate(value))
+
+
+def _axis(key: str, value, ctx: Context):
+    """A coordinate axis 0 to d - 1 or a non-zero direction."""
+    if isinstance(value, list):
+        v = vector(key, value, ctx.dim)
+        if np.linalg.norm(v) == 0.0:
+            raise ConfigError(key, f"{list(v)}; accepted: a non-zero vector or 0..{ctx.dim - 1}")
+        return v
+    return number(key, value, int, {"keyed": True, "ge": 0, "le": ctx.dim - 1})
+
+
+def _center(doc: str = "centre [m]"):
+    return setting(None, doc, size="dim", required=True)
+
+
+def _positive(doc: str):
+    return setting(None, doc, gt=0.0, required=True)
+
+
+AXIS = "0, 1, 2 or a direction; null: 1 (+y)"
+
+
+@dataclass
+class _Collider:
+    """The keys of every collider: ``boundary`` with Coulomb ``friction``,
+    ``inside: true`` (the shape is a container), ``velocity`` while
+    start <= t < end."""
+
+    type: str = setting("half_space", "the kind of collider")
+    name: str = setting("", "a name for the recording")
+    boundary: str = setting("slip", "sticky, slip or separate (mpm.colliders)", choices=BOUNDARIES)
+    friction: float = setting(0.0, "Coulomb friction coefficient of slip and separate", ge=0.0)
+    inside: bool = setting(False, "the solid is the outside of the shape (a container)")
+    velocity: Optional[List[float]] = setting(None, "[m/s] moves the collider while start <= t < end; "
+                                                    "null: static", size="dim")
+    start: float = setting(0.0, "[s] when the motion starts", ge=0.0)
+    end: Optional[float] = setting(None, "[s] when the motion ends; null: never")
+
+    def problems(self):
+        if self.end is not None and not self.end > self.start:
+            return [("end", f"{self.end} out of range; accepted: end > start ({self.start})")]
+        return []
+
+    def common(self) -> dict:
+        return dict(kind=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
+                    inside=self.inside, velocity=self.velocity, start=self.start,
+                    end=float("inf") if self.end is None else self.end)
+
+    def build(self, key: str, ctx: Context) -> mpm.Collider:
+        geometry = {k: getattr(self, k) for k in self.geometry}
+        return mpm.Collider(**self.common(), **{k: v for k, v in geometry.items() if v is not None})
+
+
+@dataclass
+class HalfSpace(_Collider):
+    """The solid behind a plane through ``point`` with outward ``normal``."""
+
+    geometry = ("point", "normal")
+    type: str = setting("half_space", "the kind of collider")
+    point: Optional[List[float]] = setting(None, "a point of the plane [m]", size="dim", required=True)
+    normal: Optional[List[float]] = setting(None, "outward normal (any length)", parse=_nonzero, required=True)
+
+
+@dataclass
+class Wedge(_Collider):
+    """The intersection of two half-spaces through ``point`` (a ridge)."""
+
+    geometry = ("point", "normals")
+    type: str = setting("wedge", "the kind of collider")
+    point: Optional[List[float]] = setting(None, "a point of both planes [m]", size="dim", required=True)
+    normals: Optional[List[Any]] = setting(None, "two outward normals", parse=_normals, required=True)
+
+
+@dataclass
+class BoxCollider(_Collider):
+    """An axis-aligned box."""
+
+    geometry = ("center", "half_size")
+    type: str = setting("box", "the kind of collider")
+    center: Optional[List[float]] = _center()
+    half_size: Optional[List[float]] = setting(None, "half the side along each axis [m]", size="dim", gt=0.0,
+                                               required=True)
+
+
+@dataclass
+class SphereCollider(_Collider):
+    """A ball (``inside: true``: a spherical container)."""
+
+    geometry = ("center", "radius")
+    type: str = setting("sphere", "the kind of collider")
+    center: Optional[List[float]] = _center()
+    radius: Optional[float] = _positive("radius [m]")
+
+
+@dataclass
+class CylinderCollider(_Collider):
+    """A capped cylinder along ``axis``."""
+
+    geometry = ("center", "radius", "half_height", "axis")
+    type: str = setting("cylinder", "the kind of collider")
+    center: Optional[List[float]] = _center()
+    radius: Optional[float] = _positive("radius [m]")
+    half_height: Optional[float] = _positive("half the length along the axis [m]")
+    axis: Optional[Any] = setting(None, AXIS, parse=_axis)
+
+
+@dataclass
+class Cup(_Collider):
+    """An open cylindrical cup: inner bottom centre ``center``, inner
+    ``radius`` and ``depth``, wall ``thickness``, opening along ``axis``."""
+
+    geometry = ("center", "radius", "depth", "thickness", "axis")
+    type: str = setting("cup", "the kind of collider")
+    center: Optional[List[float]] = _center("inner bottom centre [m]")
+    radius: Optional[float] = _positive("inner radius [m]")
+    depth: Optional[float] = _positive("inner depth [m]")
+    thickness: Optional[float] = _positive("wall thickness [m]")
+    axis: Optional[Any] = setting(None, AXIS, parse=_axis)
+
+
+@dataclass
+class BowlCollider(_Collider):
+    """A spherical cap shell: the sphere ``center``, inner ``radius``,
+    ``thickness``, cut by the rim plane ``rim`` above the centre along
+    ``axis`` (the opening)."""
+
+    geometry = ("center", "radius", "thickness", "rim", "axis")
+    type: str = setting("bowl", "the kind of collider")
+    center: Optional[List[float]] = _center()
+    radius: Optional[float] = _positive("inner radius [m]")
+    thickness: Optional[float] = _positive("wall thickness [m]")
+    rim: Optional[float] = setting(None, "the rim plane's height above the centre along the axis [m]; "
+                                         "accepted: -(radius + thickness) < rim <= radius", required=True)
+    axis: Optional[Any] = setting(None, AXIS, parse=_axis)
+
+    def build(self, key: str, ctx: Context) -> mpm.Collider:
+        number(f"{key}.rim", self.rim, float, {"keyed": True, "gt": -(self.radius + self.thickness), "le": self.radius})
+        return super().build(key, ctx)
+
+
+@dataclass
+class MeshCollider(_Collider):
+    """A closed triangle mesh (3D), placed like a mesh shape."""
+
+    dims = (3,)
+    type: str = setting("mesh", "the kind of collider")
+    mesh: Optional[str] = setting(None, "an OBJ, PLY, STL or USD path, or warp:<asset>", parse=mesh_file,
+                                  required=True)
+    center: Optional[List[float]] = _center()
+    size: Optional[float] = _positive("largest side of the mesh's bounding box [m]")
+    axis: Optional[int] = setting(None, "the mesh's up axis, 0, 1 or 2; null: 1 (y)", ge=0, le=2)
+
+    def build(self, key: str, ctx: Context) -> mpm.Collider:
+        shape = MeshShape(self.mesh, self.center, self.size, axis_in(f"{key}.axis", self.axis, 3))
+        return mpm.Collider(**self.common(), mesh=shape)
+
+
+COLLIDERS = Family("collider", "type", {c.__dataclass_fields__["type"].default: c for c in (
+    HalfSpace, Wedge, BoxCollider, SphereCollider, CylinderCollider, Cup, BowlCollider, MeshCollider)},
+    unused="not used by a {kind} collider", missing="missing for a {kind} collider", flat_node=True)
+ColliderConfig = COLLIDERS.flat("ColliderConfig", __name__, """A rigid collider (mpm.colliders): every key
+of every type (null where the type does not use it); the types and their keys are the dataclasses of
+:data:`COLLIDERS`.""")

@@ -1,0 +1,269 @@
+"""The ``scene`` group: the domain, its bodies, kinematic regions, colliders
+and closed-form solution, each defined once here (shapes and colliders in
+their own modules), and the :class:`mpm.Scene` they build. A scene's file in
+``conf/scene/`` holds values only."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+from omegaconf import MISSING, OmegaConf
+
+import mpm
+from mpm.materials import Material
+from mpm.scene import CONTACT_TYPES, WALL_TYPES
+
+from .colliders import ColliderConfig, COLLIDERS
+from .fields import ConfigError, Context, Family, check, choice, number, plain, setting, vector
+from .physics import MATERIAL
+from .shapes import SHAPES, ShapeConfig, fixed_shape
+
+__all__ = ["BodyConfig", "ColliderConfig", "RegionConfig", "SceneConfig", "ShapeConfig", "make_scene"]
+
+
+def angular(key: str, w, ctx: Context):
+    """[rad/s]: a scalar in 2D, a 3-vector in 3D."""
+    return number(key, w) if ctx.dim == 2 else vector(key, w, 3)
+
+
+def matrix(key: str, value, ctx: Context):
+    """A d x d matrix given as d rows."""
+    d = ctx.dim
+    if not isinstance(value, (list, tuple)) or len(value) != d:
+        raise ConfigError(key, f"{value!r}; accepted: {d} rows of {d} numbers")
+    return tuple(vector(f"{key}[{i}]", row, d) for i, row in enumerate(value))
+
+
+def walls(key: str, value, ctx: Context) -> tuple:
+    """One wall type for every face, or one per face (x_lo, x_hi, y_lo, ...)."""
+    n = 2 * ctx.dim
+    values = [value] * n if isinstance(value, str) else value
+    if not isinstance(values, list) or len(values) != n:
+        raise ConfigError(key, f"{value!r}; accepted: one of {', '.join(WALL_TYPES)}, "
+                               f"or a list of {n} (x_lo, x_hi, y_lo, ...)")
+    return tuple(choice(f"{key}[{i}]", w, WALL_TYPES) for i, w in enumerate(values))
+
+
+def body_ref(key: str, value, ctx: Context):
+    """A body's index or name (checked against the scene's bodies later)."""
+    return value if isinstance(value, str) else number(key, value, int, {"keyed": True, "ge": 0})
+
+
+@dataclass
+class BodyConfig:
+    """One body: a shape filled with particles of one material."""
+
+    name: str = setting("", "the body's name; empty: body<i>")
+    shape: ShapeConfig = setting(ShapeConfig(), "the shape the particles fill", family=SHAPES)
+    material: Optional[Any] = setting(None, "null: the material group; a mapping with a model key: the "
+                                            "body's own material", family=MATERIAL)
+    velocity: Optional[List[float]] = setting(None, "initial velocity [m/s]", size="dim")
+    angular_velocity: Optional[Any] = setting(None, "initial spin about the shape's centre [rad/s]: a scalar "
+                                                    "(2D) or a 3-vector (3D)", parse=angular)
+    ppc: Optional[int] = setting(None, "particles per cell; null: the scene's", ge=1)
+    deformation: Optional[Any] = setting(None, "initial deformation gradient F, d rows of d numbers (det F < 0: "
+                                               "inverted)", parse=matrix)
+
+
+@dataclass
+class RegionConfig:
+    """A kinematic boundary region: the particles of ``body`` whose initial
+    position is inside ``select`` move with ``velocity``, ``angular_velocity``
+    and ``velocity_gradient`` about ``center`` while start <= t < end."""
+
+    name: str = setting("", "a name for the recording")
+    body: Any = setting(0, "the body: its index or name", parse=body_ref)
+    select: ShapeConfig = setting(ShapeConfig(), "the initial positions it takes (no random rotation)",
+                                  parse=fixed_shape)
+    velocity: Optional[List[float]] = setting(None, "[m/s]", size="dim")
+    angular_velocity: Optional[Any] = setting(None, "[rad/s]: a scalar (2D) or a 3-vector (3D)", parse=angular)
+    velocity_gradient: Optional[Any] = setting(None, "[1/s] d rows of d numbers: a homogeneous stretch or shear",
+                                               parse=matrix)
+    center: Optional[List[float]] = setting(None, "[m]; null: the centre of select, moving with the velocity",
+                                            size="dim")
+    start: float = setting(0.0, "[s] when the motion starts", ge=0.0)
+    end: Optional[float] = setting(None, "[s] when it ends; null: never")
+
+    def problems(self):
+        if self.end is not None and not self.end > self.start:
+            return [("end", f"{self.end} out of range; accepted: end > start ({self.start})")]
+        return []
+
+
+# ------------------------------------------------------------------ closed-form solutions (mpm.analytic)
+def _one_elastic_box(kind: str, body) -> None:
+    if not isinstance(body.shape, mpm.Box):
+        raise ConfigError("scene.bodies[0].shape.type", f"the {kind} is a box; accepted: box")
+
+
+@dataclass
+class VibratingBar:
+    """The 1D vibrating bar: a box of an elastic solid with nu = 0, no gravity."""
+
+    type: str = setting("vibrating_bar", "the kind of solution")
+    amplitude: Optional[float] = setting(None, "velocity amplitude [m/s]", gt=0.0, required=True)
+    mode: int = setting(1, "the mode", ge=1)
+    axis: int = setting(0, "the bar's axis", ge=0, le=2)
+
+    def build(self, key: str, body, dim: int):
+        mat = body.material
+        _one_elastic_box("vibrating bar", body)
+        if mat.name not in ("fixed_corotated", "neo_hookean") or mat.nu != 0.0:
+            raise ConfigError("scene.bodies[0].material", f"{mat.name} (nu = {getattr(mat, 'nu', None)}): "
+                              "the 1D bar solution needs an elastic solid with nu = 0; accepted: "
+                              "fixed_corotated or neo_hookean with nu: 0.0")
+        axis = number(f"{key}.axis", self.axis, int, {"keyed": True, "ge": 0, "le": dim - 1})
+        lo, hi = body.shape.bounds()
+        return mpm.analytic.VibratingBar(lo=float(lo[axis]), length=float(hi[axis] - lo[axis]),
+                                         wave_speed=(mat.E / mat.rho) ** 0.5, amplitude=self.amplitude,
+                                         mode=self.mode, axis=axis)
+
+
+@dataclass
+class ShearWave:
+    """A decaying shear wave in a slab of a Newtonian viscous fluid."""
+
+    type: str = setting("shear_wave", "the kind of solution")
+    amplitude: Optional[float] = setting(None, "velocity amplitude [m/s]", gt=0.0, required=True)
+    mode: int = setting(1, "the mode", ge=1)
+    axis: int = setting(0, "the velocity's axis", ge=0, le=2)
+    normal: int = setting(1, "the slab's normal axis", ge=0, le=2)
+
+    def build(self, key: str, body, dim: int):
+        mat = body.material
+        _one_elastic_box("shear wave's slab", body)
+        if not isinstance(mat, mpm.materials.Viscous) or mat.viscosity <= 0.0:
+            raise ConfigError("scene.bodies[0].material", f"{mat.name}: the shear wave decays by Newtonian "
+                              "viscosity; accepted: viscous (or fluid) with viscosity > 0")
+        within = {"keyed": True, "ge": 0, "le": dim - 1}
+        axis = number(f"{key}.axis", self.axis, int, within)
+        normal = number(f"{key}.normal", self.normal, int, within)
+        if normal == axis:
+            raise ConfigError(f"{key}.normal", f"{normal} equals axis; accepted: another axis")
+        lo, hi = body.shape.bounds()
+        return mpm.analytic.ShearWave(lo=float(lo[normal]), thickness=float(hi[normal] - lo[normal]),
+                                      kinematic_viscosity=mat.viscosity / mat.rho, amplitude=self.amplitude,
+                                      mode=self.mode, axis=axis, normal=normal)
+
+
+@dataclass
+class Vortex:
+    """The 2D vortex in a neo-Hookean ring (a manufactured solution)."""
+
+    dims = (2,)
+    type: str = setting("vortex", "the kind of solution")
+    amplitude: Optional[float] = setting(None, "angular amplitude [rad]", gt=0.0, required=True)
+    omega: float = setting(math.pi, "angular frequency [rad/s]", gt=0.0)
+
+    def build(self, key: str, body, dim: int):
+        shape, mat = body.shape, body.material
+        if not isinstance(shape, mpm.Sphere) or shape.inner_radius <= 0.0:
+            raise ConfigError("scene.bodies[0].shape", "the vortex is a ring; accepted: a sphere with "
+                                                       "inner_radius > 0")
+        if mat.name != "neo_hookean":
+            raise ConfigError("scene.bodies[0].material.model", f"{mat.name}: the vortex's body force is "
+                                                                "derived for neo_hookean; accepted: neo_hookean")
+        return mpm.analytic.Vortex(center=tuple(shape.center), inner_radius=shape.inner_radius,
+                                   outer_radius=shape.radius, shear_modulus=mat.E / (2 * (1 + mat.nu)),
+                                   density=mat.rho, amplitude=self.amplitude, omega=self.omega)
+
+
+SOLUTION = Family("solution", "type", {c.__dataclass_fields__["type"].default: c
+                                       for c in (VibratingBar, Vortex, ShearWave)})
+
+
+@dataclass
+class SceneConfig:
+    """Domain [0, domain[d]] per axis, a grid of ``resolution`` cells along x."""
+
+    name: str = setting(MISSING, "the scene's name")
+    dim: int = setting(2, "2 or 3", choices=(2, 3))
+    domain: List[float] = setting([1.0, 1.0], "the domain's extent per axis [m]", size="dim", gt=0.0)
+    resolution: int = setting(64, "grid cells along x", ge=4)
+    duration: float = setting(1.0, "simulated time when run.steps and run.duration are null [s]", gt=0.0)
+    gravity: List[float] = setting([0.0, -9.81], "[m/s^2]", size="dim")
+    walls: Any = setting("slip", f"one of {', '.join(WALL_TYPES)}, or one per face (x_lo, x_hi, y_lo, ...)",
+                         parse=walls)
+    wall_cells: int = setting(3, "wall thickness [cells]", ge=1)
+    ppc: int = setting(4, "particles per cell", ge=1)
+    jitter: float = setting(0.0, "random displacement of the lattice samples [fraction of their spacing]",
+                            ge=0.0, le=1.0)
+    lattice_offset: Optional[List[float]] = setting(None, "shift of the sampling lattice [cells]; ppc 1 with "
+                                                          "0.5: particles on the nodes", size="dim")
+    contact: str = setting("frictionless", "between bodies: frictionless, none, or shared (one grid; EMPM)",
+                           choices=CONTACT_TYPES)
+    contact_fill: float = setting(0.5, "the node volume fraction the bodies must fill for contact",
+                                  gt=0.0, le=1.0)
+    bodies: List[BodyConfig] = setting([], "the bodies", nonempty="at least one body")
+    regions: List[RegionConfig] = setting([], "kinematic boundary regions")
+    colliders: List[ColliderConfig] = setting([], "rigid colliders", family=COLLIDERS)
+    size: str = setting("default", "a key of sizes: its values replace resolution, ppc, ...")
+    sizes: Dict[str, Any] = setting({}, "name -> {resolution: ..., ppc: ...}")
+    particle_resolution: Optional[int] = setting(None, "sample the particles as on this grid (a fixed particle "
+                                                       "set under grid refinement)", ge=1)
+    solution: Optional[Any] = setting(None, "closed-form solution: a mapping with a type key "
+                                            f"({', '.join(SOLUTION.variants)})", family=SOLUTION)
+
+
+def check_size(node, key: str = "scene") -> None:
+    """``scene.size`` must name one of ``scene.sizes`` (checked before the
+    scene's interpolations, which read the chosen size, are resolved)."""
+    if not OmegaConf.is_config(node):
+        return
+    size = node.get("size", "default")
+    sizes = node.get("sizes") or {}
+    names = list(sizes.keys()) if sizes else ["default"]
+    if size not in names:
+        raise ConfigError(f"{key}.size", f"{size!r} unknown for scene {node.get('name')}; "
+                                         f"accepted: {', '.join(names)}")
+
+
+def make_scene(node, default_material: Material, key: str = "scene", seed: int = 0) -> tuple[mpm.Scene, SceneConfig]:
+    """The scene and its checked config; ``seed`` draws random shape
+    rotations (and nothing else)."""
+    check_size(node, key)
+    d = plain(node)
+    if not isinstance(d, dict):
+        raise ConfigError(key, f"{d!r}; accepted: a scene mapping")
+    dim = choice(f"{key}.dim", number(f"{key}.dim", d.get("dim", 2), int), (2, 3))
+    ctx = Context(dim=dim, rng=np.random.default_rng([seed, 1]))
+    sc = check(SceneConfig, d, key, ctx)
+    bodies = [mpm.Body(shape=b.shape.build(f"{key}.bodies[{i}].shape", ctx),
+                       material=default_material if b.material is None else b.material,
+                       name=b.name or f"body{i}", velocity=b.velocity, angular_velocity=b.angular_velocity,
+                       ppc=b.ppc, deformation=b.deformation) for i, b in enumerate(sc.bodies)]
+    names = [b.name for b in bodies]
+    regions = []
+    for i, r in enumerate(sc.regions):
+        rkey = f"{key}.regions[{i}]"
+        body = r.body
+        if isinstance(body, str):
+            body = choice(f"{rkey}.body", body, names)
+            body = names.index(body)
+        else:
+            number(f"{rkey}.body", body, int, {"keyed": True, "ge": 0, "le": len(bodies) - 1})
+        regions.append(mpm.KinematicRegion(
+            body=body, select=r.select.build(f"{rkey}.select", replace(ctx, rng=None)), name=r.name,
+            velocity=r.velocity, angular_velocity=r.angular_velocity, velocity_gradient=r.velocity_gradient,
+            center=r.center, start=r.start, end=math.inf if r.end is None else r.end))
+    scene = mpm.Scene(dim=dim, domain=sc.domain, resolution=sc.resolution, bodies=bodies, gravity=sc.gravity,
+                      walls=sc.walls, wall_cells=sc.wall_cells, ppc=sc.ppc, jitter=sc.jitter,
+                      lattice_offset=sc.lattice_offset, contact=sc.contact, contact_fill=sc.contact_fill,
+                      regions=regions, particle_resolution=sc.particle_resolution,
+                      colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)])
+    scene.solution = _solution(sc.solution, f"{key}.solution", scene)
+    return scene, sc
+
+
+def _solution(solution, key: str, scene: mpm.Scene):
+    if solution is None:
+        return None
+    if len(scene.bodies) != 1:
+        raise ConfigError(f"{key}.type", f"{solution.type} describes one body, the scene has {len(scene.bodies)}; "
+                                         "accepted: a scene with one body")
+    if any(g != 0.0 for g in scene.gravity):
+        raise ConfigError("scene.gravity", f"{list(scene.gravity)}: {solution.type} has no gravity; accepted: zeros")
+    return solution.build(key, scene.bodies[0], scene.dim)

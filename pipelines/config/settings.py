@@ -1,0 +1,122 @@
+"""The settings of a run: ``run``, ``log``, ``kernel`` and
+``stability_map``. Each dataclass is both the schema Hydra composes and the
+checked settings a :class:`pipelines.config.validate.RunSpec` carries."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import List, Optional
+
+import mpm
+from mpm.transfer import TRANSFERS
+
+from .fields import ConfigError, Context, setting
+
+PRECISIONS = ("float32", "float64")
+DEVICES = ("auto", "cpu", "cuda")
+COLORS = ("auto", "body", "dJ", "plastic_strain")  # log.color; dJ needs log.dJ, plastic_strain a plastic body
+
+
+def reference(key: str, path, ctx: Context | None = None) -> str:
+    """The final_state.npz of a reference run, given the run's directory or the file."""
+    p = os.path.join(str(path), "final_state.npz") if os.path.isdir(str(path)) else str(path)
+    if not os.path.isfile(p):
+        raise ConfigError(key, f"{path!r}: no final_state.npz there; accepted: the directory of a "
+                               "finished run (or its final_state.npz)")
+    return os.path.abspath(p)
+
+
+def recording_name(key: str, value, ctx: Context | None = None) -> str:
+    """A file name inside the run directory."""
+    name = "" if value is None else str(value)
+    if not name or "/" in name or "\\" in name or not name.endswith(".rrd") or name == ".rrd":
+        raise ConfigError(key, f"{value!r}; accepted: a file name ending in .rrd, without a directory (it is "
+                               "written into the run directory)")
+    return name
+
+
+@dataclass
+class RunSettings:
+    """How long and how to step."""
+
+    steps: Optional[int] = setting(None, "number of steps (exclusive with run.duration)", ge=1)
+    duration: Optional[float] = setting(None, "simulated time [s]; null: the scene's", gt=0.0)
+    dt: Optional[float] = setting(None, "fixed time step [s]; null: adaptive (explicit: the CFL limit; "
+                                        "implicit: the displacement limit)", gt=0.0)
+    cfl: float = setting(0.4, "CFL number of the adaptive step", gt=0.0, le=1.0)
+    dt_max: float = setting(1.0e-3, "largest adaptive step [s]", gt=0.0)
+    dt_collapse: float = setting(1.0e-4, "unstable when the adaptive step falls below this fraction of the "
+                                         "first", ge=0.0, le=1.0)
+    precision: str = setting("float32", "floating-point precision of the state", choices=PRECISIONS)
+    device: str = setting("${oc.env:MPM_DEVICE,auto}", "auto (CUDA when Warp finds a GPU, else the CPU), "
+                                                       "cpu or cuda; the default: the environment's MPM_DEVICE, "
+                                                       "else auto", choices=DEVICES)
+    force: bool = setting(False, "in a sweep: run even if a job with the same config hash finished")
+    plan: bool = setting(False, "print the stages and kernels of a step and exit (nothing compiled or run)")
+    fuse: Optional[bool] = setting(None, "explicit EMPM: stencils located in P2G/G2P, G2P updates the "
+                                         "reference (the same results); null: where it pays")
+    reference: Optional[str] = setting(None, "a run directory (or its final_state.npz) to measure the error "
+                                             "against", parse=reference)
+    sync_every: Optional[int] = setting(None, "the host reads the step's figures every k steps; null: 1 on the "
+                                              "CPU, 10 on CUDA", ge=1)
+    graph: Optional[bool] = setting(None, "replay a fixed-size scene's k steps as a CUDA graph; null: on CUDA "
+                                          "where the scene allows it")
+
+    def problems(self):
+        if self.steps is not None and self.duration is not None:
+            return [("steps", "set run.steps or run.duration, not both")]
+        return []
+
+
+@dataclass
+class LogSettings:
+    """What goes into the recording."""
+
+    every: Optional[int] = setting(None, "particles every N steps; 0: none; null: log.fps frames per simulated "
+                                         "second", ge=0)
+    fps: float = setting(60.0, "particle frames per simulated second (when log.every is null)", gt=0.0)
+    color: str = setting("auto", f"particle colour: {', '.join(COLORS)} (auto: plastic_strain with a plastic "
+                                 "body, else dJ; dJ needs log.dJ, plastic_strain a plastic body)")
+    size_warning_mb: float = setting(1000.0, "warn before a run whose recording would be larger [MB]", gt=0.0)
+    dJ: bool = setting(True, "the per-particle dJ field with the particles")
+    fracture_every: int = setting(20, "steps between evaluations of the fracture measure (and at the end)", ge=1)
+    scalars: bool = setting(True, "physics scalars every step")
+    flush_every: int = setting(500, "steps between batched scalar sends", ge=1)
+    progress: Optional[bool] = setting(None, "progress bar; null: on a terminal")
+    recording: str = setting("recording.rrd", "file name inside the run directory", parse=recording_name)
+
+    @property
+    def particles(self) -> bool:
+        """Whether particle frames are logged at all."""
+        return self.every != 0
+
+    def resolve_color(self, scene: mpm.Scene) -> None:
+        """``color`` checked against the scene, ``auto`` resolved."""
+        plastic = any(b.material.plastic for b in scene.bodies)
+        accepted = [c for c in COLORS if (c != "dJ" or self.dJ) and (c != "plastic_strain" or plastic)]
+        if self.color not in accepted:
+            why = ("" if self.color not in ("dJ", "plastic_strain") else
+                   " (log.dJ is false)" if self.color == "dJ" else " (no plastic body in this scene)")
+            raise ConfigError("log.color", f"{self.color!r}{why}; accepted: {', '.join(accepted)}")
+        if self.color == "auto":
+            self.color = "plastic_strain" if plastic else "dJ" if self.dJ else "body"
+
+
+@dataclass
+class KernelConfig:
+    """Interpolation kernel (mpm.kernels) and the transfer that uses it (mpm.transfer)."""
+
+    name: str = setting("quadratic", "the kernel", choices=tuple(mpm.KERNELS))
+    transfer: str = setting("mls", "the transfer of the affine velocity field", choices=TRANSFERS)
+
+
+@dataclass
+class MapSpec:
+    """The points of a stability map (pipelines.sweeps.stability)."""
+
+    E: List[float] = setting([], "stiffness [Pa]: Young's modulus (a fluid's bulk modulus)", gt=0.0,
+                             nonempty="a list of numbers > 0")
+    dt_cfl: List[float] = setting([], "fixed step [multiples of the explicit CFL limit]", gt=0.0,
+                                  nonempty="a list of numbers > 0")
+    steps: int = setting(100, "steps per point", ge=1)
