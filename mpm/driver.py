@@ -183,6 +183,17 @@ class Driver:
         p = self.policy
         return self.step >= p.steps if p.steps is not None else self.time >= p.duration * (1 - 1e-12)
 
+    def kernels(self) -> list:
+        """Every kernel the run compiles: the solver's and the policy's."""
+        return self.solver.kernels() + self.device_policy.kernels()
+
+    def load(self) -> float:
+        """Compile (or load from the cache) every kernel of the run; seconds taken."""
+        t0 = time.perf_counter()
+        modules = list({id(k.module): k.module for k in self.kernels()}.values())
+        wp.force_load(device=self.solver.model.device, modules=modules, max_workers=2)
+        return time.perf_counter() - t0
+
     # ------------------------------------------------------------ run
     def run(self) -> Outcome:
         """Start, step until the end or an instability; the outcome."""
@@ -195,8 +206,8 @@ class Driver:
         """Prepare the solver, measure the initial state, check it, choose the
         first step, and tell the observers."""
         s, state, p = self.solver, self.state, self.policy
-        if self.k > 1:  # room for k steps of at most a cell each (a fixed step: the device checks)
-            s.pad = (math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) + 1) * s.model.dx
+        if self.k > 1:  # room for k steps of at most cfl cells each (a fixed step: one; the device checks)
+            s.pad = math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) * s.model.dx
         s.prepare(state)
         self.initial = s.measure(state, elastic=False)
         names = s.diagnostics.names

@@ -212,8 +212,8 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
                 if halt == 0 and (n >= control.stop_step[0] or t >= control.stop_time[0] * f64(1.0 - 1e-9)):
                     halt = PAUSE
         control.halt[0] = f64(halt)
-        if wp.static(measured):
-            if control.host_update[0] == f64(0.0):
+        if wp.static(measured):  # (a failed step's state is not measured on the host either)
+            if control.host_update[0] == f64(0.0) and halt != DETECTION and halt != NONFINITE and halt != OUTSIDE:
                 M = status.diagnostics[0]
                 for d in range(wp.static(dim)):
                     control.center[d] = wp.where(M > f64(0.0), status.diagnostics[iC + d] / M, f64(0.0))

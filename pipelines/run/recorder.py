@@ -100,8 +100,10 @@ class Recorder(mpm.Observer):
                                                     file=sys.stderr, flush=True))
         if Progress.shown(log.progress):
             notice.start()
+        self.driver = mpm.Driver(self.solver, self.state, policy, spec.detect, [self], sync_every=sync_every,
+                                 graph=graph, measure=log.scalars)
         try:
-            self.metrics["compile_time_s"] = self.solver.load()
+            self.metrics["compile_time_s"] = self.driver.load()
         finally:
             notice.cancel()
         self.mass0 = self.model.mass.numpy().astype(np.float64)  # [kg] (removed particles' mass becomes 0)
@@ -118,8 +120,6 @@ class Recorder(mpm.Observer):
         self.stretch_names = per_body("min_stretch")
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
-        self.driver = mpm.Driver(self.solver, self.state, policy, spec.detect, [self], sync_every=sync_every,
-                                 graph=graph, measure=log.scalars)
         self.metrics["sync_every"] = self.driver.k
         self.built = True
 
