@@ -11,7 +11,7 @@ import mpm
 from helpers import DEVICE, spec_for
 from mpm.material_point import MaterialPoint, velocity_path
 from reference_mpm import plastic_step
-from test_reference import assert_no_contact
+from test_reference import EPS64, assert_no_contact, round_off
 
 PLASTIC = {
     "snow": mpm.materials.Snow(E=1e5),
@@ -37,13 +37,23 @@ def impact_scene(material, dim):
                      ppc=1)
 
 
+# float64 evaluates the von Mises hardening term 2 H / 3 with 2/3 in float32 (a literal
+# expression inside the Warp function), 3e-8 off: its return mapping misses the
+# closed form by 2e-10 (test_plasticity.test_float64_von_mises_return_mapping_is_the_closed_form)
+VON_MISES_FLOAT32_CONSTANT = pytest.mark.xfail(
+    strict=True, reason="mpm/materials/von_mises.py: S(2.0 / 3.0) * H is computed in float32 in float64 runs")
+
+
 # every model in 2D; in 3D the two with the most branches
-@pytest.mark.parametrize("name,dim", [(n, 2) for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
+@pytest.mark.parametrize("name,dim", [pytest.param(n, 2, marks=[VON_MISES_FLOAT32_CONSTANT] if n == "von_mises" else [])
+                                      for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
 def test_eulerian_plastic_step_matches_numpy_reference(name, dim, device):
     """float64, particle by particle: positions, velocities, affine matrices,
     the trial elastic deformation F^0s = (I + dt C) F_E and the history
-    variables after every step, from a random pre-strain; the return mapping
-    did act on most particles."""
+    variables after every step, from a random pre-strain, to round-off
+    (test_reference.round_off; the return mapping's SVD, logarithms and, for
+    NACC, the roots of its ellipse's quadratic: up to 256 eps in F_E and the
+    history, measured 72 eps); the return mapping did act on most particles."""
     material = PLASTIC[name]
     scene = impact_scene(material, dim)
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
@@ -67,12 +77,15 @@ def test_eulerian_plastic_step_matches_numpy_reference(name, dim, device):
         solver.advance(state, dt)
         assert_no_contact(solver)
         got = state.numpy()
-        np.testing.assert_allclose(got["x"], x, rtol=0, atol=1e-12, err_msg=f"x, step {k}")
-        np.testing.assert_allclose(got["v"], v, rtol=0, atol=1e-9, err_msg=f"v, step {k}")
-        np.testing.assert_allclose(got["C"], C, rtol=0, atol=1e-6, err_msg=f"C, step {k}")
-        # F = (I + dt C) F_E: the round-off in C times dt
-        np.testing.assert_allclose(got["F0s"], F, rtol=0, atol=1e-9, err_msg=f"F, step {k}")
-        np.testing.assert_allclose(got["history"], h, rtol=0, atol=1e-9, err_msg=f"history, step {k}")
+        tol = round_off(x, v, F, model.dx)
+        return_mapping = 256 * EPS64
+        np.testing.assert_allclose(got["x"], x, rtol=0, atol=tol["x"], err_msg=f"x, step {k}")
+        np.testing.assert_allclose(got["v"], v, rtol=0, atol=tol["v"], err_msg=f"v, step {k}")
+        np.testing.assert_allclose(got["C"], C, rtol=0, atol=tol["C"], err_msg=f"C, step {k}")
+        np.testing.assert_allclose(got["F0s"], F, rtol=0, atol=return_mapping * np.abs(F).max(),
+                                   err_msg=f"F, step {k}")
+        np.testing.assert_allclose(got["history"], h, rtol=0, atol=return_mapping * max(1.0, np.abs(h).max()),
+                                   err_msg=f"history, step {k}")
     assert np.count_nonzero(h[:, 1]) > n // 2, "the return mapping hardly acted"
 
 
