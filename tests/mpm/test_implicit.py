@@ -221,13 +221,19 @@ def test_failed_newton_solve_halves_or_stops(tmp_path):
 def test_implicit_config_and_metrics(tmp_path):
     """integrator=implicit through the config: Newton and CG counts in
     metrics.json, the displacement limit as the step's binding term, and a
-    one-line error for an out-of-range option."""
+    one-line error for an out-of-range option. The ball starts pre-strained
+    (a ball at rest in free fall has no stress: the predictor solves its
+    system exactly, with no Newton iteration at all), so that every step
+    iterates: at least one Newton iteration and one CG iteration each,
+    within newton_max, no halving."""
     spec = spec_for(["integrator=implicit", "scene.resolution=24", "run.duration=0.05", "log.every=0",
-                     "log.progress=false"])
+                     "log.progress=false", "scene.bodies.0.deformation=[[1.05,0.0],[0.02,0.97]]"])
     assert isinstance(spec.integrator, Implicit)
     m = execute(spec, tmp_path)
     assert m["status"] == "completed" and m["integrator"] == "implicit"
-    assert m["implicit"]["newton_mean"] >= 0 and "cg_per_newton" in m["implicit"]
+    imp = m["implicit"]
+    assert 1 <= imp["newton_mean"] <= imp["newton_max_seen"] <= spec.integrator.newton_max
+    assert imp["cg_per_newton"] >= 1 and imp["cg_mean"] >= imp["newton_mean"] and imp["halvings"] == 0
     assert set(m["dt_binding"]) <= {"displacement", "dt_max"}
     with pytest.raises(ValueError, match="integrator.newton_tol"):
         spec_for(["integrator=implicit", "integrator.newton_tol=2"])

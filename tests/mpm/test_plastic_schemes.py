@@ -176,25 +176,64 @@ def test_viscous_shear_wave_measures_the_configured_viscosity(scheme):
 # every model with the papers' kernels; the other two B-splines with one
 # plastic model and the fluid (the material code is the same for every
 # kernel: a compile-time composition, and each pair costs two compiles)
-@pytest.mark.parametrize("material,kernel", [
-    (m, k) for k in ("quadratic", "compact")
-    for m in ("viscous", "snow", "sand", "von_mises", "nacc", "viscoplastic")]
-    + [(m, k) for k in ("linear", "cubic") for m in ("viscous", "sand")])
+IMPACTS = ([(m, k) for k in ("quadratic", "compact") for m in ("viscous", "snow", "sand", "von_mises", "nacc", "viscoplastic")]
+           + [(m, k) for k in ("linear", "cubic") for m in ("viscous", "sand")])
+LINEAR_EULERIAN = ("mpm: the linear kernel under EMPM creates energy at the stable step (CFL 0.4) in this impact, "
+                   "with no step reporting a failure: the viscous block's total energy grows 25,600 times in 25 "
+                   "steps (at step 22 a particle goes from J = 0.955 to 0.12 in one step sized on the previous "
+                   "step's J and |L|), the sand's by 4 %")
+
+
+def impact_energies(material, kernel: str, scheme, steps: int = 25):
+    """The impact of a block on a sticky floor (2D, 16^2, float64) at the
+    stable step (CFL 0.4): the total energy (kinetic + elastic + potential)
+    of every state, the final plastic history, and the steps' failures."""
+    scene = impact_scene(material, 2)
+    model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
+    solver = mpm.Solver(model, scheme)
+    solver.prepare(state)
+    names = solver.diagnostics.names
+
+    def energy():
+        d = solver.measure(state)
+        return sum(d[names.index(k)] for k in ("kinetic_energy", "elastic_energy", "potential_energy"))
+
+    energies, reasons, report = [energy()], [], None
+    for _ in range(steps):
+        report = solver.advance(state, solver.timestep.stable_dt(0.4, report, 4.5))
+        reasons.append(report.reason)
+        energies.append(energy())
+    return np.array(energies), state.history.numpy(), reasons
+
+
+@pytest.mark.parametrize("material,kernel", IMPACTS)
 def test_every_material_runs_with_every_scheme_and_kernel(material, kernel):
-    """The impact of a block on a sticky floor (2D, 16^2, 25 steps at the
-    stable step, float64) with each scheme: no instability, mass to
-    round-off, and the plastic models did flow."""
+    """The impact of a block at 4 m/s on a sticky floor (impact_energies)
+    with each scheme: no step fails, and the impact only dissipates - the
+    floor stops the block and the material flows or rings down - so the
+    total energy never rises above its start beyond the round-off of its
+    float64 sums (64 eps; measured: it falls every step, to 0.40-0.72 of
+    the start after 25 steps), and the plastic models did flow. (The linear
+    kernel under EMPM: test_linear_kernel_eulerian_impact_keeps_its_energy.)"""
     mat = mpm.MATERIALS[material]()
-    scene = impact_scene(mat, 2)
-    for scheme in (mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()):
-        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
-        solver = mpm.Solver(model, scheme)
-        solver.prepare(state)
-        mass0 = solver.measure(state, elastic=False)[0]
-        report = None
-        for _ in range(25):
-            report = solver.advance(state, solver.timestep.stable_dt(0.4, report, 4.5))
-            assert report.reason is None, (scheme.name, report.reason)
-        assert solver.measure(state, elastic=False)[0] == pytest.approx(mass0, rel=1e-12)
+    schemes = [mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()]
+    if kernel == "linear":
+        schemes = schemes[1:]
+    for scheme in schemes:
+        E, history, reasons = impact_energies(mat, kernel, scheme)
+        assert reasons == [None] * len(reasons), (scheme.name, reasons)
+        assert E.max() <= E[0] + 64 * np.finfo(np.float64).eps * abs(E[0]), (scheme.name, E.max() / E[0])
+        assert E[-1] < 0.9 * E[0], scheme.name
         if mat.plastic:
-            assert state.history.numpy()[:, 1].max() > 0, scheme.name
+            assert history[:, 1].max() > 0, scheme.name
+
+
+@pytest.mark.xfail(strict=True, reason=LINEAR_EULERIAN)
+@pytest.mark.parametrize("material", ["viscous", "sand"])
+def test_linear_kernel_eulerian_impact_keeps_its_energy(material):
+    """The same impact with the linear kernel under EMPM: no step fails and
+    the total energy never rises above its start (as with every other
+    kernel and scheme)."""
+    E, _, reasons = impact_energies(mpm.MATERIALS[material](), "linear", mpm.EMPM())
+    assert reasons == [None] * len(reasons)
+    assert E.max() <= E[0] + 64 * np.finfo(np.float64).eps * abs(E[0]), E.max() / E[0]
