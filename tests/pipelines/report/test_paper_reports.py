@@ -54,6 +54,7 @@ def test_martin_moyce_data_are_monotone():
     assert MARTIN_MOYCE_Z[0] > 1.0  # the front has left the column's width a
 
 
+@pytest.mark.slow
 def test_dam_break_front_against_the_experiment(tmp_path):
     """A short 2D dam break: its front starts at Z = 1 and the report reads
     its recording and sets it against the measured points it reaches."""
