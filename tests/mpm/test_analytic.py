@@ -106,6 +106,7 @@ def test_vibrating_bar_error_shrinks_under_refinement(tmp_path):
         assert e["displacement_max"] >= e["displacement"] and e["solution"] == "vibrating_bar"
 
 
+@pytest.mark.slow
 def test_vortex_run_measures_a_converging_error(tmp_path):
     """TLMPM on the manufactured vortex for 0.05 s: the displacement error
     against the exact motion falls by more than 2x from 32^2 to 64^2, and is

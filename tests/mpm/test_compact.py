@@ -25,5 +25,5 @@ def test_compact_eulerian_step_matches_numpy_reference(dim, transfer, device):
                                   scene.gravity, scene.walls, dt, transfer)
         solver.advance(state, dt)
         assert_no_contact(solver)
-        assert_state_matches(state, x, v, C, F, k, C_atol=1e-6)  # the per-particle K_p adds round-off
+        assert_state_matches(state, x, v, C, F, k, model.dx, C_factor=512)  # the per-particle K_p adds round-off
     assert np.abs(F - np.eye(dim)).max() > 1e-4

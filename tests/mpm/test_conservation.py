@@ -49,16 +49,17 @@ def test_mass_momentum_angular_momentum_conserved(dim, precision, device):
     # scales for relative errors: sum m|v| and sum m |x||v|
     p_scale = np.sum(m * np.linalg.norm(s["v"], axis=1))
     L_scale = np.sum(m * np.linalg.norm(s["x"], axis=1) * np.linalg.norm(s["v"], axis=1))
-    # round-off grows with the number of steps and of accumulated terms
-    tol = 2 * EPS[precision] * steps  # measured: below 0.25 eps per step
+    # round-off grows with the number of steps: half an eps of the scale per step
+    # (measured: up to 0.18 eps per step, 3D float64)
+    tol = 0.5 * EPS[precision] * steps
     assert after[0] == before[0]  # particle masses never change
     for i, name in enumerate(names):
         if name.startswith("momentum_") and name != "momentum_scale":
             assert abs(after[i] - before[i]) <= tol * p_scale, name
         if name.startswith("angular_momentum") and name != "angular_momentum_scale":
             assert abs(after[i] - before[i]) <= tol * L_scale, name
-    # the bodies did collide and deform: the test is not trivial
-    assert after[names.index("elastic_energy")] > 1e-3 * before[names.index("kinetic_energy")]
+    # the bodies did collide and deform: the test is not trivial (measured: 0.13 in 3D, 0.53 in 2D)
+    assert after[names.index("elastic_energy")] > 0.05 * before[names.index("kinetic_energy")]
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -81,10 +82,11 @@ def test_free_fall_follows_half_g_t_squared(dim, device):
         solver.advance(state, dt)
     t = n * dt
     dy = state.x.numpy()[:, 1] - y0
-    np.testing.assert_allclose(dy, g * dt**2 * n * (n + 1) / 2, rtol=1e-12)
+    np.testing.assert_allclose(dy, g * dt**2 * n * (n + 1) / 2, rtol=n * EPS["float64"])  # a rounding per step
     assert np.all(np.abs(dy - 0.5 * g * t**2) <= 0.5 * abs(g) * t * dt * (1 + 1e-9))
+    # C = 0 up to round-off of the uniform nodal velocities: F = I to a few eps (measured 4 eps)
     np.testing.assert_allclose(state.F0s.numpy(), np.broadcast_to(np.eye(dim), (model.n_particles, dim, dim)),
-                               atol=1e-12)
+                               rtol=0, atol=16 * EPS["float64"])
 
 
 @pytest.mark.parametrize("floor", ["slip", "sticky"])
@@ -170,17 +172,20 @@ def test_angular_momentum_is_measured_about_the_centre_of_mass(dim):
     drift = Drift(names)
     d0 = solver.measure(state, elastic=False)
     L0 = numpy_L()
-    np.testing.assert_allclose(d0[iL], L0, rtol=1e-12)
+    # the same sums in another order: 128 eps of |L| (measured 35 eps)
+    np.testing.assert_allclose(d0[iL], L0, rtol=128 * EPS["float64"])
     drift.add(d0)
     for _ in range(20):
         solver.advance(state, 2e-4)
     d1 = solver.measure(state, elastic=False)
     L1 = numpy_L()
-    np.testing.assert_allclose(d1[iL], L1, rtol=1e-12)
+    np.testing.assert_allclose(d1[iL], L1, rtol=128 * EPS["float64"])
     drift.add(d1)
     expected = np.linalg.norm(L1 - L0) / np.linalg.norm(L0)
     assert expected > 1e-8  # measured: 4e-4 in 3D
-    assert drift.summary()["angular_momentum_drift"] == pytest.approx(expected, rel=1e-6, abs=0)
+    # a difference of two L's with 128 eps of round-off each, over their difference
+    assert drift.summary()["angular_momentum_drift"] == pytest.approx(
+        expected, rel=2 * 128 * EPS["float64"] / expected, abs=0)
     # the measure is not the one about the origin, which the orbital part dominates
     c = d1[names.index("center_of_mass_x"):][:dim]
     P = d1[1:1 + dim]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -42,8 +43,12 @@ def test_drop_ball_falls_freely_under_the_driver(device):
 
 
 def test_drop_ball_script_prints_its_outcome():
-    """``python examples/drop_ball.py`` runs as a script and reports a completed run."""
+    """``python examples/drop_ball.py`` runs as a script and reports a completed run.
+    A script's own folder comes first on its path, not the working directory:
+    PYTHONPATH names the checkout, so that the script imports this checkout's
+    packages (as the tests do), not another installed copy."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     out = subprocess.run([sys.executable, str(ROOT / "examples" / "drop_ball.py"), "--duration", "0.3"],
-                         capture_output=True, text=True, timeout=600, cwd=ROOT)
+                         capture_output=True, text=True, timeout=600, cwd=ROOT, env=env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("completed after") and "at the floor" in out.stdout

@@ -20,33 +20,71 @@ def run(overrides, tmp_path, name="run"):
     return metrics
 
 
+EPS32, EPS64 = np.finfo(np.float32).eps, np.finfo(np.float64).eps
+
+
+def assert_free_fall(m, run_dir):
+    """The default ball (at rest, 0.2 m above the floor's wall band) fell
+    freely for 8 steps of dt = 1e-3 s: a uniform velocity field, which every
+    kernel reproduces on its grids (partition of unity) with every transfer
+    and scheme, so every particle moved as symplectic Euler integrates
+    y'' = g:
+        v_n = g t,   y_n - y_0 = g dt^2 n (n + 1) / 2,
+    and the energy lost exactly m g^2 dt^2 n / 2 (kinetic m (g t)^2 / 2
+    against potential m g^2 dt^2 n (n + 1) / 2). float32: v within 8 eps32
+    n |g t| (one rounding of |v| per step; measured up to 2.6), x within
+    eps32 n max|x| / 2 (half an ulp per step; measured 1 ulp in 8 steps),
+    the energy within M |g| times that."""
+    assert m["steps"] == 8 and m["dt_min"] == m["dt_max"] == 1e-3
+    f = np.load(run_dir / "final_state.npz")
+    n, dt, g = 8, 1e-3, -9.81
+    t = float(f["time"])
+    assert t == pytest.approx(n * dt, rel=n * EPS64, abs=0)
+    v, x, X0 = (f[k].astype(np.float64) for k in ("v", "x", "X0"))
+    np.testing.assert_allclose(v, np.broadcast_to([0.0, g * t], v.shape), rtol=0, atol=8 * EPS32 * n * abs(g * t))
+    x_tol = 0.5 * EPS32 * n * np.abs(x).max()
+    np.testing.assert_allclose(x - X0, np.broadcast_to([0.0, g * dt**2 * n * (n + 1) / 2], x.shape), rtol=0,
+                               atol=x_tol)
+    M = f["mass"].astype(np.float64).sum()
+    assert m["energy_final"] - m["energy_initial"] == pytest.approx(-0.5 * M * g**2 * dt**2 * n, rel=0,
+                                                                     abs=M * abs(g) * x_tol)
+
+
 @pytest.mark.parametrize("scheme", SCHEMES)
 @pytest.mark.parametrize("kernel", KERNELS)
 def test_every_kernel_with_every_scheme(kernel, scheme, tmp_path):
+    """Every kernel with every scheme (MLS) lets the ball fall freely (assert_free_fall)."""
     m = run([f"kernel={kernel}", f"scheme={scheme}", "scene=elastic_ball_2d", "scene.resolution=32",
              "run.steps=8", "log.every=4"], tmp_path)
-    assert m["steps"] == 8 and m["kernel"] == kernel and np.isfinite(m["energy_final"])
+    assert m["kernel"] == kernel and m["scheme"] == scheme
+    assert_free_fall(m, tmp_path / "run")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("transfer", ["apic", "pic"])
 def test_compact_with_the_other_transfers_and_the_lagrangian_schemes(transfer, tmp_path):
+    """The compact kernel with APIC and PIC under TLMPM and A-ULMPM lets the
+    ball fall freely too (assert_free_fall)."""
     for scheme in ("tlmpm", "aulmpm"):
-        run([f"scheme={scheme}", "kernel=compact", f"kernel.transfer={transfer}",
-             "scene=elastic_ball_2d", "scene.resolution=32", "run.steps=8", "log.every=0"],
-            tmp_path, scheme)
+        m = run([f"scheme={scheme}", "kernel=compact", f"kernel.transfer={transfer}",
+                 "scene=elastic_ball_2d", "scene.resolution=32", "run.steps=8", "log.every=0"],
+                tmp_path, scheme)
+        assert m["transfer"] == transfer
+        assert_free_fall(m, tmp_path / scheme)
 
 
 @pytest.mark.parametrize("scheme", ["empm", "aulmpm"])
 def test_colliding_spheres_keep_zero_momentum(scheme, tmp_path):
-    """CK-MPM, Fig. 4: two spheres meet head-on; float64 relative drift of the
-    total (zero) linear momentum at most 1e-5 (the paper reports 1.06e-5; this
-    solver stays at round-off, about 1e-14), and they do bounce off. (TLMPM's
-    momentum through contact: test_lagrangian, three colliding bodies.)"""
+    """CK-MPM, Fig. 4: two spheres meet head-on (the paper keeps the total,
+    zero, linear momentum within 1.06e-5 of its scale); here to float64
+    round-off: independent roundings of every step add up as sqrt(steps),
+    8 eps64 sqrt(steps) of the scale sum m |v| (measured 2.2 eps64
+    sqrt(steps) with A-ULMPM, 0.5 with EMPM, over 2,227 steps), and they
+    do bounce off. (TLMPM's momentum through contact: test_lagrangian,
+    three colliding bodies.)"""
     m = run(["scene=colliding_spheres", f"scheme={scheme}", "kernel=compact", "scene.resolution=24",
              "run.duration=0.8", "run.precision=float64", "log.every=100000"], tmp_path)
-    assert m["momentum_drift"] <= 1e-5
-    assert m["momentum_drift"] <= 1e-12
+    assert m["momentum_drift"] <= 8 * EPS64 * np.sqrt(m["steps"])
     # they met (at about 0.6 s) and turned back: sphere a is short of where
     # it would have coasted to, 0.4 + 0.05 t along each axis
     rec = recordings.read(tmp_path / "run" / "recording.rrd")
@@ -57,11 +95,19 @@ def test_colliding_spheres_keep_zero_momentum(scheme, tmp_path):
 
 @pytest.mark.parametrize("scheme", SCHEMES)
 def test_rotating_rod_keeps_its_angular_momentum(scheme, tmp_path):
-    """CK-MPM, Fig. 5: relative angular-momentum drift at most 6e-3 (the
-    paper's figure); measured here: EMPM 2e-4, TLMPM and A-ULMPM 2e-5."""
+    """CK-MPM, Fig. 5 (the paper: 6e-3 in 1 s). The compact kernel's
+    moment matrix K_p varies per particle, so APIC's angular momentum is not
+    exact (RESULTS.md): EMPM jumps to about 1.2e-3 in the first 0.05 s, then
+    drifts 1.4e-7 per step; TLMPM and A-ULMPM (no update in this solid) lose
+    1.3e-7 per step from their frozen stencils, whatever the step (measured
+    1.29, 1.32, 1.34e-7 per step at dt = 1e-3, 5e-4, 2.5e-4 s; EMPM 1.32,
+    1.46, 1.74e-3 in all). Asserted: twice the per-step rates, 1.5 times the
+    jump, over the run's steps (about 1,000 at the adaptive step)."""
     m = run(["scene=rotating_rod", f"scheme={scheme}", "kernel=compact", "run.precision=float64",
              "log.every=0"], tmp_path)
-    assert m["angular_momentum_drift"] <= 6e-3
+    jump = 1.5 * 1.2e-3 if scheme == "empm" else 0.0
+    rate = 2 * (1.4e-7 if scheme == "empm" else 1.3e-7)
+    assert m["angular_momentum_drift"] <= jump + rate * m["steps"]
 
 
 @pytest.mark.slow

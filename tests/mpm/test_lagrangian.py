@@ -99,7 +99,8 @@ def test_linear_momentum_conserved_by_every_scheme(scheme):
 def test_droplet_tlmpm_cannot_splash_aulmpm_can(tmp_path):
     """The 2D droplet (A-ULMPM paper, Fig. 3): after impact EMPM and A-ULMPM
     throw a sheet up the walls; TLMPM stays a flat blob; A-ULMPM updates in a
-    small fraction of its steps."""
+    small fraction of its steps, EMPM in every one, TLMPM in none (the cost of
+    the updates in time belongs to the benchmark, pipelines.bench)."""
     height, m = {}, {}
     for s in ("empm", "tlmpm", "aulmpm"):
         m[s] = run_scene(["scene=droplet_2d", f"scheme={s}", "run.duration=0.4", "log.every=50"],
@@ -108,8 +109,8 @@ def test_droplet_tlmpm_cannot_splash_aulmpm_can(tmp_path):
         height[s] = np.quantile(x[:, 1], 0.99)
     assert height["tlmpm"] < 0.2
     assert height["empm"] > 0.5 and height["aulmpm"] > 0.5
-    assert m["aulmpm"]["updates_per_1e4_steps"] < 2500  # at most a quarter of the steps
-    assert m["aulmpm"]["update_time_ms"] < m["empm"]["update_time_ms"]
+    assert 0 < m["aulmpm"]["updates_per_1e4_steps"] < 2500  # at most a quarter of the steps
+    assert m["empm"]["updates_per_1e4_steps"] == 1e4 and m["tlmpm"]["config_updates"]["total"] == 0
 
 
 def test_update_events_match_the_logged_criterion(tmp_path):

@@ -11,7 +11,7 @@ import mpm
 from helpers import DEVICE, spec_for
 from mpm.material_point import MaterialPoint, velocity_path
 from reference_mpm import plastic_step
-from test_reference import assert_no_contact
+from test_reference import EPS64, assert_no_contact, round_off
 
 PLASTIC = {
     "snow": mpm.materials.Snow(E=1e5),
@@ -37,13 +37,23 @@ def impact_scene(material, dim):
                      ppc=1)
 
 
+# float64 evaluates the von Mises hardening term 2 H / 3 with 2/3 in float32 (a literal
+# expression inside the Warp function), 3e-8 off: its return mapping misses the
+# closed form by 2e-10 (test_plasticity.test_float64_von_mises_return_mapping_is_the_closed_form)
+VON_MISES_FLOAT32_CONSTANT = pytest.mark.xfail(
+    strict=True, reason="mpm/materials/von_mises.py: S(2.0 / 3.0) * H is computed in float32 in float64 runs")
+
+
 # every model in 2D; in 3D the two with the most branches
-@pytest.mark.parametrize("name,dim", [(n, 2) for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
+@pytest.mark.parametrize("name,dim", [pytest.param(n, 2, marks=[VON_MISES_FLOAT32_CONSTANT] if n == "von_mises" else [])
+                                      for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
 def test_eulerian_plastic_step_matches_numpy_reference(name, dim, device):
     """float64, particle by particle: positions, velocities, affine matrices,
     the trial elastic deformation F^0s = (I + dt C) F_E and the history
-    variables after every step, from a random pre-strain; the return mapping
-    did act on most particles."""
+    variables after every step, from a random pre-strain, to round-off
+    (test_reference.round_off; the return mapping's SVD, logarithms and, for
+    NACC, the roots of its ellipse's quadratic: up to 256 eps in F_E and the
+    history, measured 72 eps); the return mapping did act on most particles."""
     material = PLASTIC[name]
     scene = impact_scene(material, dim)
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
@@ -67,12 +77,15 @@ def test_eulerian_plastic_step_matches_numpy_reference(name, dim, device):
         solver.advance(state, dt)
         assert_no_contact(solver)
         got = state.numpy()
-        np.testing.assert_allclose(got["x"], x, rtol=0, atol=1e-12, err_msg=f"x, step {k}")
-        np.testing.assert_allclose(got["v"], v, rtol=0, atol=1e-9, err_msg=f"v, step {k}")
-        np.testing.assert_allclose(got["C"], C, rtol=0, atol=1e-6, err_msg=f"C, step {k}")
-        # F = (I + dt C) F_E: the round-off in C times dt
-        np.testing.assert_allclose(got["F0s"], F, rtol=0, atol=1e-9, err_msg=f"F, step {k}")
-        np.testing.assert_allclose(got["history"], h, rtol=0, atol=1e-9, err_msg=f"history, step {k}")
+        tol = round_off(x, v, F, model.dx)
+        return_mapping = 256 * EPS64
+        np.testing.assert_allclose(got["x"], x, rtol=0, atol=tol["x"], err_msg=f"x, step {k}")
+        np.testing.assert_allclose(got["v"], v, rtol=0, atol=tol["v"], err_msg=f"v, step {k}")
+        np.testing.assert_allclose(got["C"], C, rtol=0, atol=tol["C"], err_msg=f"C, step {k}")
+        np.testing.assert_allclose(got["F0s"], F, rtol=0, atol=return_mapping * np.abs(F).max(),
+                                   err_msg=f"F, step {k}")
+        np.testing.assert_allclose(got["history"], h, rtol=0, atol=return_mapping * max(1.0, np.abs(h).max()),
+                                   err_msg=f"history, step {k}")
     assert np.count_nonzero(h[:, 1]) > n // 2, "the return mapping hardly acted"
 
 
@@ -163,25 +176,64 @@ def test_viscous_shear_wave_measures_the_configured_viscosity(scheme):
 # every model with the papers' kernels; the other two B-splines with one
 # plastic model and the fluid (the material code is the same for every
 # kernel: a compile-time composition, and each pair costs two compiles)
-@pytest.mark.parametrize("material,kernel", [
-    (m, k) for k in ("quadratic", "compact")
-    for m in ("viscous", "snow", "sand", "von_mises", "nacc", "viscoplastic")]
-    + [(m, k) for k in ("linear", "cubic") for m in ("viscous", "sand")])
+IMPACTS = ([(m, k) for k in ("quadratic", "compact") for m in ("viscous", "snow", "sand", "von_mises", "nacc", "viscoplastic")]
+           + [(m, k) for k in ("linear", "cubic") for m in ("viscous", "sand")])
+LINEAR_EULERIAN = ("mpm: the linear kernel under EMPM creates energy at the stable step (CFL 0.4) in this impact, "
+                   "with no step reporting a failure: the viscous block's total energy grows 25,600 times in 25 "
+                   "steps (at step 22 a particle goes from J = 0.955 to 0.12 in one step sized on the previous "
+                   "step's J and |L|), the sand's by 4 %")
+
+
+def impact_energies(material, kernel: str, scheme, steps: int = 25):
+    """The impact of a block on a sticky floor (2D, 16^2, float64) at the
+    stable step (CFL 0.4): the total energy (kinetic + elastic + potential)
+    of every state, the final plastic history, and the steps' failures."""
+    scene = impact_scene(material, 2)
+    model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
+    solver = mpm.Solver(model, scheme)
+    solver.prepare(state)
+    names = solver.diagnostics.names
+
+    def energy():
+        d = solver.measure(state)
+        return sum(d[names.index(k)] for k in ("kinetic_energy", "elastic_energy", "potential_energy"))
+
+    energies, reasons, report = [energy()], [], None
+    for _ in range(steps):
+        report = solver.advance(state, solver.timestep.stable_dt(0.4, report, 4.5))
+        reasons.append(report.reason)
+        energies.append(energy())
+    return np.array(energies), state.history.numpy(), reasons
+
+
+@pytest.mark.parametrize("material,kernel", IMPACTS)
 def test_every_material_runs_with_every_scheme_and_kernel(material, kernel):
-    """The impact of a block on a sticky floor (2D, 16^2, 25 steps at the
-    stable step, float64) with each scheme: no instability, mass to
-    round-off, and the plastic models did flow."""
+    """The impact of a block at 4 m/s on a sticky floor (impact_energies)
+    with each scheme: no step fails, and the impact only dissipates - the
+    floor stops the block and the material flows or rings down - so the
+    total energy never rises above its start beyond the round-off of its
+    float64 sums (64 eps; measured: it falls every step, to 0.40-0.72 of
+    the start after 25 steps), and the plastic models did flow. (The linear
+    kernel under EMPM: test_linear_kernel_eulerian_impact_keeps_its_energy.)"""
     mat = mpm.MATERIALS[material]()
-    scene = impact_scene(mat, 2)
-    for scheme in (mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()):
-        model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
-        solver = mpm.Solver(model, scheme)
-        solver.prepare(state)
-        mass0 = solver.measure(state, elastic=False)[0]
-        report = None
-        for _ in range(25):
-            report = solver.advance(state, solver.timestep.stable_dt(0.4, report, 4.5))
-            assert report.reason is None, (scheme.name, report.reason)
-        assert solver.measure(state, elastic=False)[0] == pytest.approx(mass0, rel=1e-12)
+    schemes = [mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()]
+    if kernel == "linear":
+        schemes = schemes[1:]
+    for scheme in schemes:
+        E, history, reasons = impact_energies(mat, kernel, scheme)
+        assert reasons == [None] * len(reasons), (scheme.name, reasons)
+        assert E.max() <= E[0] + 64 * np.finfo(np.float64).eps * abs(E[0]), (scheme.name, E.max() / E[0])
+        assert E[-1] < 0.9 * E[0], scheme.name
         if mat.plastic:
-            assert state.history.numpy()[:, 1].max() > 0, scheme.name
+            assert history[:, 1].max() > 0, scheme.name
+
+
+@pytest.mark.xfail(strict=True, reason=LINEAR_EULERIAN)
+@pytest.mark.parametrize("material", ["viscous", "sand"])
+def test_linear_kernel_eulerian_impact_keeps_its_energy(material):
+    """The same impact with the linear kernel under EMPM: no step fails and
+    the total energy never rises above its start (as with every other
+    kernel and scheme)."""
+    E, _, reasons = impact_energies(mpm.MATERIALS[material](), "linear", mpm.EMPM())
+    assert reasons == [None] * len(reasons)
+    assert E.max() <= E[0] + 64 * np.finfo(np.float64).eps * abs(E[0]), E.max() / E[0]

@@ -35,6 +35,7 @@ def test_reproduce_reports_a_match_and_frames_are_written(tmp_path):
     assert pngs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_compare_reports_the_largest_deviation(tmp_path):
     recs = []
     for E in ("1e3", "1.1e3"):

@@ -54,6 +54,7 @@ def test_martin_moyce_data_are_monotone():
     assert MARTIN_MOYCE_Z[0] > 1.0  # the front has left the column's width a
 
 
+@pytest.mark.slow
 def test_dam_break_front_against_the_experiment(tmp_path):
     """A short 2D dam break: its front starts at Z = 1 and the report reads
     its recording and sets it against the measured points it reaches."""
@@ -72,6 +73,13 @@ def test_dam_break_front_against_the_experiment(tmp_path):
     report = write_report(sweep, tmp_path / "out")
     assert "## Dam break against Martin & Moyce (1952)" in report.read_text()
     row, = _rows(report.parent / "dam_break.csv")
-    assert int(row["points"]) == int(np.sum(MARTIN_MOYCE_T <= T.max())) >= 2
-    assert abs(float(row["mean_relative_deviation"])) < 0.5
+    inside = MARTIN_MOYCE_T <= T.max()
+    assert int(row["points"]) == int(inside.sum()) >= 2
+    # the table's deviations are those of the front against the measured points it reaches
+    rel = (np.interp(MARTIN_MOYCE_T[inside], T, Z) - MARTIN_MOYCE_Z[inside]) / MARTIN_MOYCE_Z[inside]
+    assert float(row["mean_relative_deviation"]) == pytest.approx(rel.mean(), rel=4 * np.finfo(float).eps, abs=0)
+    assert float(row["max_relative_deviation"]) == pytest.approx(np.abs(rel).max(), rel=4 * np.finfo(float).eps, abs=0)
+    # and the front runs with the experiment: measured +11 % on average, +22 % at most, over
+    # its first two points (T <= 1.1, where the weakly compressible column starts)
+    assert abs(rel.mean()) < 0.2 and np.abs(rel).max() < 0.35
     assert (report.parent / "dam_break.png").stat().st_size > 1000

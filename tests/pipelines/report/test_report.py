@@ -201,6 +201,7 @@ def test_callback(tmp_path, capsys):
     assert "warning: sweep report failed" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli(sweep, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "pipelines.report", str(sweep)],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)

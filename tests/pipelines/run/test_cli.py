@@ -3,6 +3,7 @@ stops on instability and on Ctrl-C/SIGTERM, each leaving a readable recording
 and metrics.json."""
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -163,35 +164,81 @@ def test_bad_input_from_a_fresh_process(args, tmp_path):
 
 
 # documented outcomes of inputs that are not errors: (args, exit code, a stderr
-# fragment, a check of metrics.json)
+# fragment, a check of the run directory: metrics.json's contents and the run's files)
+
+
+def _same_as_without_the_override(m, run):
+    """The plate ran with its own material: its final state is that of the
+    same run without material.E=5 (in-process), to float32 round-off."""
+    import numpy as np
+
+    from helpers import spec_for
+    from pipelines.run.runner import execute
+
+    ref = execute(spec_for(["scene.resolution=24", "scene=rotating_plate_2d", "run.steps=2", "log.every=0"]),
+                  run.parent / "reference")
+    got, want = np.load(run / "final_state.npz"), np.load(run.parent / "reference" / "final_state.npz")
+    eps = np.finfo(np.float32).eps
+    return (m["status"] == ref["status"] == "completed" and m["dt"] == ref["dt"]
+            and np.allclose(got["x"], want["x"], rtol=0, atol=4 * eps)
+            and np.allclose(got["v"], want["v"], rtol=0, atol=64 * eps * np.abs(want["v"]).max()))
+
+
+def _left_through_the_open_face(m, run):
+    """The removed particles are the massless ones of the final state, each
+    parked where it crossed the open x_hi face's interior bound (1 - dx:
+    one cell from the face, dx = 1/24), none elsewhere."""
+    import numpy as np
+
+    f = np.load(run / "final_state.npz")
+    gone = f["mass"] == 0
+    return (m["status"] == "completed" and m["removed"]["total"] == gone.sum() > 0
+            and np.allclose(f["x"][gone, 0], 1 - 1 / 24, rtol=0, atol=4 * np.finfo(np.float32).eps))
+
+
 BEHAVIOURS = [
     # an initial velocity that overflows float32: unstable at step 0, not a hang
     (["scene.bodies.0.velocity=[1e30,0]"], 3, "kinetic or potential energy is not finite",
-     lambda m: m["status"] == "unstable" and m["unstable_step"] == 0 and m["unstable_criterion"] == "nonfinite"),
+     lambda m, run: m["status"] == "unstable" and m["unstable_step"] == 0 and m["unstable_criterion"] == "nonfinite"),
     # an override the scene cannot use is said, and the run goes ahead
     (["scene=rotating_plate_2d", "material.E=5", "run.steps=2"], 0,
      "note: material.E=5 has no effect: every body of scene rotating_plate_2d brings its own material",
-     lambda m: m["status"] == "completed"),
+     _same_as_without_the_override),
     # an open wall removes the particles that leave through it
     (["scene.walls=[slip,open,slip,slip]", "scene.gravity=[0,0]", "scene.bodies.0.velocity=[8,0]",
-      "run.duration=0.05"], 0, "completed", lambda m: m["status"] == "completed" and m["removed"]["total"] > 0),
-    # epsilon = inf: A-ULMPM never updates (it is TLMPM)
-    (["scheme=aulmpm", "scheme.epsilon=inf", "run.steps=3"], 0, "completed",
-     lambda m: m["config_updates"]["total"] == 0),
-    # a recording larger than log.size_warning_mb is announced before the run
+      "run.duration=0.05"], 0, "completed", _left_through_the_open_face),
+    # epsilon = inf: A-ULMPM never updates (it is TLMPM), even with eta = 0, where
+    # a finite epsilon updates at every step
+    (["scheme=aulmpm", "scheme.epsilon=inf", "scheme.eta=0", "run.steps=3"], 0, "completed",
+     lambda m, run: m["steps"] == 3 and m["config_updates"]["total"] == 0),
+    # a recording larger than log.size_warning_mb is announced before the run, with
+    # an estimate of at least its particle frames' payload (positions and dJ, float32)
     (["run.steps=2", "log.size_warning_mb=0.01"], 0, "warning: the recording will be about",
-     lambda m: m["recording_estimate_mb"] > 0.01),
+     lambda m, run: m["recording_estimate_mb"] > 0.01
+     and m["recording_estimate_mb"] >= 3 * m["particles"] * (2 + 1) * 4 / 1e6),
 ]
 
 
 @pytest.mark.parametrize("args,code,fragment,check", BEHAVIOURS, ids=[" ".join(a)[:60] for a, *_ in BEHAVIOURS])
 def test_documented_behaviour(args, code, fragment, check, tmp_path):
-    p = run_cli(["scene.resolution=24", "log.progress=false"] + args + [f"hydra.run.dir={tmp_path}"], cwd=ROOT,
+    run = tmp_path / "run"
+    p = run_cli(["scene.resolution=24", "log.progress=false"] + args + [f"hydra.run.dir={run}"], cwd=ROOT,
                 timeout=300)
     assert p.returncode == code, p.stderr
     assert fragment in p.stderr and "Traceback" not in p.stderr, p.stderr
-    assert check(json.loads((tmp_path / "metrics.json").read_text()))
-    verify(tmp_path / "recording.rrd")
+    assert check(json.loads((run / "metrics.json").read_text()), run)
+    verify(run / "recording.rrd")
+
+
+def test_finite_epsilon_with_eta_zero_updates_every_step(tmp_path):
+    """The other side of the epsilon = inf behaviour: the same run with
+    epsilon = 0 updates at every one of its steps (the check above can fail)."""
+    from helpers import spec_for
+    from pipelines.run.runner import execute
+
+    m = execute(spec_for(["scene.resolution=24", "scheme=aulmpm", "scheme.epsilon=0", "scheme.eta=0",
+                          "run.steps=3", "log.every=0"]), tmp_path)
+    assert m["config_updates"]["total"] == 3
 
 
 def test_the_cli_table_covers_sixty_inputs():
@@ -250,7 +297,7 @@ def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
     assert proc.returncode == 130, err
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert metrics["status"] == "interrupted" and metrics["reason"].startswith(f"{name} at step")
-    assert metrics["steps"] > 0 and metrics["energy_final"] is not None
+    assert metrics["steps"] > 0 and math.isfinite(metrics["energy_final"])
     verify(rrd)
 
 

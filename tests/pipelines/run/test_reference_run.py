@@ -9,6 +9,7 @@ import pytest
 from helpers import ROOT, run_cli
 
 
+@pytest.mark.slow
 def test_error_against_a_reference_run(tmp_path):
     """run.reference: the run measures E = sqrt(sum |phi - phi_ref|^2 / n_p)
     against a finer run's final state with the same particles (paper eq. 36)."""

@@ -3,10 +3,12 @@ jobs by config hash, the report at the end of the sweep, the named experiments."
 
 import json
 import os
+import re
 
 import pytest
 
 from helpers import ROOT, compose_cfg, group_options, run_cli
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 from pipelines.run import provenance
 
@@ -81,49 +83,114 @@ def test_config_hash_follows_the_computation_not_the_presentation():
     assert len(provenance.code_hash()) == 16
 
 
-@pytest.mark.parametrize("name", group_options("experiment"))
-@pytest.mark.parametrize("scale", ["default", "paper"])
-def test_named_experiments_compose(name, scale):
-    """Every experiment composes with both scales; its sweep parameters and
-    settings resolve (the sweep itself is an experiment, not a test)."""
+def _compose(overrides, hydra=True):
     from hydra import compose, initialize_config_dir
 
     from helpers import CONF
 
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(config_name="config", overrides=[f"+experiment={name}", f"scale={scale}"],
-                      return_hydra_config=True)
-    params = OmegaConf.to_container(cfg.hydra.sweeper.params, resolve=True)
-    assert params and all(isinstance(v, str) and v for v in params.values())
-    assert cfg.hydra.sweep.dir == f"multirun/{name}/{scale}"
-    from pipelines.config.validate import resolve
+        return compose(config_name="config", overrides=overrides, return_hydra_config=hydra)
 
-    cfg_job = compose_cfg([f"+experiment={name}", f"scale={scale}"])
-    resolve(cfg_job)  # the experiment's own settings are valid
+
+def _plain(path) -> dict:
+    """A config file as plain data, nothing composed or interpolated."""
+    return OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+
+
+SCALE_REF = re.compile(r"\$\{scale\.(\w+)(\.\$\{scene\.name\})?\}")
+
+
+def _scale_references(node, path=()):
+    """(path, text) of every string in an experiment file that reads the scale group."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _scale_references(v, path + (k,))
+    elif isinstance(node, str) and SCALE_REF.search(node):
+        yield path, node
+
+
+def _at(cfg, path):
+    for key in path:
+        cfg = cfg[key]
+    return OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else cfg
+
+
+def _sweep_values(key: str, value: str) -> list[str]:
+    """The values a sweep parameter takes, as Hydra's sweeper expands them
+    (a glob over the group's options in conf/)."""
+    override = OverridesParser.create().parse_override(f"{key}={value}")
+    if type(override.value()).__name__ == "Glob":
+        return override.value().filter(group_options(key.lstrip("+")))
+    if override.is_sweep_override():
+        return list(override.sweep_string_iterator())
+    return [override.get_value_element_as_str()]
 
 
 @pytest.mark.parametrize("name", group_options("experiment"))
-def test_experiment_globs_pick_every_option_of_the_group(name):
+@pytest.mark.parametrize("scale", ["default", "paper"])
+def test_named_experiments_compose(name, scale):
+    """Every experiment composes with both scales into the sizes of that
+    scale: each value its file reads from the scale group
+    (``${scale.key}``, conf/scale/<scale>.yaml read as plain data) is that
+    scale's, in the sweep parameters, the sweep directory and the job's
+    settings; every sweep parameter expands to at least one value, each
+    option of a config group an option the definition names; and the first
+    job of the sweep resolves (the sweep itself is an experiment, not a test)."""
+    from pipelines.config.validate import resolve
+
+    cfg = _compose([f"+experiment={name}", f"scale={scale}"])
+    sizes = _plain(ROOT / "conf" / "scale" / f"{scale}.yaml")
+    assert cfg.scale.name == scale and cfg.hydra.sweep.dir == f"multirun/{name}/{scale}"
+    references = list(_scale_references(_plain(ROOT / "conf" / "experiment" / f"{name}.yaml")))
+    assert references  # at least the sweep directory's ${scale.name}
+    for path, text in references:
+        def value(m):
+            v = sizes[m.group(1)]
+            return v[cfg.scene.name] if m.group(2) else v
+
+        whole = SCALE_REF.fullmatch(text)
+        expected = value(whole) if whole else SCALE_REF.sub(lambda m: str(value(m)), text)
+        got = _at(cfg, path)
+        if path[:3] == ("hydra", "sweeper", "params"):  # the sweeper reads its parameters as text
+            got, expected = str(got), str(expected)
+        assert got == expected, (path, text)
+    params = OmegaConf.to_container(cfg.hydra.sweeper.params, resolve=True)
+    first = []
+    for key, value in params.items():
+        values = _sweep_values(key, str(value))
+        assert values, key
+        options = group_options(key.lstrip("+"))
+        if options:  # a config group: only its options
+            assert set(values) <= set(options), key
+        first.append(f"{key}={values[0]}")
+    resolve(_compose([f"+experiment={name}", f"scale={scale}", *first], hydra=False))
+
+
+GLOBS = [(name, key) for name in group_options("experiment")
+         for key, value in _plain(ROOT / "conf" / "experiment" / f"{name}.yaml")["hydra"]["sweeper"]["params"].items()
+         if str(value).startswith("glob(")]
+
+
+@pytest.mark.parametrize("name,key", GLOBS, ids=[f"{n}-{k}" for n, k in GLOBS])
+def test_experiment_globs_pick_every_option_of_the_group(name, key):
     """``glob(...)`` sweeps pick up every option Hydra finds for the group (a
     new kernel in mpm.KERNELS joins the experiments), and Hydra finds exactly
     the options the definition names: the solver's registries for the groups
     defined in code, the files for the others."""
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    cfg = OmegaConf.load(ROOT / "conf" / "experiment" / f"{name}.yaml")
-    params = OmegaConf.to_container(cfg.hydra.sweeper.params, resolve=False)
+    value = _plain(ROOT / "conf" / "experiment" / f"{name}.yaml")["hydra"]["sweeper"]["params"][key]
+    group = key.lstrip("+")
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        loader = GlobalHydra.instance().config_loader()
-        for key, value in params.items():
-            if not str(value).startswith("glob("):
-                continue
-            group = key.lstrip("+")
-            found = sorted(loader.get_group_options(group))
-            assert found == group_options(group)
-            override = OverridesParser.create().parse_override(f"{key}={value}")
-            assert sorted(override.value().filter(found)) == group_options(group)
+        found = sorted(GlobalHydra.instance().config_loader().get_group_options(group))
+    assert found == group_options(group) and found
+    override = OverridesParser.create().parse_override(f"{key}={value}")
+    assert sorted(override.value().filter(found)) == group_options(group)
+
+
+def test_every_experiment_with_a_glob_is_checked():
+    assert len({n for n, _ in GLOBS}) == 10 and len(GLOBS) == 13
 
 
 @pytest.mark.slow
@@ -155,16 +222,26 @@ def test_invalid_job_in_a_sweep_says_why_the_others_run_and_the_sweep_fails(tmp_
     assert f"sweep {sweep}: 1 completed, 1 invalid; report: {sweep / 'report.md'}" in p.stderr
 
 
+LAUNCHERS = {"basic": "hydra._internal.core_plugins.basic_launcher.BasicLauncher",
+             "joblib": "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher",
+             "submitit_local": "hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher",
+             "submitit_slurm": "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher",
+             "ray": "hydra_plugins.hydra_ray_launcher.ray_launcher.RayLauncher"}
+
+
 @pytest.mark.parametrize("name", group_options("experiment"))
-@pytest.mark.parametrize("launcher", ["basic", "joblib", "submitit_local", "submitit_slurm", "ray"])
-def test_named_experiments_compose_with_every_launcher(name, launcher):
+def test_named_experiments_compose_with_every_launcher(name):
     """An experiment must not set options of one launcher (they fail to compose
-    with the others)."""
-    from hydra import compose, initialize_config_dir
+    with the others): with every launcher it composes, the launcher is that
+    one, and the jobs, the sweep parameters and the sweep directory are
+    those of the default launcher."""
+    def job(cfg):
+        return OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)
 
-    from helpers import CONF
-
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(config_name="config", overrides=[f"+experiment={name}", f"hydra/launcher={launcher}"],
-                      return_hydra_config=True)
-    assert cfg.hydra.sweep.dir == f"multirun/{name}/default"
+    base = _compose([f"+experiment={name}"])
+    for launcher, target in LAUNCHERS.items():
+        cfg = _compose([f"+experiment={name}", f"hydra/launcher={launcher}"])
+        assert cfg.hydra.launcher._target_ == target
+        assert cfg.hydra.sweep.dir == base.hydra.sweep.dir == f"multirun/{name}/default"
+        assert cfg.hydra.sweeper.params == base.hydra.sweeper.params
+        assert job(cfg) == job(base), launcher
