@@ -11,10 +11,15 @@ from dataclasses import dataclass
 
 import warp as wp
 
-try:  # the class of @wp.struct instances (its place moved between Warp versions)
-    from warp._src.codegen import StructInstance
-except ImportError:  # pragma: no cover
-    from warp.codegen import StructInstance
+
+@wp.struct
+class _Probe:
+    unused: int
+
+
+# the base class of every @wp.struct instance: Warp does not export it, so it
+# is read off an instance that the public wp.struct made
+StructInstance = next(c for c in type(_Probe()).__mro__ if c.__name__ == "StructInstance")
 
 __all__ = ["PRECISIONS", "N_MATERIAL_PARAMS", "N_HISTORY", "StructInstance", "Types", "make_types"]
 

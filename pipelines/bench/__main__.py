@@ -42,11 +42,15 @@ Everything runs through the same code path as ``pipelines.run``
    an update pass of its own (``false``), on the 2D ball and the 3D sphere,
    quadratic MLS and PIC, compact MLS and PIC (``run.fuse`` null picks the
    fused path for the quadratic and cubic kernels).
-8. stages: the 2D ball with one optional stage added at a time, and the
+8. sync: the 2D ball and the 3D sphere with the host reading back every step
+   and every 10 steps (mpm.driver; with the CUDA graph on CUDA): ms per
+   step, read-backs and kernel launches per step, the ratio to k = 1.
+9. stages: the 2D ball with one optional stage added at a time, and the
    launches per step; profile: where a step's time goes, per kernel and
    host work, on the 2D ball and the 3D sphere (pipelines.bench.scale).
 
-``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
+``--device`` picks the Warp device of every run (default: run.device's,
+CUDA where Warp finds a GPU). ``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
 and ``--scaling`` the growth of cost and memory from about 10K to 1M
 particles (pipelines.bench.scale; minutes each); ``--only`` picks tables.
 
@@ -59,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -208,10 +213,34 @@ def bench_fused(workdir: Path, steps: int) -> list[dict]:
             for name in FUSED_CASES]
 
 
-TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "stages", "profile",
-          "paper", "scaling")
+SYNC_EVERY = (1, 10)  # read-backs every k steps (mpm.driver): the CPU's default and CUDA's
+SYNC_ROUNDS = 3
+
+
+def bench_sync(workdir: Path, device: str) -> list[dict]:
+    """The 2D ball and the 3D sphere (EMPM, step only, detection on) with the
+    host reading back every step and every 10 steps (with the CUDA graph on
+    CUDA), in interleaved rounds: ms per step, read-backs and kernel launches
+    per step (the driver's own count, mpm.launch.Counter), the ratio to k = 1."""
+    rows = []
+    for case in ("ball_2d", "ball_3d"):
+        runs = {k: CASES[case] + ["scheme=empm", f"run.sync_every={k}", f"run.steps={STEPS[case]}"] + QUIET
+                for k in SYNC_EVERY}
+        best = interleaved(runs, [], workdir / f"sync_{case}", SYNC_ROUNDS)
+        for k, m in best.items():
+            launches, memory, reads = scale.launches_per_step(spec_for(runs[k]), steps=50, sync_every=k)
+            rows.append({"case": case, "sync_every": k, "graph": k > 1 and device.startswith("cuda"),
+                         "particles": m["particles"], "grid_nodes": m["grid_nodes"], "step_ms": m["step_time_ms"],
+                         "vs_k1": m["step_time_ms"] / best[1]["step_time_ms"], "reads": reads,
+                         "launches": launches, "copies_fills": memory})
+    return rows
+
+
+TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
+          "profile", "paper", "scaling")
 SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
-             "integrators": "integrator", "fused": "fused-against-cached EMPM", "stages": "optional-stage",
+             "integrators": "integrator", "fused": "fused-against-cached EMPM",
+             "sync": "read-backs every k steps", "stages": "optional-stage",
              "profile": "per-kernel profile"}  # tables in the default run: --no-<table> leaves one out
 
 
@@ -226,6 +255,8 @@ def main(argv=None) -> None:
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
+    p.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"),
+                   help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
     p.set_defaults(speed=True)  # the first table (--only may leave it out)
     args = p.parse_args(argv)
     for c in args.cases:
@@ -238,6 +269,8 @@ def main(argv=None) -> None:
                 p.error(f"--only: unknown table {t!r}; accepted: {', '.join(TABLES)}")
         for t in TABLES:
             setattr(args, t, t in chosen)
+    if args.device is not None:  # run.device's default, for every run below
+        os.environ["MPM_DEVICE"] = args.device
     schema.register()
     with tempfile.TemporaryDirectory(prefix="mpm-bench-") as tmp:
         if args.cold:
@@ -258,6 +291,7 @@ def main(argv=None) -> None:
         materials = bench_materials(Path(tmp), 40) if args.materials else []
         integrators = bench_integrators(Path(tmp)) if args.integrators else []
         fused = bench_fused(Path(tmp), 40) if args.fused else []
+        sync = bench_sync(Path(tmp), device) if args.sync else []
         stages = scale.bench_stages(Path(tmp)) if args.stages else []
         profile = scale.profile() if args.profile else []
         paper = scale.bench_paper(Path(tmp)) if args.paper else []
@@ -323,6 +357,15 @@ def main(argv=None) -> None:
         for r in fused:
             print(f"{r['case']:<26} {r['particles']:>9,} {r['fused_ms']:>9.3f} {r['cached_ms']:>10.3f} "
                   f"{r['cached_ms'] / r['fused_ms']:>8.2f}x")
+    if sync:
+        print(f"\nread-backs every k steps (EMPM, step only, detection on, {device}; fastest of {SYNC_ROUNDS} "
+              "interleaved rounds; reads and launches per step counted over 50 steps)")
+        print(f"{'case':<9} {'k':>3} {'graph':>6} {'particles':>9} {'grid':>8} {'ms/step':>8} {'vs k=1':>7} "
+              f"{'reads/step':>10} {'launches/step':>13} {'copies/step':>11}")
+        for r in sync:
+            print(f"{r['case']:<9} {r['sync_every']:>3} {str(r['graph']):>6} {r['particles']:>9,} "
+                  f"{r['grid_nodes']:>8,} {r['step_ms']:>8.3f} {r['vs_k1']:>6.2f}x {r['reads']:>10.2f} "
+                  f"{r['launches']:>13.1f} {r['copies_fills']:>11.1f}")
     if stages:
         scale.print_stages(stages)
     if profile:
@@ -334,7 +377,8 @@ def main(argv=None) -> None:
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,
-                                         "integrators": integrators, "fused": fused, "stages": stages,
+                                         "integrators": integrators, "fused": fused, "sync": sync,
+                                         "stages": stages,
                                          "profile": profile, "paper": paper, "scaling": scaling}, indent=2) + "\n")
 
 

@@ -266,8 +266,8 @@ def print_stages(rows: list[dict]) -> None:
     print(f"\noptional stages on the 2D ball (128^2, EMPM, quadratic MLS, {rows[0]['particles']:,} particles), "
           "one added at a time")
     print(f"{'stage':<46} {'ms/step':>8} {'log ms':>7} {'vs plain':>9} {'launches/step':>13} "
-          f"{'copies+fills/step':>17}")
+          f"{'copies+fills/step':>17} {'reads/step':>10}")
     for r in rows:
         print(f"{r['stage']:<46} {r['step_ms']:>8.3f} {r['log_ms']:>7.3f} {r['vs_plain']:>8.2f}x "
-              f"{r['launches']:>13.1f} {r['copies_fills']:>17.1f}")
+              f"{r['launches']:>13.1f} {r['copies_fills']:>17.1f} {r['reads']:>10.2f}")
     print("the two-ball rows have their own particles (two smaller balls): compare them with each other")

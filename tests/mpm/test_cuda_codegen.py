@@ -46,7 +46,7 @@ material-point driver, for every material) are built.
 ``test_cases_reach_every_specialisation`` asserts that every factory is
 called with every required value of each argument (:func:`required`; a new
 factory, flag or material that no case reaches fails it) and that every
-kernel ``Solver.kernels()`` returns comes from a recorded call. Each
+kernel ``Driver.kernels()`` returns (the solver's and its policy's) comes from a recorded call. Each
 ``test_compiles_for_sm90`` compiles the distinct modules of one factory
 (and interpolation kernel) in one dimension and precision: 676 modules in
 all, about 170 per dimension and precision, each once per process, into a
@@ -175,6 +175,9 @@ class Case:
     track_energy: bool = False
     track_J: bool = False
     forcing: bool = False
+    batched: bool = False  # the driver runs 10 steps between read-backs (mpm.driver)
+    detect: str = "stop"  # the driver's blow-up detection: stop | warn | off
+    measure: bool = False  # the driver measures the diagnostics every step
 
     def label(self) -> str:
         default = Case()
@@ -221,12 +224,16 @@ def scheme(case: Case):
             "aulmpm_paper": lambda: mpm.AULMPM(criterion="paper", affine="keep")}[case.scheme]()
 
 
-def solver(case: Case, dim: int, precision: str) -> mpm.Solver:
-    model, _ = mpm.build(scene(case, dim), mpm.KERNELS[case.kernel], precision, "cpu")
+def driver(case: Case, dim: int, precision: str) -> mpm.Driver:
+    """The case's solver and the driver that steps it (its policy on the device)."""
+    model, state = mpm.build(scene(case, dim), mpm.KERNELS[case.kernel], precision, "cpu")
     integrator = mpm.Implicit(psd=case.psd) if case.implicit else mpm.Explicit()
     options = mpm.SolverOptions(transfer=case.transfer, integrator=integrator, fuse=case.fuse,
-                                record_dJ=case.record_dJ, track_energy=case.track_energy, track_J=case.track_J)
-    return mpm.Solver(model, scheme(case), options)
+                                record_dJ=case.record_dJ, track_energy=case.track_energy, track_J=case.track_J,
+                                batched=case.batched)
+    solver = mpm.Solver(model, scheme(case), options)
+    return mpm.Driver(solver, state, mpm.StepPolicy(steps=1), mpm.Detection(action=case.detect),
+                      sync_every=10 if case.batched else 1, measure=case.measure)
 
 
 def kinds(dim: int) -> tuple[str, ...]:
@@ -267,6 +274,17 @@ def cases(dim: int) -> list[Case]:
         Case(record_dJ=True, track_energy=True, track_J=True, fuse=True),
         Case(scheme="tlmpm", record_dJ=True, track_energy=True, track_J=True),
         Case(forcing=True), Case(scheme="tlmpm", materials=("neo_hookean",), forcing=True),
+        # the driver: its detection warning or off; steps in batches (every stage's early exits,
+        # the device's configuration updates, its diagnostics), Eulerian fused and cached,
+        # Lagrangian, with contact, regions, colliders and open walls
+        Case(detect="warn", measure=True), Case(scheme="tlmpm", detect="off"),
+        Case(batched=True, fuse=True, measure=True), Case(batched=True, kernel="compact", measure=True),
+        Case(batched=True, scheme="aulmpm", materials=("fluid",)), Case(batched=True, scheme="aulmpm_paper"),
+        Case(batched=True, scheme="tlmpm", detect="warn"), Case(batched=True, scheme="tlmpm", detect="off"),
+        Case(batched=True, materials=two, measure=True), Case(batched=True, materials=two, contact="shared"),
+        Case(batched=True, scheme="tlmpm", materials=two, regions=True, colliders=kinds(dim)),
+        Case(batched=True, scheme="tlmpm", open_walls=True, record_dJ=True, track_energy=True, track_J=True),
+        Case(batched=True, open_walls=True, fuse=True, colliders=kinds(dim)),
     ]
     # colliders, all kinds together with friction and without: in the grid update, after
     # contact, as constraints of the implicit solve; each kind alone
@@ -288,9 +306,9 @@ def specialisations(dim: int, precision: str) -> dict:
     unrecorded = []
     with recording(calls):
         for case in cases(dim):
-            s = solver(case, dim, precision)
+            d = driver(case, dim, precision)
             known = {id(k) for ks in calls.values() for k in ks}
-            unrecorded += [f"{kernel_name(k)} ({case.label()})" for k in s.kernels() if id(k) not in known]
+            unrecorded += [f"{kernel_name(k)} ({case.label()})" for k in d.kernels() if id(k) not in known]
         for cls in mpm.MATERIALS.values():
             MaterialPoint(cls(), dim, precision)
     assert not unrecorded, f"kernels built outside the recorded factories: {unrecorded}"
@@ -345,6 +363,12 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return {kinds(t.dim)} | {(k,) for k in kinds(t.dim)}
     if name == "n_grids":
         return {k.n_grids for k in mpm.KERNELS.values()}
+    if name == "dim":
+        return {t.dim}
+    if name == "n_bodies":  # the per-body loops of the criterion and the policy: one body and several
+        return {1, 2}
+    if name == "kind":  # the scheme's update rule (mpm.schemes.rule_kind)
+        return {"always", "never", "paper", "distortion"}
     if parameter.annotation in (bool, "bool") or isinstance(parameter.default, bool):
         return {False, True}
     raise AssertionError(f"{factory}: no values known for argument {name!r} ({annotation}); "
