@@ -55,7 +55,7 @@ INSIDE_DEPTH = 1.0
 """a particle counts as inside a collider when deeper than this many cells:
 the nodes inside a collider stop particles within about a cell of its
 surface (a fast splash particle in a container reaches 0.3-0.85 cells deep,
-tests/test_colliders.py), so deeper ones have gone through it"""
+tests/mpm/test_colliders.py), so deeper ones have gone through it"""
 
 
 def _unit(v) -> tuple[float, ...]:

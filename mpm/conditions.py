@@ -121,3 +121,30 @@ class Conditions:
         band = self.band + 1e-3 * self.model.dx  # with room for round-off
         domain = np.asarray(self.model.domain, float)
         return ((lo < band) & self.closed[0] | (hi > domain - band) & self.closed[1]).any(axis=-1)
+
+
+class Removals:
+    """The particles removed at open faces (G2P gives them mass 0): per body
+    those left (``counts``, what A-ULMPM's criterion divides by) and those
+    removed so far (``removed``), and the particles left by number
+    (``kept``; None: all of them)."""
+
+    def __init__(self, model):
+        self.model = model
+        self.counts = np.array([c for _, c in model.body_ranges])
+        self.removed = np.zeros(len(model.body_ranges), np.int64)
+        self.kept: np.ndarray | None = None
+        self._stale = False
+
+    def add(self, report) -> None:
+        """A step's removals (``report.removed``, per body, or None)."""
+        if report.removed is not None:
+            self.removed += report.removed
+            self.counts = self.counts - report.removed
+            self._stale = True
+
+    def refresh(self) -> None:
+        """``kept`` from the masses, after removals (a read-back)."""
+        if self._stale:
+            self.kept = np.flatnonzero(self.model.mass.numpy() > 0)
+            self._stale = False

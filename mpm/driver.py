@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .launch import load
 from .params import param
 from .policy import Policy
 from .stability import Detection, Detector
@@ -189,10 +190,7 @@ class Driver:
 
     def load(self) -> float:
         """Compile (or load from the cache) every kernel of the run; seconds taken."""
-        t0 = time.perf_counter()
-        modules = list({id(k.module): k.module for k in self.kernels()}.values())
-        wp.force_load(device=self.solver.model.device, modules=modules, max_workers=2)
-        return time.perf_counter() - t0
+        return load(self.kernels(), self.solver.model.device)
 
     # ------------------------------------------------------------ run
     def run(self) -> Outcome:
@@ -333,7 +331,7 @@ class Driver:
         if self.current:
             s.settle(self.state, report)
         else:
-            s.count_removed(report)
+            s.removals.add(report)
         self.outcome.step, self.outcome.time = self.step, self.time
         if self.detector is not None and not report.nonfinite:
             for record in report.trips.reshape(-1, 6):

@@ -6,9 +6,10 @@ from __future__ import annotations
 from .launch import kernel_name
 
 
-def plan(solver) -> list[tuple[str, list[str]]]:
+def plan(solver, driver=None) -> list[tuple[str, list[str]]]:
     """The stages of one step of ``solver`` (mpm.Solver), in order, each with
-    the names of the kernels it launches."""
+    the names of the kernels it launches; with ``driver`` (mpm.Driver) its
+    policy and read-back too."""
     def names(*ks):
         return [kernel_name(k) for k in ks if k is not None]
 
@@ -36,11 +37,23 @@ def plan(solver) -> list[tuple[str, list[str]]]:
         ", energy and speed for the detection" if s.options.track_energy else "") + (
         ", the configuration update" if s.g2p_commits else "")
     stages.append((g2p, names(tr.g2p)))
+    stages.append(("criterion (device, one thread): configuration updates, particles left, node positions "
+                   "needed, grids that must follow", names(s.criterion.kernel)))
     update = {"empm": "every step", "tlmpm": "never (initial reference)"}.get(
         sch.name, f"when the criterion fires (epsilon {getattr(sch, 'epsilon', 0):g})")
+    where = ("on the device where the grid covers the new reference, else the host refits first"
+             if s.device_moves else "the host refits the grids and launches it")
     if s.g2p_commits:
         update = "every step, in G2P; the grids follow (host); the update kernel only at the start"
-    stages.append((f"configuration update: {update}", sorted(set(names(*s.references.update)))))
+        where = ""
+    update = f"{update}; {where}" if where and sch.name != "tlmpm" else update
+    kernels = s.references.gated if s.device_moves else s.references.update
+    stages.append((f"configuration update: {update}", sorted(set(names(*kernels)))))
+    if driver is not None:
+        stages.append(("policy (device, one thread): time, blow-up detection, next step, end, history row",
+                       names(driver.device_policy.kernel)))
+        stages.append((f"read-back of the history: every {driver.k} step(s)"
+                       + (", the k steps as a CUDA graph" if driver.graph else ""), []))
     stages.append(("diagnostics, fracture measure" + (", particles inside colliders" if cond.inside else "")
                    + " (at logging cadence)", names(s.diagnostics.kernel, s.fracture.kernel, cond.inside)))
     return stages

@@ -25,9 +25,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import warp as wp
 
-from .conditions import Conditions
+from .conditions import Conditions, Removals
 from .configuration import References
 from .contact import Contact
 from .criterion import Criterion
@@ -35,7 +34,7 @@ from .diagnostics import Diagnostics, diagnostic_names
 from .fracture import FractureMeasure
 from .implicit import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
-from .launch import Launches
+from .launch import Launches, load
 from .layout import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
@@ -77,15 +76,11 @@ class SolverOptions:
 
 
 class Solver:
-    """Advances a :class:`State` of a :class:`Model` with a scheme.
-
-    Public parts, for the integrators, the driver and tests: ``layout`` and
-    ``grid`` (the reference grids and their nodal fields), ``const`` (the
-    discretisation's constants), ``buffer`` (the step's figures and the
-    device's control block, mpm.status), ``transfers``, ``conditions``,
-    ``contact`` (None without), ``references``, ``criterion``, ``implicit``
-    (the Newton solve, None when explicit), ``timestep`` (the step rule on
-    the host), ``fracture`` and ``diagnostics``."""
+    """Advances a :class:`State` of a :class:`Model` with a scheme. Its
+    parts are public: ``layout``, ``grid``, ``const``, ``buffer``
+    (mpm.status), ``transfers``, ``conditions``, ``contact`` (or None),
+    ``references``, ``criterion``, ``implicit`` (or None), ``timestep`` (the
+    host's step rule), ``removals``, ``fracture``, ``diagnostics``."""
 
     def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
         self.model = model
@@ -103,10 +98,7 @@ class Solver:
         if batched and (implicit or forcing):
             raise ValueError("batched steps need the explicit integrator and no host-side body force")
         nb = self.n_bodies = len(scene.bodies)
-        self.body_counts = np.array([c for _, c in model.body_ranges])  # particles not removed, per body
-        self.removed = np.zeros(nb, np.int64)  # per body: particles removed at open faces so far
-        self.kept: np.ndarray | None = None  # the particles not removed, by number (None: all of them)
-        self._kept_stale = False
+        self.removals = Removals(model)  # particles removed at open faces
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
@@ -148,10 +140,9 @@ class Solver:
         # the device moves references only in batches, and only where the scheme can move them
         self.device_moves = batched and not self.g2p_commits and scheme.name != "tlmpm"
         self.pad = 0.0  # [m] grids grown by this much on every side at a refit (batches: room for k steps)
-        self._backup = None  # F^0s and history before an implicit step (plastic models, for a retry)
         self.time = 0.0  # [s] simulated time of the state, on the host (the device's is control.t)
         self.X0 = None  # [m] initial positions, float64 (after prepare)
-        self.buffer.set(alive=self.body_counts)
+        self.buffer.set(alive=self.removals.counts)
 
     # ------------------------------------------------------------------ setup
     def kernels(self) -> list:
@@ -163,10 +154,7 @@ class Solver:
 
     def load(self) -> float:
         """Compile (or load from the cache) every kernel this run uses; seconds taken."""
-        t0 = time.perf_counter()
-        modules = list({id(k.module): k.module for k in self.kernels()}.values())
-        wp.force_load(device=self.model.device, modules=modules, max_workers=2)
-        return time.perf_counter() - t0
+        return load(self.kernels(), self.model.device)
 
     def prepare(self, state: State) -> None:
         """Take the initial positions as every body's reference configuration
@@ -194,7 +182,6 @@ class Solver:
         self.buffer.reset()
         self._clear()
         self._apply_forcing()
-        self._save(state)
         self._rasterize(state)
         self._update_grid()
         newton = self._solve(state)
@@ -251,23 +238,6 @@ class Solver:
         if self.conditions.boundary is not None:
             self.conditions.apply(self.grid, self.layout, self.buffer.status)
 
-    def _save(self, state: State) -> None:
-        """Keep F^0s and the history before an implicit step of a plastic
-        model: P2G's return mapping overwrites them."""
-        if self.implicit is None or not self.model.plastic:
-            return
-        if self._backup is None:
-            self._backup = (wp.empty_like(state.F0s), wp.empty_like(state.history))
-        wp.copy(self._backup[0], state.F0s)
-        wp.copy(self._backup[1], state.history)
-
-    def restore(self, state: State) -> None:
-        """Undo a failed implicit attempt (the grid is scratch; only P2G's
-        plastic write-back changed the state)."""
-        if self._backup is not None:
-            wp.copy(state.F0s, self._backup[0])
-            wp.copy(state.history, self._backup[1])
-
     # ------------------------------------------------------------------ the host's side
     def advance(self, state: State, dt: float, halvings: int = 0) -> StepReport:
         """One step of ``dt`` [s] from ``self.time``, then the configuration
@@ -295,25 +265,28 @@ class Solver:
 
     def solve_step(self, state: State, dt: float, halvings: int) -> tuple[NewtonReport | None, float, int]:
         """:meth:`attempt` with up to ``halvings`` retries at half the step
-        (the device's ``control.dt`` follows); (report, step taken, retries)."""
+        (the device's ``control.dt`` follows; a plastic state restored first);
+        (report, step taken, retries)."""
+        if self.implicit is not None:
+            self.implicit.save(state)
         for attempt in range(halvings + 1):
             self.dt = dt
             newton = self.attempt(state)
             if newton is None or newton.converged or attempt == halvings:
                 break
-            self.restore(state)
+            self.implicit.restore(state)
             dt *= 0.5
             self.buffer.set(dt=dt)
         if newton is not None and not newton.converged:
-            self.restore(state)  # the state the failed step started from
+            self.implicit.restore(state)  # the state the failed step started from
         return newton, dt, attempt
 
     def settle(self, state: State, report: StepReport) -> None:
         """The host's part of a completed step: the particles removed at open
         faces, and the configuration updates the device left to it (every
         update when the steps are not batched: the grids follow tightly)."""
-        self.count_removed(report)
-        self.refresh_kept()
+        self.removals.add(report)
+        self.removals.refresh()
         if report.reason is not None:
             return
         t0 = time.perf_counter()
@@ -326,23 +299,8 @@ class Solver:
             self.buffer.set(host_update=0.0, regrid=np.zeros(self.n_bodies))
         report.update_time = time.perf_counter() - t0
 
-    def count_removed(self, report: StepReport) -> None:
-        """Per body, the particles G2P removed at open faces in this step
-        (mass 0): the counts the criterion divides by shrink with them."""
-        if report.removed is not None:
-            self.removed += report.removed
-            self.body_counts = self.body_counts - report.removed
-            self._kept_stale = True
-
-    def refresh_kept(self) -> None:
-        """The particles not removed, by number, from the masses (after removals)."""
-        if self._kept_stale:
-            self.kept = np.flatnonzero(self.model.mass.numpy() > 0)
-            self._kept_stale = False
-
     def report(self, values: dict | None = None) -> StepReport:
-        """The step's report from the buffer (one device-to-host copy), or from
-        a history row's ``values`` (mpm.status.StepBuffer.values)."""
+        """The step's report: the buffer read back, or a history row's ``values``."""
         v = values if values is not None else self.buffer.read()
         return StepReport.of(v, self.model.dim, energy=self.options.track_energy, reach=self.free_flight)
 
@@ -364,6 +322,5 @@ class Solver:
         return out
 
     def memory_bytes(self, state: State) -> int:
-        """Bytes of the Warp arrays of the model, ``state`` and the solver
-        (grids at their current capacity, caches, scratch; mpm.memory)."""
+        """Bytes of the model's, the state's and the solver's Warp arrays (mpm.memory)."""
         return array_bytes(self.model, state, self)

@@ -250,7 +250,7 @@ class Recorder(mpm.Observer):
         extra = {"dt": report.dt, "dt_fresh": report.dt_fresh, "max_speed": report.max_speed,
                  "config_updates": float(self.updates.sum())}
         if self.scheme.tracks_marks():
-            for name, m, n in zip(self.marked_names, report.marked, self.solver.body_counts):
+            for name, m, n in zip(self.marked_names, report.marked, self.solver.removals.counts):
                 extra[name] = float(m / max(n, 1))
         if self.scheme.name != "empm":  # the narrowest reference cell (1 in EMPM)
             for name, s in zip(self.stretch_names, report.min_stretch):
@@ -258,7 +258,7 @@ class Recorder(mpm.Observer):
         if self.solution is not None and current:
             extra.update(self.errors())
         if self.solver.conditions.open:
-            extra["removed"] = float(self.solver.removed.sum())
+            extra["removed"] = float(self.solver.removals.removed.sum())
         if report.newton is not None:
             n = report.newton
             extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg),
@@ -286,7 +286,7 @@ class Recorder(mpm.Observer):
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.solver.options.record_dJ else None
         fields = plastic_fields(self.model, self.state)
-        index = self.solver.kept  # the particles left inside, once some were removed at open walls
+        index = self.solver.removals.kept  # the particles left inside, once some were removed at open walls
         if index is not None:
             x, dJ = x[index], (dJ[index] if dJ is not None else None)
             fields = {k: v[index] for k, v in fields.items()}
@@ -304,26 +304,9 @@ class Recorder(mpm.Observer):
             return True
         return False
 
-    def recording_mb(self, dt: float) -> tuple[float, int, int]:
-        """Estimated size of the recording [MB], its particle frames and steps,
-        from the first step ``dt`` [s] (an adaptive step may shrink later)."""
-        log, (steps_end, duration) = self.spec.log, self.spec.end
-        steps = steps_end if steps_end is not None else math.ceil(duration / dt)
-        t_end = duration if duration is not None else steps * dt
-        if not log.particles:
-            frames = 0
-        elif log.every is not None:
-            frames = steps // log.every + 2
-        else:
-            frames = min(steps, math.ceil(t_end * log.fps)) + 2
-        n = self.model.n_particles
-        per_particle = 4 * self.model.dim + 3 + 4 * (log.dJ + len(plastic_fields(self.model, self.state)))
-        scalars = 24 * (len(self.names) + 12) if log.scalars else 0  # value, step and time per scalar
-        return (frames * n * per_particle + (steps + 1) * scalars) / 1e6, frames, steps
-
     def warn_size(self, dt: float) -> None:
         """Say so before a run whose recording would pass log.size_warning_mb."""
-        mb, frames, steps = self.recording_mb(dt)
+        mb, frames, steps = run_metrics.recording_estimate(self.spec, self.model, self.state, len(self.names), dt)
         limit = self.spec.log.size_warning_mb
         if mb > limit:
             text = (f"the recording will be about {mb:,.0f} MB ({frames} particle frames of "
@@ -339,13 +322,13 @@ class Recorder(mpm.Observer):
         for b, n in enumerate(report.removed):
             if n:
                 name = self.spec.scene.bodies[b].name
-                total = int(self.solver.removed[b])
+                total = int(self.solver.removals.removed[b])
                 self.sink.event(self.step, self.t, f"{n} particles of {name} left through an open wall and were "
                                                    f"removed ({total} so far)",
                                 body=name, removed=int(n), removed_total=total)
 
     def record_updates(self, report: mpm.StepReport) -> None:
-        counts = self.solver.body_counts
+        counts = self.solver.removals.counts
         if report.updated:
             self.update_steps += 1
             self.updates[report.updated] += 1
@@ -453,10 +436,10 @@ class Recorder(mpm.Observer):
             m["implicit"] = run_metrics.implicit_summary(self.spec.integrator, self.newton, self.driver.halved)
         m.update(self.drift.summary())
         if self.solver.conditions.open:  # particles that left through open walls take their mass along
-            kept = self.solver.kept if self.solver.kept is not None else slice(None)
+            kept = self.solver.removals.kept if self.solver.removals.kept is not None else slice(None)
             lost = float(self.mass0.sum() - self.mass0[kept].sum())
-            m["removed"] = {"total": int(self.solver.removed.sum()),
-                            **{b: int(c) for b, c in zip(names, self.solver.removed)}, "mass": lost}
+            m["removed"] = {"total": int(self.solver.removals.removed.sum()),
+                            **{b: int(c) for b, c in zip(names, self.solver.removals.removed)}, "mass": lost}
             if self.drift.first is not None and self.drift.first[0]:
                 m["mass_drift"] = abs(self.drift.last[0] + lost - self.drift.first[0]) / self.drift.first[0]
         if self.driver.detector is not None:

@@ -5,6 +5,7 @@ comparison."""
 
 from __future__ import annotations
 
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -89,6 +90,24 @@ def plastic_fields(model, state) -> dict[str, np.ndarray]:
             for name, values in body.material.fields(history[rows], J_E[rows]).items():
                 out.setdefault(name, np.full(n, np.nan, np.float32))[start:start + count] = values
     return out
+
+
+def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[float, int, int]:
+    """Estimated size of the recording [MB], its particle frames and steps,
+    from the first step ``dt`` [s] (an adaptive step may shrink later);
+    ``n_scalars``: the diagnostics logged per step."""
+    log, (steps_end, duration) = spec.log, spec.end
+    steps = steps_end if steps_end is not None else math.ceil(duration / dt)
+    t_end = duration if duration is not None else steps * dt
+    if not log.particles:
+        frames = 0
+    elif log.every is not None:
+        frames = steps // log.every + 2
+    else:
+        frames = min(steps, math.ceil(t_end * log.fps)) + 2
+    per_particle = 4 * model.dim + 3 + 4 * (log.dJ + len(plastic_fields(model, state)))
+    scalars = 24 * (n_scalars + 12) if log.scalars else 0  # value, step and time per scalar
+    return (frames * model.n_particles * per_particle + (steps + 1) * scalars) / 1e6, frames, steps
 
 
 def plastic_summary(model, state) -> dict:

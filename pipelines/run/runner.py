@@ -54,7 +54,7 @@ def sync_every(spec: RunSpec) -> int:
     CUDA and 1 on the CPU; 1 under the implicit integrator and with a
     manufactured solution's body force (both need the host every step)."""
     host_steps = spec.integrator.name == "implicit" or getattr(spec.scene.solution, "has_body_force", False)
-    k = getattr(spec.run, "sync_every", None)
+    k = spec.run.sync_every
     if k is None:
         k = mpm.driver.SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
     return 1 if host_steps else int(k)
@@ -82,8 +82,10 @@ def step_policy(spec: RunSpec) -> mpm.StepPolicy:
 def plan(spec: RunSpec) -> str:
     """``run.plan=true``: the stages of a step and the kernels they launch,
     the run's size, and what it logs; nothing is compiled or run."""
-    model, _ = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
+    model, state = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
     solver = mpm.Solver(model, spec.scheme, solver_options(spec))
+    driver = mpm.Driver(solver, state, step_policy(spec), spec.detect, sync_every=sync_every(spec),
+                        graph=spec.run.graph, measure=spec.log.scalars)
     log = spec.log
     frames = ("none" if not log.particles else f"every {log.every} steps" if log.every is not None
               else f"{log.fps:g} per simulated second")
@@ -91,12 +93,12 @@ def plan(spec: RunSpec) -> str:
              f"{model.dim}D, {spec.run.precision} on {spec.run.device}; {solver.scheme.name}, "
              f"{spec.kernel.name} kernel ({spec.transfer}), {spec.integrator.name} integrator",
              "step:"]
-    for i, (stage, kernels) in enumerate(step_plan(solver), 1):
+    for i, (stage, kernels) in enumerate(step_plan(solver, driver), 1):
         lines.append(f"  {i}. {stage}" + (f": {', '.join(kernels)}" if kernels else ""))
     lines.append(f"logging: particle frames {frames}" + (" with dJ" if solver.options.record_dJ else "")
                  + (", scalars every step" if log.scalars else ", no scalars")
                  + f", fracture every {log.fracture_every} steps; detection {spec.detect.action}")
-    lines.append(f"kernels compiled: {len(solver.kernels())}")
+    lines.append(f"kernels compiled: {len({id(k.module) for k in driver.kernels()})}")
     return "\n".join(lines)
 
 
@@ -155,7 +157,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     except ValueError:  # not the main thread
         pass
     try:
-        run.build(step_policy(spec), solver_options(spec), sync_every(spec), getattr(spec.run, "graph", None))
+        run.build(step_policy(spec), solver_options(spec), sync_every(spec), spec.run.graph)
         sink.start(run.meta())
         driver = run.driver
         driver.start()

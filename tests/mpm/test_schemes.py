@@ -178,7 +178,7 @@ def test_fused_eulerian_path_equals_the_cached_one(dim, kernel, transfer, bodies
         solver.prepare(state)
         for _ in range(steps):
             solver.advance(state, dt)
-        out.append({**state.numpy(), "K": state.stencils.K.numpy(), "removed": solver.removed.sum()})
+        out.append({**state.numpy(), "K": state.stencils.K.numpy(), "removed": solver.removals.removed.sum()})
     for key in ("x", "v", "C", "F0s", "Fsn", "X", "K"):
         np.testing.assert_array_equal(out[1][key], out[0][key], err_msg=key)
     assert np.abs(out[0]["x"] - out[0]["X"]).max() == 0  # EMPM: the reference is where the particles are

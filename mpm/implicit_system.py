@@ -1,0 +1,383 @@
+"""The kernels of the implicit integrator's system (mpm.implicit): per
+particle the energy, residual and Hessian action of the incremental
+potential (``make_evaluate``, ``make_apply``), per node the passes of
+Newton's method and of conjugate gradients (``make_node_kernels``), the
+constraints' work and Coulomb friction after a solve. Sums go into one
+float64 accumulator at the slots below.
+"""
+
+import functools
+
+import warp as wp
+
+from .grid import make_work
+from .kernels import Kernel
+from .launch import warp_kernel
+from .status import StepStatus
+from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
+                                     make_tangent_type)
+from .stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
+                      weight_matrix_type)
+from .types import Types
+
+ENERGY, RESIDUAL2, DOT_A, DOT_B, MOMENTUM2, STIFFNESS2 = range(6)  # slots of the float64 accumulator
+
+
+@functools.cache
+def make_weight_gradient(t: Types, kernel: Kernel, mls: bool):
+    """``weight_gradient(a, b, c, W, dW, r, w, Kp, K, inv_dx) -> g_ip`` [1/m]."""
+    node_gradient = make_node_gradient(t, kernel)
+    per_particle_K = kernel.moment is None
+    Wm = weight_matrix_type(t, kernel)
+    S = t.scalar
+
+    @wp.func
+    def weight_gradient(a: int, b: int, c: int, W: Wm, dW: Wm, r: t.vec, w: S, Kp: t.mat, K: S,
+                        inv_dx: S):
+        if wp.static(mls):
+            if wp.static(per_particle_K):
+                return w * (Kp * r)
+            else:
+                return (w * K) * r
+        else:
+            return node_gradient(a, b, c, W, dW, inv_dx)
+
+    return weight_gradient
+
+
+def _specialisation(t: Types, kernel: Kernel, transfer: str):
+    mls = transfer == "mls" and not kernel.gradient_affine
+    return mls, *make_cached(t, kernel, not mls), make_node(t, kernel), make_weight_gradient(t, kernel, mls)
+
+
+@functools.cache
+def make_gather(t: Types, kernel: Kernel, transfer: str):
+    """``gather(p, body, shape, cache, v, dx, K, Kp) -> D_p(v) = 1/G sum_g sum_i
+    v_i g_ip^T``: the velocity gradient in the reference configuration that
+    G2P will take (F^sn += dt D), for grid velocities (or a direction) v."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    Cache = make_stencil_cache(t, kernel)
+    inv_G = 1.0 / G
+    mat = t.mat
+
+    @wp.func
+    def gather(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, v: wp.array(dtype=t.vec),
+               dx: S, K: S, Kp: t.mat):
+        inv_dx = S(1.0) / dx
+        D = mat()
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        D += wp.outer(v[i], weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
+        return S(inv_G) * D
+
+    return gather
+
+
+@functools.cache
+def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
+    """Per particle of one material model at the iterate v: F_p(v), the
+    energy, the tangent (stored), the viscous factor V^0 J 2 eta (stored),
+    and the scatter of dt S_p g_ip into the residual and of the elastic and
+    viscous parts of A's diagonal."""
+    f64 = wp.float64
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    Cache = make_stencil_cache(t, kernel)
+    Tangent = make_tangent_type(t)
+    principal_stress = make_principal_stress(t, material, psd)
+    quadratic = make_tangent_quadratic(t)
+    gather = make_gather(t, kernel, transfer)
+    per_particle_K = kernel.moment is None
+    viscous = material.viscosity_param is not None
+    eta_index = material.viscosity_param or 0
+    inv_G = 1.0 / G
+    half_inv_G = 0.5 / G
+    n_grids = float(G)
+    vec, mat = t.vec, t.mat
+
+    @warp_kernel
+    def evaluate(
+        volume: wp.array(dtype=S),
+        body: wp.array(dtype=wp.int32),
+        body_params: wp.array(dtype=t.params),
+        shape: wp.array(dtype=t.ivec),
+        F0s: wp.array(dtype=t.mat),
+        Fsn: wp.array(dtype=t.mat),
+        history: wp.array(dtype=t.history),
+        cache: Cache,
+        v: wp.array(dtype=t.vec),
+        dx: S,
+        K: S,
+        dt: S,
+        start: int,
+        tangent: wp.array(dtype=Tangent),
+        visc: wp.array(dtype=S),
+        residual: wp.array(dtype=t.vec),
+        diag: wp.array(dtype=t.vec),
+        acc: wp.array(dtype=f64),
+    ):
+        p = wp.tid() + start
+        b = body[p]
+        Fs = Fsn[p]
+        F0 = F0s[p]
+        V0 = volume[p]
+        inv_dx = S(1.0) / dx
+        Kp = mat()
+        if wp.static(per_particle_K):
+            Kp = cache.K[p]
+        D = gather(p, b, shape, cache, v, dx, K, Kp)
+        P, psi, T = principal_stress((Fs + dt * D) * F0, body_params[b], history[p])
+        tangent[p] = T
+        stress = V0 * P * wp.transpose(F0)
+        e = psi
+        k_visc = S(0.0)
+        FinvT = mat()
+        if wp.static(viscous):
+            Finv = wp.inverse(Fs)
+            FinvT = wp.transpose(Finv)
+            L = D * Finv
+            symL = S(0.5) * (L + wp.transpose(L))
+            eta = body_params[b][eta_index]
+            J = wp.determinant(Fs) * wp.determinant(F0)
+            k_visc = V0 * J * S(2.0) * eta
+            stress += k_visc * symL * FinvT
+            e += dt * J * eta * wp.ddot(symL, symL)
+            visc[p] = k_visc
+        wp.atomic_add(acc, ENERGY, f64(S(n_grids) * V0 * e))
+        # A's diagonal, (dt^2 / G) V0 e_k . dP(e_k wv^T) wv with wv = F0^T g, in the
+        # principal frames: u_k = U^T e_k (row k of U), z = V^T wv
+        VF0T = wp.transpose(T.V) * wp.transpose(F0)
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        gi = weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx)
+                        wp.atomic_add(residual, i, dt * (stress * gi))
+                        z = VF0T * gi
+                        y = FinvT * gi
+                        dg = vec()
+                        for k in range(wp.static(dim)):
+                            dg[k] = (dt * dt * S(inv_G) * V0) * quadratic(T, T.U[k], z)
+                            if wp.static(viscous):
+                                dg[k] += dt * k_visc * (wp.dot(y, y) + y[k] * y[k]) * S(half_inv_G)
+                        wp.atomic_add(diag, i, dg)
+
+    return evaluate
+
+
+@functools.cache
+def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
+    """Per particle: the scatter of dt dS_p g_ip for the direction dv (A's
+    stress part; the mass part is added per node by :func:`make_node_kernels`)."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    Cache = make_stencil_cache(t, kernel)
+    Tangent = make_tangent_type(t)
+    action = make_tangent_action(t)
+    gather = make_gather(t, kernel, transfer)
+    per_particle_K = kernel.moment is None
+    mat = t.mat
+
+    @warp_kernel
+    def apply(
+        volume: wp.array(dtype=S),
+        body: wp.array(dtype=wp.int32),
+        shape: wp.array(dtype=t.ivec),
+        F0s: wp.array(dtype=t.mat),
+        Fsn: wp.array(dtype=t.mat),
+        cache: Cache,
+        tangent: wp.array(dtype=Tangent),
+        visc: wp.array(dtype=S),
+        dv: wp.array(dtype=t.vec),
+        dx: S,
+        K: S,
+        dt: S,
+        out: wp.array(dtype=t.vec),
+    ):
+        p = wp.tid()
+        b = body[p]
+        F0 = F0s[p]
+        inv_dx = S(1.0) / dx
+        Kp = mat()
+        if wp.static(per_particle_K):
+            Kp = cache.K[p]
+        D = gather(p, b, shape, cache, dv, dx, K, Kp)
+        dS = volume[p] * action(tangent[p], dt * D * F0) * wp.transpose(F0)
+        if wp.static(viscous):
+            Finv = wp.inverse(Fsn[p])
+            L = D * Finv
+            dS += visc[p] * S(0.5) * (L + wp.transpose(L)) * wp.transpose(Finv)
+        dS = dt * dS
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        wp.atomic_add(out, i, dS * weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
+
+    return apply
+
+
+@functools.cache
+def make_node_kernels(t: Types):
+    """The per-node halves of the solve (all float64 sums in ``acc``)."""
+    f64 = wp.float64
+    S = t.scalar
+    vec = t.vec
+    dim = t.dim
+
+    @warp_kernel
+    def finish_residual(m: wp.array(dtype=S), v: wp.array(dtype=vec), v_star: wp.array(dtype=vec),
+                        free: wp.array(dtype=t.mat), residual: wp.array(dtype=vec),
+                        diag: wp.array(dtype=vec), inv_diag: wp.array(dtype=vec),
+                        reaction: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                        acc: wp.array(dtype=f64)):
+        """R = Pi (m (v - v*) + R_stress), the kinetic part of E, |R|^2 (but at
+        the nodes of contact constraints, ``contact`` and cbin >= 0), the
+        inverse of A's diagonal (0 on fixed components) and the constraints'
+        reaction (I - Pi) (m (v - v*) + R_stress) / m [m/s]."""
+        i = wp.tid()
+        mi = m[i]
+        if mi <= S(0.0):
+            residual[i] = vec()
+            inv_diag[i] = vec()
+            return
+        dv = v[i] - v_star[i]
+        Pi = free[i]
+        full = mi * dv + residual[i]
+        R = Pi * full
+        residual[i] = R
+        reaction[i] = (full - R) / mi
+        wp.atomic_add(acc, ENERGY, f64(S(0.5) * mi * wp.dot(dv, dv)))
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(R, R)))
+        wp.atomic_add(acc, MOMENTUM2, f64(mi * mi * wp.dot(v_star[i], v_star[i])))
+        d = diag[i]
+        inv = vec()
+        a2 = S(0.0)
+        for k in range(wp.static(dim)):
+            a2 += (mi + d[k]) * (mi + d[k])
+            if Pi[k, k] > S(0.0):
+                inv[k] = S(1.0) / (mi + d[k])
+        wp.atomic_add(acc, STIFFNESS2, f64(a2))
+        inv_diag[i] = inv
+
+    @warp_kernel
+    def finish_apply(m: wp.array(dtype=S), dv: wp.array(dtype=vec), free: wp.array(dtype=t.mat),
+                     out: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
+        """out = Pi (m dv + out), and dv . out."""
+        i = wp.tid()
+        mi = m[i]
+        if mi <= S(0.0):
+            out[i] = vec()
+            return
+        Ad = free[i] * (mi * dv[i] + out[i])
+        out[i] = Ad
+        wp.atomic_add(acc, DOT_A, f64(wp.dot(dv[i], Ad)))
+
+    @warp_kernel
+    def cg_start(residual: wp.array(dtype=vec), free: wp.array(dtype=t.mat), inv_diag: wp.array(dtype=vec),
+                 delta: wp.array(dtype=vec), r: wp.array(dtype=vec), z: wp.array(dtype=vec),
+                 d: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                 acc: wp.array(dtype=f64)):
+        """delta = 0, r = -R, z = Pi (inv_diag . r), d = z, r . z (as finish_residual)."""
+        i = wp.tid()
+        ri = -residual[i]
+        zi = free[i] * wp.cw_mul(inv_diag[i], ri)
+        delta[i] = vec()
+        r[i] = ri
+        z[i] = zi
+        d[i] = zi
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
+
+    @warp_kernel
+    def cg_step(alpha: S, d: wp.array(dtype=vec), Ad: wp.array(dtype=vec), free: wp.array(dtype=t.mat),
+                inv_diag: wp.array(dtype=vec), delta: wp.array(dtype=vec), r: wp.array(dtype=vec),
+                z: wp.array(dtype=vec), cbin: wp.array(dtype=wp.int32), contact: int,
+                acc: wp.array(dtype=f64)):
+        """delta += alpha d, r -= alpha A d, z = Pi (inv_diag . r), |r|^2 and r . z
+        (as finish_residual)."""
+        i = wp.tid()
+        delta[i] = delta[i] + alpha * d[i]
+        ri = r[i] - alpha * Ad[i]
+        r[i] = ri
+        zi = free[i] * wp.cw_mul(inv_diag[i], ri)
+        z[i] = zi
+        if contact == 0 or cbin[i] < 0:
+            wp.atomic_add(acc, RESIDUAL2, f64(wp.dot(ri, ri)))
+            wp.atomic_add(acc, DOT_B, f64(wp.dot(ri, zi)))
+
+    @warp_kernel
+    def cg_direction(beta: S, z: wp.array(dtype=vec), d: wp.array(dtype=vec)):
+        i = wp.tid()
+        d[i] = z[i] + beta * d[i]
+
+    @warp_kernel
+    def trial(v: wp.array(dtype=vec), delta: wp.array(dtype=vec), alpha: S, residual: wp.array(dtype=vec),
+              out: wp.array(dtype=vec), acc: wp.array(dtype=f64)):
+        """out = v + alpha delta, and R . delta (the directional derivative of E)."""
+        i = wp.tid()
+        out[i] = v[i] + alpha * delta[i]
+        wp.atomic_add(acc, DOT_A, f64(wp.dot(residual[i], delta[i])))
+
+    return finish_residual, finish_apply, cg_start, cg_step, cg_direction, trial
+
+
+@functools.cache
+def make_boundary_work(t: Types):
+    """Kernel: the work of the constraints on each node at the solution, the
+    positive part of J . v with J = m reaction their impulse (v - reaction:
+    the velocity without it), into the step's ``status.boundary_work``
+    (mpm.grid ``make_work``, mpm.stability)."""
+    S = t.scalar
+    vec = t.vec
+    work = make_work(t)
+
+    @warp_kernel
+    def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
+                      status: StepStatus):
+        i = wp.tid()
+        if m[i] > S(0.0):
+            work(m[i], v[i] - reaction[i], v[i], status)
+
+    return boundary_work
+
+
+@functools.cache
+def make_friction(t: Types):
+    """Kernel: Coulomb friction after the solve (ImplicitSolve.finish)."""
+    S = t.scalar
+    vec = t.vec
+
+    @warp_kernel
+    def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
+                 mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
+                 v: wp.array(dtype=vec)):
+        i = wp.tid()
+        if m[i] <= S(0.0) or mu[i] <= S(0.0):
+            return
+        push = wp.dot(reaction[i], normal[i])  # > 0: the constraint held the node out of the collider
+        if push <= S(0.0):
+            return
+        vr = v[i] - u[i]
+        vt = free[i] * vr
+        lt = wp.length(vt)
+        if lt > S(0.0):
+            v[i] = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt)
+
+    return friction
