@@ -69,8 +69,10 @@ def scene_default_material(name: str) -> str:
 
 
 def material_file(name: str) -> dict:
-    return {k: v for k, v in read_yaml(CONF / "material" / f"{name}.yaml").items()
-            if k != "defaults"}
+    """The material group's values: the model's own defaults (the group is
+    defined in code: mpm.MATERIALS, pipelines.config.physics)."""
+    cls = mpm.MATERIALS[name]
+    return {f.name: getattr(cls(), f.name) for f in dataclasses.fields(cls) if f.name != "model"}
 
 
 def assert_material(material, values: dict, where: str):
@@ -133,7 +135,7 @@ def test_scene_resolves_to_its_file(scene):
     size, walls per face, gravity, particles per cell, and per body its name,
     shape (kind, centre, sizes, rotation), velocity and material - its own
     mapping's values, else every value of the material group it composes
-    with (conf/material/). With another material group (one case per scene:
+    with (its model's defaults). With another material group (one case per scene:
     the group's values are checked once per material in
     test_material_group_reaches_every_body_without_its_own), the bodies that
     bring their own material keep it and the others take the group's."""
@@ -182,7 +184,7 @@ GROUP_SCENES = ("elastic_ball_2d", "viscous_cup", "water_bunny")
 @pytest.mark.parametrize("material", MATERIALS)
 def test_material_group_reaches_every_body_without_its_own(material):
     """material=<m> gives every body of the scenes that take the group an
-    instance of m with every value of conf/material/<m>.yaml, whatever group
+    instance of m with every default value of its model, whatever group
     the scene itself composes with; an override of one of its values reaches
     all of them."""
     values = {"model": material, **material_file(material)}

@@ -343,4 +343,4 @@ def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
     assert "node positions summed only in steps near a wall" in three.stdout  # walls alone
     four = run_cli(["run.plan=true", "kernel=compact", f"hydra.run.dir={tmp_path / 'd'}"], cwd=ROOT, timeout=120)
     assert four.returncode == 0, four.stderr  # the compact kernel keeps its cache and its update pass
-    assert "stencils from the cache" in four.stdout and "configuration update: every step:" in four.stdout
+    assert "stencils from the cache" in four.stdout and "configuration update: every step; the host" in four.stdout
