@@ -350,8 +350,10 @@ class Driver:
         if report.halt == DONE:
             self.outcome.status = "completed"
         if self.measure:  # after the configuration updates, as the device does
+            t0 = time.perf_counter()
             report.diagnostics = (s.measure(self.state, elastic=False) if not s.options.batched or report.host_update
                                   else s.diagnostics.named(report.diagnostics))
+            report.measure_time = time.perf_counter() - t0
         for o in self.observers:
             o.on_step(self, report)
         if report.halt in (DONE, NONFINITE, OUTSIDE, DETECTION):

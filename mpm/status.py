@@ -144,6 +144,7 @@ class StepBuffer:
             self.flat = wp.array(self.initial, dtype=wp.float64)
             self._reset = wp.array(self.initial[:self.status_size], dtype=wp.float64)
         self._status_view = self.flat[:self.status_size]
+        self._views: dict[str, wp.array] = {}
         self.status, self.control = StepStatus(), StepControl()
         for f in FIELDS:
             setattr(self.status, f.name, self.view(f.name))
@@ -151,8 +152,12 @@ class StepBuffer:
             setattr(self.control, f.name, self.view(f.name))
 
     def view(self, name: str) -> wp.array:
-        s = self.slices[name]
-        return self.flat[s.start:s.stop]
+        """The device array of one field (a view into the buffer, made once)."""
+        v = self._views.get(name)
+        if v is None:
+            s = self.slices[name]
+            v = self._views[name] = self.flat[s.start:s.stop]
+        return v
 
     def reset(self) -> None:
         """The status to its reductions' identities (one device copy); the control stays."""
@@ -169,7 +174,7 @@ class StepBuffer:
     def set(self, **values) -> None:
         """Write control values from the host (host-to-device copies)."""
         for name, v in values.items():
-            self.view(name).assign(np.atleast_1d(np.asarray(v, np.float64)))
+            self.view(name).assign(np.asarray(v, np.float64).reshape(-1))
 
 
 @dataclass
@@ -212,6 +217,7 @@ class StepReport:
     elastic: float = float("nan")  # [J] elastic energy of the state the step started from (its P2G)
     dt_fresh: float = float("nan")  # [s] the step a freshly updated reference would have allowed
     wall_time: float = 0.0  # [s] host time the step took
+    measure_time: float = 0.0  # [s] host time its diagnostics took after it (driver's measure)
 
     @classmethod
     def failed(cls, n_bodies: int) -> "StepReport":
