@@ -116,12 +116,6 @@ class Conditions:
             self._inside_counts])
         return self._inside_counts.numpy()[:len(m.scene.colliders)].astype(np.int64)
 
-    def near_wall(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Per row of boxes [row, axis], whether it reaches the wall band of a closed face."""
-        band = self.band + 1e-3 * self.model.dx  # with room for round-off
-        domain = np.asarray(self.model.domain, float)
-        return ((lo < band) & self.closed[0] | (hi > domain - band) & self.closed[1]).any(axis=-1)
-
 
 class Removals:
     """The particles removed at open faces (G2P gives them mass 0): per body

@@ -154,8 +154,9 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     ):
         p = wp.tid() + start
         b = body[p]
-        if wp.static(gated):
-            if control.update[b] == wp.float64(0.0) or control.skip[0] != wp.float64(0.0):
+        if wp.static(gated):  # (a body whose grid must be refitted first: the host moves it)
+            if (control.update[b] == wp.float64(0.0) or control.regrid[b] != wp.float64(0.0)
+                    or control.skip[0] != wp.float64(0.0)):
                 return
         Xp = x[p]
         Fs = Fsn[p]

@@ -19,8 +19,8 @@ and stopping a run that goes unstable:
 The policy runs on the device (mpm.policy), after every step, from the
 step's own figures: the host reads back once every ``sync_every`` = k steps
 (a history of k rows, one per step), and the steps after a halt in a batch
-do nothing, so the detection stops a blow-up at the same step as when the
-host reads every step. A fixed-size scene's k steps can be captured as a
+change no state, so the detection stops a blow-up at the same step as when
+the host reads every step. A fixed-size scene's k steps can be captured as a
 CUDA graph and replayed (``graph``). The implicit integrator (its Newton
 loop reads back) and a manufactured solution's host-side body force take
 k = 1.
@@ -48,7 +48,7 @@ from .launch import load
 from .params import param
 from .policy import Policy
 from .stability import Detection, Detector
-from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, StepReport
+from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, TRIP_SIZE, StepReport
 from .timestep import BINDINGS
 
 STATUSES = ("running", "completed", "unstable")
@@ -149,6 +149,9 @@ class Driver:
         self.graph = bool(graph if graph is not None else opt.batched and device.is_cuda) and self.k > 1
         if self.graph and not device.is_cuda:
             raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
+        if self.detection.action != "off" and not opt.track_energy:
+            raise ValueError("detection: the blow-up detection needs the step's energies "
+                             "(SolverOptions(track_energy=True)), or Detection(action='off')")
         self.measure = measure
         self.device_policy = Policy(solver, policy, self.detection, self.k, measured=measure and opt.batched,
                                     batched=opt.batched)
@@ -167,7 +170,6 @@ class Driver:
         self.v0 = 0.0  # [m/s] the fastest initial particle
         self.current = True  # the device holds the state of driver.step (observers may read it)
         self.syncs = 0  # read-backs of the step history
-        self._values: dict | None = None  # the last row read
         self._landing = False  # the last step was shortened to land on the duration
         self._scale = 1.0  # the implicit step's factor after halvings
         self._wanted = (None, None)
@@ -204,6 +206,7 @@ class Driver:
         """Prepare the solver, measure the initial state, check it, choose the
         first step, and tell the observers."""
         s, state, p = self.solver, self.state, self.policy
+        s.time = 0.0  # a run's clock starts at 0 (the device's too: mpm.policy.Policy.start)
         if self.k > 1:  # room for k steps of at most cfl cells each (a fixed step: one; the device checks)
             s.pad = math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) * s.model.dx
         s.prepare(state)
@@ -228,6 +231,7 @@ class Driver:
             s.buffer.set(kinetic_last=kinetic, potential_last=potential)
             self.device_policy.start(self.v0, self.detector)
             v = s.buffer.read()
+            s.buffer.set(halt=0.0, skip=0.0)  # the host holds the state (a collapse at the start included)
             self._chosen(v)
         for o in self.observers:
             o.on_start(self)
@@ -289,7 +293,7 @@ class Driver:
         t0 = time.perf_counter()
         newton, dt, attempts = s.solve_step(self.state, self.dt, self.halvings)
         if not newton.converged:
-            report = StepReport.failed(s.n_bodies)
+            report = StepReport.failed(s.n_bodies, s.model.dim)
             report.dt, report.newton, report.halvings = dt, newton, attempts
             report.wall_time = time.perf_counter() - t0
             report.elastic = s.step_energy()
@@ -311,9 +315,6 @@ class Driver:
         report = s.report(v)
         report.newton, report.halvings = newton, attempts
         report.wall_time = time.perf_counter() - t0
-        if attempts:
-            self._event(f"implicit step halved {attempts} time(s) to {dt:.3g} s after a failed Newton solve",
-                        "WARN", "halving", halvings=attempts, dt=dt)
         self.current = True
         self._accept(report, v)
 
@@ -328,13 +329,16 @@ class Driver:
         self._landing = bool(v["landing_step"][0])
         if self.detector is not None:
             self.detector.sync(v)
+        if report.halvings:
+            self._event(f"implicit step halved {report.halvings} time(s) to {report.dt:.3g} s after a failed "
+                        "Newton solve", "WARN", "halving", halvings=report.halvings, dt=report.dt)
         if self.current:
             s.settle(self.state, report)
         else:
             s.removals.add(report)
         self.outcome.step, self.outcome.time = self.step, self.time
         if self.detector is not None and not report.nonfinite:
-            for record in report.trips.reshape(-1, 6):
+            for record in report.trips.reshape(-1, TRIP_SIZE):
                 trip = self.detector.trip(record)
                 if self.detection.action == "stop":
                     self._stop(trip.message, trip.criterion, trip.body, report=report, value=trip.value,
@@ -354,6 +358,8 @@ class Driver:
             report.diagnostics = (s.measure(self.state, elastic=False) if not s.options.batched or report.host_update
                                   else s.diagnostics.named(report.diagnostics))
             report.measure_time = time.perf_counter() - t0
+        else:
+            report.diagnostics = None  # (the row holds none)
         for o in self.observers:
             o.on_step(self, report)
         if report.halt in (DONE, NONFINITE, OUTSIDE, DETECTION):
@@ -394,7 +400,9 @@ class Driver:
         s = self.solver
         key = (s.layout.n_nodes, s.layout.version, id(s.grid.m))
         if self._graph is None or key != self._graph_key:
-            with wp.ScopedCapture(device=s.model.device) as capture:
+            if self._graph is None:
+                self.load()  # no module may load inside a capture
+            with wp.ScopedCapture(device=s.model.device, force_module_load=False) as capture:
                 for _ in range(self.k):
                     self._device_step()
             self._graph, self._graph_key = capture.graph, key

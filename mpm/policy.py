@@ -38,7 +38,8 @@ import warp as wp
 from .diagnostics import diagnostic_names
 from .launch import warp_kernel
 from .stability import DetectParams, detect_params, make_detection
-from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, PAUSE, REGRID, StepControl, StepStatus
+from .status import (CONTROL, COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, PAUSE, REGRID, StepControl,
+                     StepStatus)
 from .timestep import BINDINGS, BodyLaws, body_laws, make_step_rule, pymax, pymin, wave_speed
 
 WAVE, VISCOUS, STRAIN, DT_MAX, FIXED, DISPLACEMENT = range(len(BINDINGS))
@@ -259,6 +260,8 @@ class Policy:
         """The first step, from the fastest initial particle ``v0`` [m/s], and
         the detection's constants (``detector``: mpm.stability.Detector)."""
         m, b = self.solver.model, self.buffer
+        b.set(**{f.name: b.initial[b.slices[f.name]] for f in CONTROL  # a new run's clock and detection
+                 if f.name not in ("alive", "positions", "center", "kinetic_last", "potential_last")})
         if detector is not None:
             self.detection = detect_params(detector, m.device)
             b.set(escale=detector.scale)

@@ -149,7 +149,7 @@ class Solver:
         """Every kernel this run compiles."""
         parts = [self.transfers, self.conditions, self.contact, self.implicit]
         return ([k for part in parts if part is not None for k in part.kernels()]
-                + self.references.kernels(gated=self.device_moves) + self.references.kernels()
+                + self.references.kernels() + (self.references.kernels(gated=True) if self.device_moves else [])
                 + [self.criterion.kernel, self.diagnostics.kernel, self.fracture.kernel])
 
     def load(self) -> float:
@@ -247,10 +247,11 @@ class Solver:
         self.schedule(dt)
         newton, dt, attempts = self.solve_step(state, dt, halvings)
         if newton is not None and not newton.converged:
-            report = StepReport.failed(self.n_bodies)
+            report = StepReport.failed(self.n_bodies, self.model.dim)
         else:
             self.interpolate(state)
             self.decide()
+            self.move(state)
             report = self.report()
             self.time += dt
         report.dt, report.newton, report.halvings = dt, newton, attempts

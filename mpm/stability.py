@@ -255,7 +255,7 @@ def detect_params(detector: Detector, device) -> DetectParams:
 @functools.cache
 def make_detection(energy_on: bool):
     """``energy(control, status, params) -> tripped`` and ``step(control,
-    status, laws, params, record) -> tripped``: :meth:`Detector.energy` and
+    status, laws, params, n_bodies) -> tripped``: :meth:`Detector.energy` and
     :meth:`Detector.step` on the device, the same float64 arithmetic, their
     running state in the control block (mpm.status) and every new trip
     recorded in the step's status (TRIP_SIZE values: the criterion's code -
@@ -271,7 +271,7 @@ def make_detection(energy_on: bool):
     @wp.func
     def record(status: StepStatus, control: StepControl, criterion: int, body: f64, value: f64, limit: f64,
                scale: f64):
-        """A trip, unless its criterion was reported before this call's batch (``fired``)."""
+        """A trip, unless its criterion was reported before this call (``fired``)."""
         fired = int(control.fired[0])
         bit = 1 << wp.min(criterion, 2)  # (3: inversion by a singular value)
         if (fired & bit) != 0:

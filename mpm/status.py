@@ -210,7 +210,7 @@ class StepReport:
     regrid: list[int] = field(default_factory=list)  # bodies whose grids the host refits (mpm.criterion)
     host_update: bool = False  # the host moves a reference configuration (its diagnostics wait for it)
     step: int = 0  # steps completed after this one (0: a step the host took by hand)
-    time: float = 0.0  # [s] the time after it (the host's step: its solver's time)
+    time: float = 0.0  # [s] the time after it (0: a step the host took by hand)
     halt: int = 0  # why the steps stopped after it (mpm.status.HALTS)
     diagnostics: np.ndarray | None = None  # the new state's diagnostics as summed (when measured)
     trips: np.ndarray | None = None  # the detection's new trips (TRIP_SIZE values each, mpm.stability)
@@ -220,9 +220,10 @@ class StepReport:
     measure_time: float = 0.0  # [s] host time its diagnostics took after it (driver's measure)
 
     @classmethod
-    def failed(cls, n_bodies: int) -> "StepReport":
+    def failed(cls, n_bodies: int, dim: int) -> "StepReport":
         """The report of a step that did not complete (its state was restored)."""
-        return cls(0.0, 0, 0, *([np.zeros(n_bodies)] * 8))
+        z = [np.zeros(n_bodies) for _ in range(6)]
+        return cls(0.0, 0, 0, *z, np.zeros((n_bodies, dim)), np.zeros((n_bodies, dim)))
 
     @classmethod
     def of(cls, v: dict[str, np.ndarray], dim: int, energy: bool, reach: bool) -> "StepReport":

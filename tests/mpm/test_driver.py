@@ -167,11 +167,12 @@ def test_the_device_chooses_the_hosts_step(device):
     that step's figures (mpm.timestep.StepRule: wave speed at the most
     compressed particle, stretch, viscosity, strain rate; dt_max; landing),
     and its detection the host's (mpm.stability.Detector) - two
-    implementations of one rule, on a fluid (c grows with compression) and
-    an A-ULMPM solid."""
+    implementations of one rule, on a viscous fluid (c grows with
+    compression; in A-ULMPM the viscous term shrinks with the reference
+    cell) and an A-ULMPM solid."""
     fluid = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=48, gravity=(0.0, -9.81),
                       bodies=[mpm.Body(mpm.Sphere((0.5, 0.25), 0.12), MATERIALS["viscous"](K=2e4, viscosity=5.0))])
-    for scene, scheme in ((fluid, mpm.EMPM()), (ball(), mpm.AULMPM())):
+    for scene, scheme in ((fluid, mpm.EMPM()), (fluid, mpm.AULMPM()), (ball(), mpm.AULMPM())):
         driver, obs, _ = drive(scene, scheme, 1, device=device)
         solver, p = driver.solver, driver.policy
         detector = mpm.Detector(driver.detection, solver.model.scene, solver.conditions.speed(), driver.v0,
@@ -189,3 +190,33 @@ def test_the_device_chooses_the_hosts_step(device):
             dt = min(p.dt_max, solver.timestep.stable_dt(p.cfl, r))
         assert detector.growth == driver.detector.growth and detector.scale == driver.detector.scale
         assert detector.work == driver.detector.work
+
+
+def test_steps_by_hand_on_a_batched_solver_update_as_the_driver_does(device):
+    """Solver.advance on a solver compiled for batches: the criterion's
+    configuration updates happen (the device moves a covered reference, the
+    host the others), as on an unbatched solver: the same state bit for bit
+    (EMPM with the compact kernel: an update pass every step, X = x after it)."""
+    states = []
+    for batched in (False, True):
+        model, state = mpm.build(ball(), mpm.KERNELS["compact"], "float32", device)
+        solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(batched=batched))
+        solver.prepare(state)
+        for _ in range(20):
+            report = solver.advance(state, 4e-4)
+            assert report.updated == [0]
+            np.testing.assert_array_equal(state.X.numpy(), state.x.numpy())
+        states.append(state.numpy())
+    for name in ("x", "v", "C", "F0s"):
+        np.testing.assert_array_equal(states[0][name], states[1][name])
+
+
+def test_a_second_driver_starts_its_own_clock(device):
+    """A driver on a solver that has run before starts from step 0 and t = 0
+    with the detection's state reset: it takes its own number of steps."""
+    model, state = mpm.build(ball(), mpm.KERNELS["quadratic"], "float32", device)
+    solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(track_energy=True, track_J=True))
+    for _ in range(2):
+        driver = mpm.Driver(solver, state, mpm.StepPolicy(steps=3))
+        assert driver.run().status == "completed"
+        assert driver.step == 3 and 0.0 < driver.time < 3 * 1e-3
