@@ -259,8 +259,7 @@ class Solver:
         return report
 
     def schedule(self, dt: float) -> None:
-        """The next step on the device: ``dt`` [s] from the host's time (the
-        steps of :meth:`attempt` by hand)."""
+        """The device's next step: ``dt`` [s] from the host's time (for :meth:`attempt` by hand)."""
         self.dt = dt
         self.buffer.set(t=self.time, dt=dt)
 

@@ -173,3 +173,18 @@ def test_solver_package_imports_neither_hydra_nor_rerun():
             "('hydra', 'omegaconf', 'rerun')]; print(bad); sys.exit(1 if bad else 0)")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stdout + p.stderr
+
+
+MAX_LINES = 500  # a module holds one concept: a reader finds it by its file name
+MAX_SOLVER_LINES = 250  # the Solver is a list of stages over public parts
+
+
+def test_no_module_over_500_lines_and_a_short_solver():
+    """Every module of ``mpm`` and ``pipelines`` is under 500 lines, and the
+    Solver class under 250 (its parts are modules of their own)."""
+    long = {name: n for name, (path, _) in find_modules(ROOT).items()
+            if (n := len(path.read_text().splitlines())) > MAX_LINES}
+    assert not long, long
+    tree = ast.parse((ROOT / "mpm" / "solver.py").read_text())
+    solver = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Solver")
+    assert solver.end_lineno - solver.lineno + 1 < MAX_SOLVER_LINES
