@@ -141,6 +141,38 @@ def test_update_events_match_the_logged_criterion(tmp_path):
     assert metrics["config_updates"]["total"] == len(expected)
 
 
+def _clamped_bar(precision: str):
+    """A bar whose left end a region pulls at u = -0.03 m/s, the region's face
+    (x = 0.25 m, a lattice plane at 48 cells) midway between two particle rows:
+    the nodes on the face draw exactly half their mass from the region."""
+    bar = mpm.Body(mpm.Box((0.5, 0.5), (0.3, 0.06)), mpm.NeoHookean())
+    clamp = mpm.KinematicRegion(body=0, select=mpm.Box((0.225, 0.5), (0.025, 0.07)), velocity=(-0.03, 0.0))
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=48, ppc=4, bodies=[bar], gravity=(0.0, 0.0),
+                      walls=("slip",) * 4, regions=[clamp])
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, DEVICE)
+    solver = mpm.Solver(model, mpm.EMPM())
+    solver.prepare(state)
+    solver.advance(state, 1e-4)
+    n = solver.layout.n_nodes
+    m, kin = solver.grid.m.numpy()[:n], solver.grid.kin.numpy()[:n]
+    return state.v.numpy().astype(np.float64), kin[m > 0] / m[m > 0]
+
+
+def test_a_clamp_on_a_tie_is_the_same_in_float32_and_float64():
+    """A node with exactly half its mass from a region (mpm.grid.KINEMATIC_TIE):
+    the rounding of the mass sums must not decide whether it is clamped. At
+    F = I the first step's particle velocities are the clamped nodes' u
+    interpolated, so the two precisions agree to float32 round-off of u
+    (a node clamped in one and free in the other moves its particles by a
+    share of u: 0.02 m/s before the tie had its margin)."""
+    v32, share32 = _clamped_bar("float32")
+    v64, share64 = _clamped_bar("float64")
+    assert np.sum(np.abs(share64 - 0.5) < 1e-12) >= 9  # the face's nodes: a tie to float64 round-off
+    assert np.sum(np.abs(share32 - 0.5) < 1e-6) >= 9  # and within rounding of one in float32
+    eps32 = np.finfo(np.float32).eps
+    assert np.abs(v32 - v64).max() <= 16 * eps32 * 0.03
+
+
 def test_kinematic_regions_anchor_rotate_and_release():
     """A bar hangs from an anchored top under gravity; a disc is spun by a
     region holding all of it, then released."""
