@@ -76,11 +76,10 @@ class SolverOptions:
 
 
 class Solver:
-    """Advances a :class:`State` of a :class:`Model` with a scheme. Its
-    parts are public: ``layout``, ``grid``, ``const``, ``buffer``
-    (mpm.status), ``transfers``, ``conditions``, ``contact`` (or None),
-    ``references``, ``criterion``, ``implicit`` (or None), ``timestep`` (the
-    host's step rule), ``removals``, ``fracture``, ``diagnostics``."""
+    """Advances a :class:`State` of a :class:`Model` with a scheme. Its parts are public: ``layout``,
+    ``grid``, ``const``, ``buffer`` (mpm.status), ``transfers``, ``conditions``, ``contact`` (or None),
+    ``references``, ``criterion``, ``implicit`` (or None), ``timestep`` (the host's step rule),
+    ``removals``, ``fracture``, ``diagnostics``. :meth:`prepare` a state before stepping it."""
 
     def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
         self.model = model
@@ -104,12 +103,11 @@ class Solver:
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0)
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev)
-        control = self.buffer.control
-        self.contact = (Contact(model, self.launch, implicit, control, batched)
+        self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched)
                         if nb > 1 and scene.contact == "frictionless" else None)
         # the conditions act in the grid update, or after contact or the implicit solve
-        self.conditions = Conditions(model, self.launch, control, separate=self.contact is not None or implicit,
-                                     implicit=implicit, lattice=eulerian, batched=batched)
+        self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
+                                     separate=self.contact is not None or implicit, batched=batched)
         # a moving grid needs node positions only where a condition can reach a node: with walls
         # alone, P2G sums them only in steps where a body comes near a closed face (mpm.criterion)
         self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact
@@ -127,7 +125,7 @@ class Solver:
             bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
             batched=batched)
         per_particle_K = k.moment is None and opt.transfer != "pic"  # K_p cached per particle
-        self.references = References(model, self.launch, self.layout, self.grid, control,
+        self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
                                      transform=scheme.affine == "transform",
                                      gradients=opt.transfer != "mls" or k.gradient_affine, fused=self.fused,
                                      moment=per_particle_K)
@@ -244,6 +242,8 @@ class Solver:
         updates the scheme asks for. An implicit step whose Newton solve
         fails is retried with half the step up to ``halvings`` times (the
         state is restored first); ``report.dt`` is the step taken."""
+        if self.X0 is None:
+            raise RuntimeError("Solver.advance: call Solver.prepare(state) first (it takes the references)")
         self.schedule(dt)
         newton, dt, attempts = self.solve_step(state, dt, halvings)
         if newton is not None and not newton.converged:

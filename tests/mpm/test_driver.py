@@ -220,3 +220,12 @@ def test_a_second_driver_starts_its_own_clock(device):
         driver = mpm.Driver(solver, state, mpm.StepPolicy(steps=3))
         assert driver.run().status == "completed"
         assert driver.step == 3 and 0.0 < driver.time < 3 * 1e-3
+
+
+def test_advance_before_prepare_says_what_to_call():
+    """A solver stepped before it took its reference configurations says so
+    (instead of failing inside the grid's arrays)."""
+    model, state = mpm.build(mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, gravity=(0.0, -9.81), bodies=[
+        mpm.Body(mpm.Sphere((0.5, 0.5), 0.1), mpm.NeoHookean())]), mpm.KERNELS["quadratic"], "float32", "cpu")
+    with pytest.raises(RuntimeError, match=r"Solver.prepare\(state\)"):
+        mpm.Solver(model).advance(state, 1e-4)
