@@ -125,6 +125,15 @@ class State:
         return out
 
 
+# The smallest singular value an initial deformation may have: an inverted
+# (det F <= 0) or nearly degenerate start has no elastic state that a model
+# recovers from (fixed corotated, defined for det F < 0, collapses such a
+# ball to a point and turns non-finite; RESULTS.md, the extreme suite), and
+# the blow-up detection's inversion criterion (mpm.stability) stops models
+# that cannot invert at a stretch of 1e-3.
+MIN_INITIAL_STRETCH = 1e-3
+
+
 def check_scene(scene: Scene, kernel: Kernel) -> None:
     """Raise :class:`SceneError` for anything that would make the scene unbuildable."""
     d = scene.dim
@@ -152,9 +161,11 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
     for i, b in enumerate(scene.bodies):
         if b.deformation is not None:
             F = np.asarray(b.deformation, float)
-            if F.shape != (d, d) or not np.all(np.isfinite(F)) or abs(np.linalg.det(F)) < 1e-6:
+            if (F.shape != (d, d) or not np.all(np.isfinite(F)) or np.linalg.det(F) <= 0.0
+                    or np.linalg.svd(F, compute_uv=False).min() < MIN_INITIAL_STRETCH):
                 raise SceneError(f"bodies[{i}].deformation",
-                                 f"{b.deformation}; accepted: {d} rows of {d} finite numbers, det F != 0")
+                                 f"{b.deformation}; accepted: {d} rows of {d} finite numbers with det F > 0 and every "
+                                 f"singular value >= {MIN_INITIAL_STRETCH:g} (no inverted or degenerate start)")
     if not scene.bodies:
         raise SceneError("bodies", "empty; accepted: at least one body")
     for r, reg in enumerate(scene.regions):

@@ -40,18 +40,18 @@ def test_report_reads_a_synthetic_stability_sweep(tmp_path):
              "energy_initial": 10.0, "energy_final": 9.0, "fracture": {"total": 0.25},
              "detect": {"energy_scale": 4.0, "energy_growth_max": 0.0},
              "unstable_criterion": "inversion", "unstable_step": 7}
-        d = _job(tmp_path, f"x{scheme}", m, ["+extreme=inverted_start", f"scheme={scheme}",
+        d = _job(tmp_path, f"x{scheme}", m, ["+extreme=compressed_start", f"scheme={scheme}",
                                              "+experiment=extreme"])
-        (d / ".hydra" / "config.yaml").write_text("expected: recovers from the inversion\n"
+        (d / ".hydra" / "config.yaml").write_text("expected: springs back\n"
                                                   "scene: {name: elastic_ball_2d}\n")
     write_report(tmp_path)
     text = (tmp_path / "stability.md").read_text()
     assert "| empm · quadratic · mls · explicit | 1 | 0.5 |" in text
     assert "| empm · cubic · mls · explicit | <0.5 | 2 |" in text
     assert (tmp_path / "stability_stability_ball_2d.png").stat().st_size > 10_000
-    assert "| inverted_start | empm | completed | 40 | 0.01 | -0.25 | 0 | 0.25 |" in text
-    assert "| inverted_start | tlmpm | unstable (inversion, step 7) |" in text
-    assert "- `inverted_start`: recovers from the inversion" in text
+    assert "| compressed_start | empm | completed | 40 | 0.01 | -0.25 | 0 | 0.25 |" in text
+    assert "| compressed_start | tlmpm | unstable (inversion, step 7) |" in text
+    assert "- `compressed_start`: springs back" in text
     rows = (tmp_path / "stability.csv").read_text().splitlines()
     assert len(rows) == 1 + 12
     assert "Stability maps" in (tmp_path / "report.md").read_text()

@@ -96,7 +96,12 @@ BAD_INPUTS = [
     (["scene.bodies.0.velocity=[nan,0]"], "scene.bodies[0].velocity[0]: nan is not finite"),
     (["scene.bodies.0.shape.type=cone"], "scene.bodies[0].shape.type: 'cone' unknown; accepted: box, sphere,"),
     (["scene.bodies.0.deformation=[[1,0],[0,0]]"], "scene.bodies[0].deformation: ((1.0, 0.0), (0.0, 0.0)); "
-                                                   "accepted: 2 rows of 2 finite numbers, det F != 0"),
+                                                   "accepted: 2 rows of 2 finite numbers with det F > 0 and every "
+                                                   "singular value >= 0.001 (no inverted or degenerate start)"),
+    (["scene.bodies.0.deformation=[[-1,0],[0,1]]"], "scene.bodies[0].deformation: ((-1.0, 0.0), (0.0, 1.0)); "
+                                                    "accepted: 2 rows of 2 finite numbers with det F > 0"),
+    (["scene.bodies.0.deformation=[[1,0],[0,0.0005]]"], "scene.bodies[0].deformation: ((1.0, 0.0), (0.0, 0.0005)); "
+                                                        "accepted: 2 rows"),
     (["scene.bodies=[]"], "scene.bodies: empty; accepted: at least one body"),
     (["integrator=implicit", "integrator.newton_max=0"], "integrator.newton_max: 0 out of range"),
     (["scheme=aulmpm", "scheme.criterion=foo"], "scheme.criterion: 'foo' unknown; accepted: paper, distortion"),
