@@ -68,9 +68,10 @@ class NewtonReport:
     cg: int = 0  # conjugate-gradient iterations, all Newton iterations together
     residual: float = 0.0  # final |R| / initial |R| (0 when no iteration was needed)
     residual0: float = 0.0  # initial |R| [kg m/s]
-    converged: bool = True
+    converged: bool = True  # the step may use the solution (converged, or a near miss)
     backtracks: int = 0  # line-search halvings, all iterations together
-    reason: str = ""  # why it failed
+    reason: str = ""  # why it failed, or what the near miss was
+    outcome: str = "converged"  # converged | near_miss | missed | diverged | stalled (see ImplicitSolve.solve)
 
 
 class ImplicitSolve:
@@ -268,6 +269,24 @@ class ImplicitSolve:
                 s.grid.v])
 
     # ------------------------------------------------------------ solve
+    def _classify(self, rep: NewtonReport, R: float, R_before: float, goal: float) -> None:
+        """Out of iterations with the residual R above ``goal``: a near miss
+        (R within ``newton_accept`` of the goal and still falling: the step
+        may use it), missed (still falling, further off), or diverged (R
+        rose in the last iteration, or above the initial residual)."""
+        opt, r, n = self.options, R / rep.residual0, rep.newton
+        said, tol = f"residual {r:.3g} of the initial after {n} iterations", f"tolerance {opt.newton_tol:g}"
+        if R > R_before or R > rep.residual0:
+            rep.converged, rep.outcome = False, "diverged"
+            rep.reason = f"Newton diverged: {said}, up from {R_before / rep.residual0:.3g} in the last one ({tol})"
+        elif R <= opt.newton_accept * goal:
+            rep.outcome = "near_miss"
+            rep.reason = f"Newton's near miss: {said} ({tol}; accepted within {opt.newton_accept:g}x of it)"
+        else:
+            rep.converged, rep.outcome = False, "missed"
+            rep.reason = (f"Newton missed its tolerance: {said}, still falling ({tol}; a near miss is within "
+                          f"{opt.newton_accept:g}x of it; integrator.newton_max allows more iterations)")
+
     def solve(self, state, dt) -> NewtonReport:
         """The grid velocities of the step: on entry ``solver.grid.v`` holds the
         predictor v* (momentum / mass + dt g) and ``solver.grid.q`` the node
@@ -284,17 +303,17 @@ class ImplicitSolve:
         # velocities eps dx / dt, which A turns into a residual; v* carries eps |v*|
         floor = ROUNDOFF * self.eps * (self.stiffness * float(m.dx) / float(dt) + self.momentum)
         goal = max(opt.newton_tol * R, floor)
+        R_before = np.inf  # the residual before the last iteration
         while True:
             if not np.isfinite(R) or not np.isfinite(E):
-                rep.converged, rep.reason = False, "non-finite residual or energy"
+                rep.converged, rep.outcome = False, "diverged"
+                rep.reason = f"Newton diverged: non-finite residual or energy after {rep.newton} iterations"
                 break
             if R <= goal:
                 break
             if rep.newton >= opt.newton_max:
-                rep.converged = opt.newton_max == 1  # the semi-implicit update: one step by definition
-                if not rep.converged:
-                    rep.reason = (f"Newton did not converge in {opt.newton_max} iterations: residual "
-                                  f"{R / rep.residual0:.3g} of the initial one (tolerance {opt.newton_tol:g})")
+                if opt.newton_max > 1:  # (1: the semi-implicit update, one step by definition)
+                    self._classify(rep, R, R_before, goal)
                 break
             rep.cg += self._cg(state, dtS, opt.cg_tol * R)
             rep.newton += 1
@@ -314,12 +333,13 @@ class ImplicitSolve:
                 alpha *= 0.5
                 rep.backtracks += 1
             if not accepted:
-                rep.converged = False
-                rep.reason = (f"line search found no decrease of the incremental potential after "
-                              f"{BACKTRACKS} halvings (residual {R / max(rep.residual0, 1e-300):.3g} of the initial)")
+                rep.converged, rep.outcome = False, "stalled"
+                rep.reason = (f"Newton stalled: the line search found no decrease of the incremental potential "
+                              f"after {BACKTRACKS} halvings (residual {R / max(rep.residual0, 1e-300):.3g} of "
+                              f"the initial, iteration {rep.newton})")
                 break
             v, v_try = v_try, v
-            E, R = E_try, R_try
+            R_before, E, R = R, E_try, R_try
         # 0 when the predictor already solved the system to round-off
         rep.residual = R / rep.residual0 if rep.newton > 0 else 0.0
         if v is not s.grid.v:

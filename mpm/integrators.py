@@ -34,6 +34,9 @@ class Implicit:
                                 "semi-implicit update) [-]", ge=1)
     newton_tol: float = param(1.0e-4, "converged when |residual| <= newton_tol |initial residual| [-]",
                               gt=0.0, lt=1.0)
+    newton_accept: float = param(10.0, "a solve out of iterations with its residual within this factor of "
+                                       "the tolerance, and still falling, is a near miss: retried with half "
+                                       "the step while halvings remain, else accepted and counted [-]", ge=1.0)
     cg_max: int = param(400, "conjugate-gradient iterations per Newton iteration at most [-]", ge=1)
     cg_tol: float = param(1.0e-3, "CG stops at |r| <= cg_tol |Newton residual| [-]", gt=0.0, lt=1.0)
     line_search: bool = param(True, "backtracking on the incremental potential (Armijo)")

@@ -264,15 +264,15 @@ class Solver:
         self.buffer.set(t=self.time, dt=dt)
 
     def solve_step(self, state: State, dt: float, halvings: int) -> tuple[NewtonReport | None, float, int]:
-        """:meth:`attempt` with up to ``halvings`` retries at half the step
-        (the device's ``control.dt`` follows; a plastic state restored first);
-        (report, step taken, retries)."""
+        """:meth:`attempt` with up to ``halvings`` retries at half the step after a failed solve or a
+        near miss (the device's ``control.dt`` follows; a plastic state restored first); (report, step
+        taken, retries)."""
         if self.implicit is not None:
             self.implicit.save(state)
         for attempt in range(halvings + 1):
             self.dt = dt
             newton = self.attempt(state)
-            if newton is None or newton.converged or attempt == halvings:
+            if newton is None or newton.outcome == "converged" or attempt == halvings:
                 break
             self.implicit.restore(state)
             dt *= 0.5

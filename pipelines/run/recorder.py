@@ -62,7 +62,7 @@ class Recorder(mpm.Observer):
         self.step_ms: list[float] = []
         self.log_ms: list[float] = []
         self.update_ms: list[float] = []
-        self.newton: list[tuple[int, int, float]] = []  # per step: Newton and CG iterations, residual
+        self.newton: list[tuple] = []  # per step: Newton and CG iterations, residual, a near miss
         self.fracture = None  # (overall, per body) at the last evaluation
         self.fracture_step = -1
         self._pieces = None  # (fracture per body, fragments per body) at the last count
@@ -169,7 +169,7 @@ class Recorder(mpm.Observer):
             self.emit(report.elastic)
         if report.newton is not None:
             n = report.newton
-            self.newton.append((n.newton, n.cg, n.residual))
+            self.newton.append((n.newton, n.cg, n.residual, n.outcome == "near_miss"))
         if report.removed is not None:
             self.record_removed(report)
         self.record_updates(report)

@@ -122,11 +122,13 @@ def plastic_summary(model, state) -> dict:
     return out
 
 
-def implicit_summary(integrator, newton: list[tuple[int, int, float]], halvings: int) -> dict:
+def implicit_summary(integrator, newton: list[tuple], halvings: int) -> dict:
     """metrics.json ``implicit``: Newton and CG iterations per step (``newton``:
-    per step the Newton and CG iterations and the residual)."""
+    per step the Newton and CG iterations, the residual and whether the step
+    took a near miss, mpm.implicit); ``near_misses`` counts those steps."""
     out = {"newton_max": integrator.newton_max, "newton_tol": integrator.newton_tol,
-           "cg_max": integrator.cg_max, "cg_tol": integrator.cg_tol, "halvings": halvings}
+           "newton_accept": integrator.newton_accept, "cg_max": integrator.cg_max, "cg_tol": integrator.cg_tol,
+           "halvings": halvings, "near_misses": int(sum(bool(row[3]) for row in newton))}
     if newton:
         a = np.array(newton, dtype=float)
         out.update(newton_mean=float(a[:, 0].mean()), newton_max_seen=int(a[:, 0].max()),

@@ -215,13 +215,39 @@ def test_failed_newton_solve_halves_or_stops(tmp_path):
             "log.every=0", "log.progress=false"]
     fixed = execute(resolve(compose_cfg(base + ["run.dt=0.01"])), tmp_path / "fixed")
     assert fixed["status"] == "unstable"
-    assert "Newton did not converge in 2 iterations" in fixed["reason"]
+    assert "Newton missed its tolerance: residual " in fixed["reason"] and "after 2 iterations" in fixed["reason"]
     assert json.loads((tmp_path / "fixed" / "metrics.json").read_text())["status"] == "unstable"
     adaptive = execute(resolve(compose_cfg(base + ["integrator.newton_tol=1e-4", "run.dt_max=0.01",
                                                     "run.duration=0.45"])),
                        tmp_path / "adaptive")
     assert adaptive["implicit"]["halvings"] > 0
     assert adaptive["status"] == "completed", adaptive["reason"]
+
+
+def test_newton_says_near_miss_missed_or_diverged(tmp_path):
+    """Out of iterations, Newton's outcome is named (mpm.implicit.ImplicitSolve._classify).
+    The ball at E = 1e8 Pa, dt = 0.01 s, two iterations: at step 24 the residual
+    ends at 0.0027 of the initial, still falling. With the tolerance 3e-4 that
+    is within newton_accept = 10x of it: a near miss, which a fixed step takes
+    (counted) and the run completes; with newton_accept = 1 the same solve
+    missed and stops the run. Without the PSD projection and the line search,
+    a sheared start's Newton iterates rise: diverged."""
+    base = ["scene=elastic_ball_2d", "scene.resolution=24", "material.E=1e8", "integrator=implicit",
+            "integrator.newton_max=2", "integrator.newton_tol=3e-4", "run.dt=0.01", "run.duration=0.3",
+            "log.every=0", "log.progress=false"]
+    near = execute(resolve(compose_cfg(base)), tmp_path / "near")
+    assert near["status"] == "completed", near["reason"]
+    assert near["implicit"]["near_misses"] >= 1 and near["implicit"]["newton_accept"] == 10.0
+    strict = execute(resolve(compose_cfg(base + ["integrator.newton_accept=1"])), tmp_path / "strict")
+    assert strict["status"] == "unstable" and strict["unstable_criterion"] == "newton"
+    assert strict["reason"].startswith("step 24 ") and "Newton missed its tolerance: residual 0.0027" in strict["reason"]
+    wild = execute(resolve(compose_cfg([
+        "scene=elastic_ball_2d", "scene.resolution=24", "material.E=1e8", "integrator=implicit",
+        "integrator.newton_max=6", "integrator.line_search=false", "integrator.psd=false", "run.dt=0.1",
+        "run.duration=0.2", "scene.bodies.0.deformation=[[1.0,2.0],[0.0,1.0]]", "log.every=0",
+        "log.progress=false"])), tmp_path / "wild")
+    assert wild["status"] == "unstable" and "Newton diverged: residual " in wild["reason"]
+    assert "up from" in wild["reason"]
 
 
 def test_implicit_config_and_metrics(tmp_path):
