@@ -15,7 +15,7 @@ import warp as wp
 from .kernels import Kernel
 from .materials import Material
 from .params import violations
-from .sampling import sample_shape
+from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
 from .scene import WALL_TYPES, Scene, skew
 from .types import Types, make_types
@@ -58,6 +58,7 @@ class Model:
     body_params: wp.array  # packed material parameters per body
     groups: list[MaterialGroup]
     body_ranges: list[tuple[int, int]]  # (start, count) per body
+    body_volumes: list[dict]  # per body: the particles' volume [m^d], the shape's, the cells', and which was used
     wall_codes: tuple[tuple[int, ...], tuple[int, ...]]  # (lo, hi) per axis
 
     @property
@@ -153,6 +154,8 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
         raise SceneError("walls", f"{list(scene.walls)}; accepted: {2 * d} of {', '.join(WALL_TYPES)}")
     if scene.ppc < 1:
         raise SceneError("ppc", f"{scene.ppc}; accepted: an integer >= 1")
+    if scene.particle_volume not in PARTICLE_VOLUMES:
+        raise SceneError("particle_volume", f"{scene.particle_volume!r}; accepted: {', '.join(PARTICLE_VOLUMES)}")
     if not 0.0 <= scene.jitter <= 1.0:
         raise SceneError("jitter", f"{scene.jitter}; accepted: 0 <= jitter <= 1")
     if scene.lattice_offset is not None and (len(scene.lattice_offset) != d
@@ -230,12 +233,18 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
 
     xs, vs, Cs, ms, Vs, ids, hs, Fs = [], [], [], [], [], [], [], []
     body_ranges = [None] * len(scene.bodies)
+    volumes: list[dict] = [{}] * len(scene.bodies)
     groups: list[MaterialGroup] = []
     start = 0
     for i in order:
         b, (x, ppc) = scene.bodies[i], samples[i]
         n = len(x)
         vol = dxp**d / ppc
+        V = shape_volume(b.shape, d)
+        used = "shape" if V is not None and scene.particle_volume == "shape" else "cells"
+        volumes[i] = {"volume": V if used == "shape" else n * vol, "shape": V, "cells": n * vol, "used": used}
+        if used == "shape":
+            vol = V / n
         F = np.eye(d)
         if b.deformation is not None:  # sampled in the reference shape, placed deformed
             F = np.asarray(b.deformation, float)
@@ -279,7 +288,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             region=wp.array(region, dtype=wp.int32),
             body_params=wp.array(np.array([b.material.packed_padded() for b in scene.bodies], S),
                                  dtype=t.params),
-            groups=groups, body_ranges=body_ranges, wall_codes=wall_codes,
+            groups=groups, body_ranges=body_ranges, body_volumes=volumes, wall_codes=wall_codes,
         )
         eye = np.tile(np.eye(d, dtype=S), (n, 1, 1))
         state = State(

@@ -1,8 +1,21 @@
-"""Fill shapes with particles at a chosen number of particles per cell."""
+"""Fill shapes with particles at a chosen number of particles per cell, and
+the shapes' exact volumes that the particles share (mpm.model)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from .meshes import MeshShape
+from .scene import Bowl, Box, Compound, Cylinder, Rotated, Sphere
+
+PARTICLE_VOLUMES = ("shape", "cells")
+"""shape: the particles of a body share its shape's exact volume equally
+(where the shape has one: see :func:`shape_volume`); cells: each particle
+stands for its sampling cell, dx^d / ppc (the union of the cells, not the
+shape: a disc of 6 cells' radius at 4 particles per cell differs by a few
+per cent)."""
 
 
 def sample_shape(shape, dim: int, dx: float, ppc: int, jitter: float,
@@ -13,7 +26,7 @@ def sample_shape(shape, dim: int, dx: float, ppc: int, jitter: float,
     sub-cell centres (displaced by ``jitter`` times the sub-spacing, uniformly
     at random) and shifted by ``offset`` [cells] per axis; otherwise they
     are uniform random points in each cell. Each particle then stands for a
-    volume ``dx^dim / ppc``.
+    volume ``dx^dim / ppc``, or a share of :func:`shape_volume`.
     """
     lo, hi = shape.bounds()
     c0 = np.floor(np.asarray(lo) / dx).astype(np.int64)
@@ -34,3 +47,46 @@ def sample_shape(shape, dim: int, dx: float, ppc: int, jitter: float,
         pts = (cells[:, None, :] + rng.random((len(cells), ppc, dim))).reshape(-1, dim)
     pts *= dx
     return pts[shape.contains(pts)]
+
+
+def _ball_below(r: float, h: float, dim: int) -> float:
+    """Volume [m^d] of a ball (a disc in 2D) of radius ``r`` below the plane
+    (line) at height ``h`` above its centre."""
+    h = min(max(h, -r), r)
+    if dim == 2:  # the disc minus the segment above the chord
+        return r * r * (math.pi - math.acos(h / r)) + h * math.sqrt(r * r - h * h)
+    a = r + h  # the cap's height
+    return math.pi * a * a * (3.0 * r - a) / 3.0
+
+
+def shape_volume(shape, dim: int) -> float | None:
+    """The exact volume [m^d] (area in 2D) of a scene shape: closed forms for
+    boxes, balls, cylinders and bowls (and their shells), the divergence
+    theorem over a mesh's triangles, a rotated shape's own, a union's sum when
+    its parts' bounding boxes do not overlap; None for a union of overlapping
+    parts (no closed form)."""
+    if isinstance(shape, Rotated):
+        return shape_volume(shape.shape, dim)
+    if isinstance(shape, Box):
+        return float(np.prod(2.0 * np.asarray(shape.half_size, float)))
+    if isinstance(shape, Sphere):
+        r, ri = shape.radius, shape.inner_radius
+        return math.pi * (r * r - ri * ri) if dim == 2 else 4.0 / 3.0 * math.pi * (r**3 - ri**3)
+    if isinstance(shape, Cylinder):
+        return math.pi * (shape.radius**2 - shape.inner_radius**2) * 2.0 * shape.half_height
+    if isinstance(shape, Bowl):
+        R, t, h = shape.radius, shape.thickness, shape.rim
+        return _ball_below(R + t, h, dim) - _ball_below(R, h, dim)
+    if isinstance(shape, MeshShape):  # sum over the triangles of a . (b x c) / 6
+        pts, tris = shape.geometry
+        a, b, c = (pts[tris[:, k]].astype(np.float64) for k in range(3))
+        return float(abs(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
+    if isinstance(shape, Compound):
+        boxes = [tuple(np.asarray(v, float) for v in p.bounds()) for p in shape.parts]
+        for i, (lo, hi) in enumerate(boxes):
+            for lo2, hi2 in boxes[:i]:
+                if np.all(lo < hi2) and np.all(lo2 < hi):
+                    return None
+        volumes = [shape_volume(p, dim) for p in shape.parts]
+        return None if any(v is None for v in volumes) else float(sum(volumes))
+    return None

@@ -267,6 +267,10 @@ class Scene:
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
     colliders: list[Collider] = field(default_factory=list)
     """rigid colliders other than the walls (mpm.colliders)"""
+    particle_volume: str = "shape"
+    """the particles' volumes (and masses, rho V_p): "shape", a body's exact
+    volume shared equally among its particles where the shape has one, else
+    its cells'; "cells", dx^d / ppc each (mpm.sampling.PARTICLE_VOLUMES)"""
     particle_resolution: int | None = None
     """particles are sampled as if the grid had this many cells along x
     (default: ``resolution``): a fixed particle set for grid-refinement studies"""

@@ -14,6 +14,7 @@ from omegaconf import MISSING, OmegaConf
 
 import mpm
 from mpm.materials import Material
+from mpm.sampling import PARTICLE_VOLUMES
 from mpm.scene import CONTACT_TYPES, WALL_TYPES
 
 from .colliders import ColliderConfig, COLLIDERS
@@ -193,6 +194,9 @@ class SceneConfig:
                             ge=0.0, le=1.0)
     lattice_offset: Optional[List[float]] = setting(None, "shift of the sampling lattice [cells]; ppc 1 with "
                                                           "0.5: particles on the nodes", size="dim")
+    particle_volume: str = setting("shape", "the particles' volumes: shape (a body's exact volume shared "
+                                            "equally; its cells' where the shape has no closed form) or cells "
+                                            "(dx^d / ppc each)", choices=PARTICLE_VOLUMES)
     contact: str = setting("frictionless", "between bodies: frictionless, none, or shared (one grid; EMPM)",
                            choices=CONTACT_TYPES)
     contact_fill: float = setting(0.5, "the node volume fraction the bodies must fill for contact",
@@ -251,7 +255,8 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
             center=r.center, start=r.start, end=math.inf if r.end is None else r.end))
     scene = mpm.Scene(dim=dim, domain=sc.domain, resolution=sc.resolution, bodies=bodies, gravity=sc.gravity,
                       walls=sc.walls, wall_cells=sc.wall_cells, ppc=sc.ppc, jitter=sc.jitter,
-                      lattice_offset=sc.lattice_offset, contact=sc.contact, contact_fill=sc.contact_fill,
+                      lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
+                      contact_fill=sc.contact_fill,
                       regions=regions, particle_resolution=sc.particle_resolution,
                       colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)])
     scene.solution = _solution(sc.solution, f"{key}.solution", scene)

@@ -94,7 +94,9 @@ class Recorder(mpm.Observer):
         self.scheme = self.solver.scheme  # defaults resolved
         self.metrics.update(particles=self.model.n_particles, domain_nodes=self.model.n_nodes,
                             scene=spec.scene_name, resolution=spec.scene.resolution, dx=self.model.dx,
-                            precision=run.precision, device=run.device)
+                            precision=run.precision, device=run.device,
+                            body_volumes={b.name or f"body{i}": v for i, (b, v) in
+                                          enumerate(zip(spec.scene.bodies, self.model.body_volumes))})
         # a first run compiles its kernels (Warp caches them): say so when it takes a while
         notice = threading.Timer(1.0, lambda: print("compiling kernels (first run only; Warp caches them) ...",
                                                     file=sys.stderr, flush=True))
