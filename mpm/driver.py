@@ -53,6 +53,7 @@ from .timestep import BINDINGS
 
 STATUSES = ("running", "completed", "unstable")
 SYNC_EVERY_CUDA = 10  # the default k on CUDA (batched solvers)
+CRUSHED = 0.05  # a step collapse with a reference cell narrower than this (s_min of F^sn) blames the reference
 
 
 @dataclass
@@ -382,8 +383,18 @@ class Driver:
         """Why the next step cannot be taken."""
         p, dt0, limit = self.policy, self.dt_first, float(v["dt_limit"][0])
         if p.dt is None and dt0 is not None and not (limit >= p.dt_collapse * dt0):
-            return (f"time step collapsed to {limit:.3g} s, below {p.dt_collapse:g} of the first "
-                    f"step ({dt0:.3g} s): a particle's strain rate or compression is running away")
+            said = f"time step collapsed to {limit:.3g} s, below {p.dt_collapse:g} of the first step ({dt0:.3g} s)"
+            s_min = math.sqrt(float(np.min(v["min_stretch2"])))  # the narrowest reference cell (inf: Eulerian)
+            if not s_min < CRUSHED:
+                return f"{said}: a particle's strain rate or compression is running away"
+            cause = f"{said}: a reference cell is crushed to {s_min:.2g} of its width"
+            scheme = self.solver.scheme.name
+            if scheme == "tlmpm":
+                return (f"{cause}; TLMPM never updates its reference, so this is the method's limit "
+                        f"(scheme=empm or aulmpm update it)")
+            if scheme == "aulmpm":
+                return f"{cause}; A-ULMPM's criterion did not update it in time (scheme.stretch_min bounds it)"
+            return cause
         speed = math.sqrt(v["max_v2"][0]) if self.step else self.v0
         return f"the time step is {self.dt:.3g} s (fastest particle {speed:.3g} m/s): the run cannot advance"
 

@@ -194,3 +194,17 @@ def test_detector_criteria_on_synthetic_reports():
     assert fresh.energy(0.5, 1.5, 0.0) == []  # exchanged, not grown
     trips = fresh.energy(2.0, 1.1, 0.0)  # grown by 1.1 J against the scale 2 J: 0.55 > 0.5
     assert [t.criterion for t in trips] == ["energy"] and trips[0].value == pytest.approx(0.55)
+
+
+def test_a_crushed_reference_is_named_as_the_lagrangian_limit(tmp_path):
+    """The soft ball (E = 1e3 Pa) hitting the floor: EMPM completes, while
+    TLMPM's reference cells are crushed and its step collapses at step 125;
+    the reason says it is the reference (its narrowest cell below
+    mpm.driver.CRUSHED of its width) and, for TLMPM, that this is the
+    method's limit, not a runaway flow."""
+    over = ["scene=stability_ball_2d", "material.E=1e3", "run.duration=0.5", "log.every=0", "log.progress=false"]
+    empm = execute(spec_for(over + ["scheme=empm"]), tmp_path / "empm", sink=Sink())
+    assert empm["status"] == "completed", empm["reason"]
+    tl = execute(spec_for(over + ["scheme=tlmpm"]), tmp_path / "tlmpm", sink=Sink())
+    assert tl["status"] == "unstable" and tl["unstable_criterion"] == "dt_collapse"
+    assert "a reference cell is crushed to " in tl["reason"] and "TLMPM never updates its reference" in tl["reason"]
