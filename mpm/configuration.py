@@ -26,6 +26,7 @@ from .kernels import Kernel
 from .launch import warp_kernel
 from .status import StepControl
 from .stencil import make_locate, make_origin, make_stencil_cache, make_weigh, weight_matrix_type
+from .materials.decompositions import make_rotation
 from .types import Types
 
 MOMENT_REGULARISATION = 1.0e-6
@@ -109,9 +110,11 @@ def make_committed(t: Types, project):
 
 
 @functools.cache
-def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradients: bool,
+def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
                 fused: bool = False, moment: bool = True, gated: bool = False):
-    """``project``: the material's projection factory or None; ``gradients``:
+    """``project``: the material's projection factory or None; ``affine``: C
+    over the update (mpm.schemes.AFFINE: keep, transform C <- C (F^sn)^-1,
+    rotate C <- C R^T with F^sn = R U); ``gradients``:
     cache the weight derivatives too (APIC and PIC transfers); ``fused``: the
     transfers locate the stencils themselves (mpm.stencil.fuse): only K_p is
     cached; ``moment``: the transfer uses K_p (not PIC), built when the
@@ -123,6 +126,7 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
     locate = make_locate(t, kernel, gradients)
     origin = make_origin(t, kernel, gradients)
     committed = make_committed(t, project)
+    rotation = make_rotation(t)
     add_moment, moment_inverse = make_moment(t, kernel)
     moment_at = make_moment_at(t, kernel, gradients)
     Cache = make_stencil_cache(t, kernel)
@@ -160,8 +164,10 @@ def make_update(t: Types, kernel: Kernel, project, transform_affine: bool, gradi
                 return
         Xp = x[p]
         Fs = Fsn[p]
-        if wp.static(transform_affine):
+        if wp.static(affine == "transform"):
             C[p] = C[p] * wp.inverse(Fs)
+        if wp.static(affine == "rotate"):  # |C R^T| = |C|: the spin carried over, never amplified
+            C[p] = C[p] * wp.transpose(rotation(Fs))
         X[p] = Xp
         F0s[p] = committed(Fs, F0s[p], body_params[b])
         Fsn[p] = wp.identity(n=dim, dtype=S)
@@ -192,17 +198,17 @@ class References:
     """The bodies' reference configurations on the device: their grids (the
     boxes of ``layout``, whose nodal fields ``grid`` grows to fit) and the
     update of their particles (one kernel per body, for its material's
-    projection; a gated twin for the driver, mpm.driver). ``transform``:
-    C <- C (F^sn)^-1 at an update; ``gradients``, ``fused``, ``moment``: what
-    the stencil cache holds (:func:`make_update`)."""
+    projection; a gated twin for the driver, mpm.driver). ``affine``: C
+    over an update (mpm.schemes.AFFINE); ``gradients``, ``fused``, ``moment``:
+    what the stencil cache holds (:func:`make_update`)."""
 
-    def __init__(self, model, launch, layout, grid, control, *, transform: bool, gradients: bool, fused: bool,
+    def __init__(self, model, launch, layout, grid, control, *, affine: str, gradients: bool, fused: bool,
                  moment: bool):
         t, k = model.types, model.kernel
         self.model, self.launch, self.layout, self.grid, self.control = model, launch, layout, grid, control
         options = dict(gradients=gradients, fused=fused, moment=moment)
-        self.update = [make_update(t, k, b.material.project, transform, **options) for b in model.scene.bodies]
-        self.gated = [make_update(t, k, b.material.project, transform, gated=True, **options)
+        self.update = [make_update(t, k, b.material.project, affine, **options) for b in model.scene.bodies]
+        self.gated = [make_update(t, k, b.material.project, affine, gated=True, **options)
                       for b in model.scene.bodies]
 
     def kernels(self, gated: bool = False) -> list:

@@ -38,7 +38,8 @@ frequent updates of a fluid, transform is unstable: a lone splash particle
 whose affine field squeezes its reference cell to half (stretch_min = 0.5)
 gets C doubled at every update, every few steps, and the step
 collapses (seen on the droplet with the compact kernel); keep is the
-default there.
+default there. ``affine="rotate"`` turns C by the rotation R of F^sn = R U
+alone, C <- C R^T: the spin crosses the update and |C| never grows.
 """
 
 import functools
@@ -49,7 +50,7 @@ import warp as wp
 
 from .params import param
 
-AFFINE = ("keep", "transform")
+AFFINE = ("keep", "transform", "rotate")
 CRITERIA = ("paper", "distortion")
 # A-ULMPM's parameters per kind of scene:
 # solids take the paper's (0.5, 0.1) and its criterion, no bounds (their large
@@ -132,8 +133,9 @@ class AULMPM:
                                        "max(dJ_max, epsilon) [-]", gt=0.0, inf=True)
     stretch_min: float | None = param(None, "distortion: also update when a reference cell is "
                                             "squeezed below this fraction of its width [-]", ge=0.0, lt=1.0)
-    affine: str | None = param(None, "C over an update: transform (re-expressed in the new reference) or "
-                                     "keep; null: the scene kind's default", choices=AFFINE)
+    affine: str | None = param(None, "C over an update: transform (re-expressed in the new reference), "
+                                     "rotate (by F^sn's rotation only: never amplified) or keep; null: the "
+                                     "scene kind's default", choices=AFFINE)
     criterion: str | None = param(None, "paper (eq. 33 as published: epsilon, eta only) or distortion "
                                         "(also dJ_max, stretch_min); null: the scene kind's default",
                                   choices=CRITERIA)

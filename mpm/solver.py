@@ -126,7 +126,7 @@ class Solver:
             batched=batched)
         per_particle_K = k.moment is None and opt.transfer != "pic"  # K_p cached per particle
         self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
-                                     transform=scheme.affine == "transform",
+                                     affine=scheme.affine,
                                      gradients=opt.transfer != "mls" or k.gradient_affine, fused=self.fused,
                                      moment=per_particle_K)
         self.criterion = Criterion(model, self.launch, self.buffer, self.layout, scheme, self.conditions,

@@ -159,7 +159,7 @@ class _Forcing:
 class Case:
     """One small scene and solver; what it sets is what the solver compiles."""
 
-    scheme: str = "empm"  # empm | tlmpm | aulmpm (the scene kind's defaults) | aulmpm_paper
+    scheme: str = "empm"  # empm | tlmpm | aulmpm (the scene kind's defaults) | aulmpm_paper | aulmpm_rotate
     kernel: str = "linear"  # the quickest to compile
     transfer: str = "mls"
     materials: tuple[str, ...] = ("fixed_corotated",)  # one body each
@@ -222,7 +222,8 @@ def scene(case: Case, dim: int) -> mpm.Scene:
 
 def scheme(case: Case):
     return {"empm": mpm.EMPM, "tlmpm": mpm.TLMPM, "aulmpm": mpm.AULMPM,
-            "aulmpm_paper": lambda: mpm.AULMPM(criterion="paper", affine="keep")}[case.scheme]()
+            "aulmpm_paper": lambda: mpm.AULMPM(criterion="paper", affine="keep"),
+            "aulmpm_rotate": lambda: mpm.AULMPM(affine="rotate")}[case.scheme]()
 
 
 def driver(case: Case, dim: int, precision: str) -> mpm.Driver:
@@ -263,7 +264,8 @@ def cases(dim: int) -> list[Case]:
     # compile (their code does not depend on the kernel)
     out += [Case(materials=(m,), transfer=TRANSFERS[i % 3], implicit=True) for i, m in enumerate(materials)]
     out += [
-        Case(), Case(scheme="aulmpm_paper"), Case(scheme="tlmpm", implicit=True, psd=False),
+        Case(), Case(scheme="aulmpm_paper"), Case(scheme="aulmpm_rotate"),
+        Case(scheme="tlmpm", implicit=True, psd=False),
         # contact between bodies
         Case(materials=two), Case(materials=two, fuse=True), Case(scheme="tlmpm", materials=two),
         Case(materials=two, contact="shared"), Case(scheme="tlmpm", materials=two, contact="none"),
@@ -282,6 +284,7 @@ def cases(dim: int) -> list[Case]:
         Case(detect="warn", track_energy=True, measure=True), Case(scheme="tlmpm", detect="off"),
         Case(batched=True, fuse=True, track_energy=True, measure=True), Case(batched=True, kernel="compact", measure=True),
         Case(batched=True, scheme="aulmpm", materials=("fluid",)), Case(batched=True, scheme="aulmpm_paper", track_energy=True),
+        Case(batched=True, scheme="aulmpm_rotate"),
         Case(batched=True, scheme="tlmpm", detect="warn", track_energy=True), Case(batched=True, scheme="tlmpm", detect="off"),
         Case(batched=True, materials=two, measure=True), Case(batched=True, materials=two, contact="shared"),
         Case(batched=True, scheme="tlmpm", materials=two, regions=True, colliders=kinds(dim)),
@@ -369,6 +372,8 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return {t.dim}
     if name == "n_bodies":  # the per-body loops of the criterion and the policy: one body and several
         return {1, 2}
+    if name == "affine":  # C over a configuration update
+        return set(mpm.schemes.AFFINE)
     if name == "kind":  # the scheme's update rule (mpm.schemes.rule_kind)
         return {"always", "never", "paper", "distortion"}
     if parameter.annotation in (bool, "bool") or isinstance(parameter.default, bool):

@@ -200,3 +200,38 @@ def test_fused_by_default_where_it_pays():
     assert not fused("mixed") and not fused("solids", "compact") and not fused("solids", "linear")
     assert not fused("solids", scheme=mpm.AULMPM(epsilon=0.0)) and not fused("solids", scheme=mpm.TLMPM())
     assert not fused("solids", integrator=mpm.Implicit())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_affine_matrix_over_an_update(dim):
+    """At a configuration update (mpm.configuration.make_update) C becomes
+    C (F^sn)^-1 (transform), C R^T with F^sn = R U its polar decomposition
+    (rotate: |C R^T| = |C|, never amplified), or stays (keep); checked
+    against NumPy's polar decomposition (via the SVD) on a random stretched
+    and turned F^sn per particle, to float64 round-off."""
+    rng = np.random.default_rng(3)
+    scene = mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, ppc=1, gravity=(0.0,) * dim,
+                      walls=("slip",) * (2 * dim), bodies=[mpm.Body(mpm.Sphere((0.5,) * dim, 0.15), mpm.NeoHookean())])
+    for affine in mpm.schemes.AFFINE:
+        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", DEVICE)
+        solver = mpm.Solver(model, mpm.AULMPM(affine=affine))
+        solver.prepare(state)
+        n = model.n_particles
+        C = rng.normal(size=(n, dim, dim))
+        U, _, Vt = np.linalg.svd(rng.normal(size=(n, dim, dim)))
+        U[np.linalg.det(U @ Vt) < 0, :, 0] *= -1.0
+        R = U @ Vt  # proper rotations
+        stretch = np.stack([np.diag(rng.uniform(0.2, 2.0, dim)) for _ in range(n)])
+        Fsn = R @ stretch  # F = R U with U symmetric positive definite (diagonal here)
+        state.C.assign(C)
+        state.Fsn.assign(Fsn)
+        solver.references.move(state, [0], solver.const)
+        got = state.C.numpy()
+        u, _, vt = np.linalg.svd(Fsn)
+        polar = u @ vt  # the polar rotation of F^sn (det > 0 here)
+        expected = {"keep": C, "transform": C @ np.linalg.inv(Fsn),
+                    "rotate": C @ np.swapaxes(polar, 1, 2)}[affine]
+        np.testing.assert_allclose(got, expected, rtol=0, atol=64 * np.finfo(float).eps * np.abs(expected).max())
+        if affine == "rotate":
+            np.testing.assert_allclose(np.linalg.norm(got, axis=(1, 2)), np.linalg.norm(C, axis=(1, 2)), rtol=1e-13)
+        np.testing.assert_allclose(state.Fsn.numpy(), np.broadcast_to(np.eye(dim), (n, dim, dim)), atol=0)

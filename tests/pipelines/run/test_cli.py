@@ -28,7 +28,7 @@ BAD_INPUTS = [
     (["scheme=nope"], "scheme=nope: unknown option; accepted: aulmpm, empm, tlmpm"),
     (["scheme=aulmpm", "scheme.eta=2"], "scheme.eta: 2.0 out of range; accepted: 0.0 <= eta <= 1.0"),
     (["scheme=aulmpm", "scheme.epsilon=-1"], "scheme.epsilon: -1.0 out of range; accepted: 0.0 <= epsilon"),
-    (["scheme=aulmpm", "scheme.affine=rotate"], "scheme.affine: 'rotate' unknown; accepted: keep, transform"),
+    (["scheme=aulmpm", "scheme.affine=twist"], "scheme.affine: 'twist' unknown; accepted: keep, transform, rotate"),
     (["scheme=tlmpm", "scheme.epsilon=1"], "scheme.epsilon: unknown key; accepted: name"),
     (["kernel=nope"], "kernel=nope: unknown option; accepted: compact, cubic, linear, quadratic"),
     (["kernel.transfer=flip"], "kernel.transfer: 'flip' unknown; accepted: mls, apic, pic"),
