@@ -31,6 +31,7 @@ from ..config.validate import ConfigError, check_memory, resolve
 from .warp_setup import init_warp
 
 schema.register()
+ENERGY_LOSS_NOTE = 0.25  # a run that lost more of its energy scale than this says so on its last line
 _last_status: list[str] = []
 _config_errors: list[str] = []
 
@@ -93,6 +94,10 @@ def run(cfg: DictConfig) -> dict:
     summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
     print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
+    change = metrics.get("energy_change")
+    if change is not None and change < -ENERGY_LOSS_NOTE:
+        print(f"note: the total energy fell by {-change:.2g} of its scale (metrics.json: energy_change), beyond "
+              f"the boundaries' work: dissipated by the scheme, its transfers or contact", file=sys.stderr)
     return metrics
 
 

@@ -446,7 +446,10 @@ class Recorder(mpm.Observer):
             if self.drift.first is not None and self.drift.first[0]:
                 m["mass_drift"] = abs(self.drift.last[0] + lost - self.drift.first[0]) / self.drift.first[0]
         if self.driver.detector is not None:
-            m["detect"] = self.driver.detector.summary()
+            d = m["detect"] = self.driver.detector.summary()
+            if d["energy_growth_max"] is not None and d["energy_scale"] > 0 and "energy_final" in m:
+                # the energy the run lost (< 0) or made, beyond the boundaries' work, in units of its scale
+                m["energy_change"] = (m["energy_final"] - m["energy_initial"] - d["boundary_work"]) / d["energy_scale"]
 
     def _final_state(self) -> None:
         """The last state reached: its scalar row (elastic energy by one more
