@@ -260,6 +260,8 @@ class Recorder(mpm.Observer):
                 extra[name] = float(s)
         if self.solution is not None and current:
             extra.update(self.errors())
+        if self.solver.contact is not None:  # body nodes in contact in this step (mpm.contact)
+            extra["contact_nodes"] = float(report.contact_nodes)
         if self.solver.conditions.open:
             extra["removed"] = float(self.solver.removals.removed.sum())
         if report.newton is not None:
