@@ -68,10 +68,14 @@ class NewtonReport:
     cg: int = 0  # conjugate-gradient iterations, all Newton iterations together
     residual: float = 0.0  # final |R| / initial |R| (0 when no iteration was needed)
     residual0: float = 0.0  # initial |R| [kg m/s]
-    converged: bool = True  # the step may use the solution (converged, or a near miss)
     backtracks: int = 0  # line-search halvings, all iterations together
     reason: str = ""  # why it failed, or what the near miss was
     outcome: str = "converged"  # converged | near_miss | missed | diverged | stalled (see ImplicitSolve.solve)
+
+    @property
+    def converged(self) -> bool:
+        """Whether the step may use the solution: converged, or a near miss."""
+        return self.outcome in ("converged", "near_miss")
 
 
 class ImplicitSolve:
@@ -277,13 +281,13 @@ class ImplicitSolve:
         opt, r, n = self.options, R / rep.residual0, rep.newton
         said, tol = f"residual {r:.3g} of the initial after {n} iterations", f"tolerance {opt.newton_tol:g}"
         if R > R_before or R > rep.residual0:
-            rep.converged, rep.outcome = False, "diverged"
+            rep.outcome = "diverged"
             rep.reason = f"Newton diverged: {said}, up from {R_before / rep.residual0:.3g} in the last one ({tol})"
         elif R <= opt.newton_accept * goal:
             rep.outcome = "near_miss"
             rep.reason = f"Newton's near miss: {said} ({tol}; accepted within {opt.newton_accept:g}x of it)"
         else:
-            rep.converged, rep.outcome = False, "missed"
+            rep.outcome = "missed"
             rep.reason = (f"Newton missed its tolerance: {said}, still falling ({tol}; a near miss is within "
                           f"{opt.newton_accept:g}x of it; integrator.newton_max allows more iterations)")
 
@@ -306,7 +310,7 @@ class ImplicitSolve:
         R_before = np.inf  # the residual before the last iteration
         while True:
             if not np.isfinite(R) or not np.isfinite(E):
-                rep.converged, rep.outcome = False, "diverged"
+                rep.outcome = "diverged"
                 rep.reason = f"Newton diverged: non-finite residual or energy after {rep.newton} iterations"
                 break
             if R <= goal:
@@ -333,7 +337,7 @@ class ImplicitSolve:
                 alpha *= 0.5
                 rep.backtracks += 1
             if not accepted:
-                rep.converged, rep.outcome = False, "stalled"
+                rep.outcome = "stalled"
                 rep.reason = (f"Newton stalled: the line search found no decrease of the incremental potential "
                               f"after {BACKTRACKS} halvings (residual {R / max(rep.residual0, 1e-300):.3g} of "
                               f"the initial, iteration {rep.newton})")

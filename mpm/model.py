@@ -233,7 +233,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
 
     xs, vs, Cs, ms, Vs, ids, hs, Fs = [], [], [], [], [], [], [], []
     body_ranges = [None] * len(scene.bodies)
-    volumes: list[dict] = [{}] * len(scene.bodies)
+    volumes: list[dict | None] = [None] * len(scene.bodies)
     groups: list[MaterialGroup] = []
     start = 0
     for i in order:

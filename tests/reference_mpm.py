@@ -257,6 +257,17 @@ def bspline_stencil(order, xp, dx):
     return out
 
 
+def node_momentum(transfer, w, m, v, C, S, Kp, r, grad):
+    """A particle's momentum contribution to one node (P2G): weight w, node
+    offset r = x_i - x_p, weight gradient grad, S = dt V P F^T, Kp the
+    moment's inverse (MLS); PIC carries no affine part."""
+    if transfer == "mls":
+        return w * (m * v + (m * C - S @ Kp) @ r)
+    if transfer == "apic":
+        return w * (m * v + m * C @ r) - S @ grad
+    return w * m * v - S @ grad
+
+
 def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravity, walls, dt,
                  transfer="mls", wall_cells=3, body=None):
     """One Eulerian step with a B-spline kernel (``kernel``: linear, quadratic,
@@ -289,13 +300,7 @@ def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravit
         S = dt * vol[p] * stress(models[p], F[p], C[p], prms[p]) @ F[p].T
         for key, w, grad, r in stencils[p]:
             m_i[key] = m_i.get(key, 0.0) + w * mass[p]
-            if transfer == "mls":
-                mom = w * (mass[p] * v[p] + (mass[p] * C[p] - S @ Kp[p]) @ r)
-            elif transfer == "apic":
-                mom = w * (mass[p] * v[p] + mass[p] * C[p] @ r) - S @ grad
-            else:
-                mom = w * mass[p] * v[p] - S @ grad
-            mv_i[key] = mv_i.get(key, 0.0) + mom
+            mv_i[key] = mv_i.get(key, 0.0) + node_momentum(transfer, w, mass[p], v[p], C[p], S, Kp[p], r, grad)
     v_i = {key: (apply_walls(mv_i[key] / m + dt * np.asarray(gravity), np.array(key) * dx, domain, walls, band)
                  if m > 0 else np.zeros(d)) for key, m in m_i.items()}
     xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
@@ -364,13 +369,7 @@ def compact_step(x, v, C, F, mass, vol, models, prms, dx, domain, gravity, walls
         for o in grids:
             for key, w, r, grad in stencil(p, o):
                 m_i[key] = m_i.get(key, 0.0) + w * mass[p]
-                if transfer == "mls":
-                    mom = w * (mass[p] * v[p] + (mass[p] * C[p] - S @ Kp[p]) @ r)
-                elif transfer == "apic":
-                    mom = w * (mass[p] * v[p] + mass[p] * C[p] @ r) - S @ grad
-                else:
-                    mom = w * mass[p] * v[p] - S @ grad
-                mv_i[key] = mv_i.get(key, 0.0) + mom
+                mv_i[key] = mv_i.get(key, 0.0) + node_momentum(transfer, w, mass[p], v[p], C[p], S, Kp[p], r, grad)
     v_i = {}
     for key, m in m_i.items():
         if m <= 0:  # a node the particles reach with zero weight
