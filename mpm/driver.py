@@ -8,7 +8,7 @@ and stopping a run that goes unstable:
   figures (mpm.timestep: wave speed at the most compressed particle, the
   narrowest reference cell, viscosity, strain rate), capped by ``dt_max``;
   under the implicit integrator a displacement limit, halved after a failed
-  Newton solve and recovering by 2 per step; or a fixed ``dt``; the last
+  (or narrowly missed) Newton solve and recovering by 2 per step; or a fixed ``dt``; the last
   step lands on the duration;
 * the run stops ``unstable`` when the adaptive step collapses below
   ``dt_collapse`` of the first one, when a particle's position, velocity or
@@ -331,8 +331,9 @@ class Driver:
         if self.detector is not None:
             self.detector.sync(v)
         if report.halvings:
-            self._event(f"implicit step halved {report.halvings} time(s) to {report.dt:.3g} s after a failed "
-                        "Newton solve", "WARN", "halving", halvings=report.halvings, dt=report.dt)
+            self._event(f"implicit step halved {report.halvings} time(s) to {report.dt:.3g} s after a Newton "
+                        "solve that failed or missed narrowly", "WARN", "halving", halvings=report.halvings,
+                        dt=report.dt)
         if self.current:
             s.settle(self.state, report)
         else:
