@@ -13,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from .kernels import Kernel
+from .loads import LoadError, LoadTable, resolve
 from .materials import Material
 from .params import violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
@@ -60,6 +61,7 @@ class Model:
     body_ranges: list[tuple[int, int]]  # (start, count) per body
     body_volumes: list[dict]  # per body: the particles' volume [m^d], the shape's, the cells', and which was used
     wall_codes: tuple[tuple[int, ...], tuple[int, ...]]  # (lo, hi) per axis
+    loads: LoadTable | None = None  # the external loads on the particles (mpm.loads); None: none
 
     @property
     def dim(self) -> int:
@@ -77,6 +79,10 @@ class Model:
     def strides(self) -> tuple[int, ...]:
         n = self.nodes
         return (n[1], 1) if self.dim == 2 else (n[1] * n[2], n[2], 1)
+
+    @property
+    def n_loads(self) -> int:
+        return len(self.loads.loads) if self.loads is not None else 0
 
     @property
     def gravity(self) -> tuple[float, ...]:
@@ -176,6 +182,12 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
             raise SceneError(f"regions[{r}].body", f"{reg.body}; accepted: 0 to {len(scene.bodies) - 1}")
         if not reg.start < reg.end:
             raise SceneError(f"regions[{r}].end", f"{reg.end} <= start {reg.start}")
+    for i, load in enumerate(scene.loads):
+        for name, message in load.problems(d, len(scene.bodies)):
+            raise SceneError(f"loads[{i}].{name}", message)
+    if scene.loads and getattr(scene.solution, "has_body_force", False):
+        raise SceneError("loads", "given with a manufactured solution, whose body force they would replace; "
+                                  "accepted: no loads with that solution")
     lo = scene.wall_cells * dx
     for i, b in enumerate(scene.bodies):
         key = f"bodies[{i}]"
@@ -275,6 +287,14 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
         if not inside.any():
             raise SceneError(f"regions[{r}].select", "selects no particle of its body")
         region[start:start + count][inside] = r + 1
+    V = np.concatenate(Vs)
+    loads = None
+    if scene.loads:
+        spacing = [(dxp**d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
+        try:
+            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing)
+        except LoadError as e:
+            raise SceneError(f"loads[{e.index}].{e.key}", e.message) from None
     S = np.float32 if precision == "float32" else np.float64
     codes = {w: WALL_TYPES.index(w) for w in WALL_TYPES}
     wall_codes = (tuple(codes[w] for w in scene.walls[0::2]), tuple(codes[w] for w in scene.walls[1::2]))
@@ -283,12 +303,12 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             scene=scene, types=t, kernel=kernel, device=device, dx=dx, cells=scene.cells,
             n_particles=n,
             mass=wp.array(np.concatenate(ms).astype(S), dtype=t.scalar),
-            volume=wp.array(np.concatenate(Vs).astype(S), dtype=t.scalar),
+            volume=wp.array(V.astype(S), dtype=t.scalar),
             body=wp.array(np.concatenate(ids), dtype=wp.int32),
             region=wp.array(region, dtype=wp.int32),
             body_params=wp.array(np.array([b.material.packed_padded() for b in scene.bodies], S),
                                  dtype=t.params),
-            groups=groups, body_ranges=body_ranges, body_volumes=volumes, wall_codes=wall_codes,
+            groups=groups, body_ranges=body_ranges, body_volumes=volumes, wall_codes=wall_codes, loads=loads,
         )
         eye = np.tile(np.eye(d, dtype=S), (n, 1, 1))
         state = State(

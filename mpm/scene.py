@@ -267,6 +267,8 @@ class Scene:
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
     colliders: list[Collider] = field(default_factory=list)
     """rigid colliders other than the walls (mpm.colliders)"""
+    loads: list = field(default_factory=list)
+    """external loads: point loads, tractions, body forces (mpm.loads.Load)"""
     particle_volume: str = "shape"
     """the particles' volumes (and masses, rho V_p): "shape", a body's exact
     volume shared equally among its particles where the shape has one, else

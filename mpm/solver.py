@@ -102,7 +102,7 @@ class Solver:
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0)
-        self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev)
+        self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched)
                         if nb > 1 and scene.contact == "frictionless" else None)
         # the conditions act in the grid update, or after contact or the implicit solve
@@ -179,7 +179,7 @@ class Solver:
         self.step_time = self.model.types.scalar(self.time)  # the implicit constraints' clock [s]
         self.buffer.reset()
         self._clear()
-        self._apply_forcing()
+        self._apply_forcing(state)
         self._rasterize(state)
         self._update_grid()
         newton = self._solve(state)
@@ -207,10 +207,10 @@ class Solver:
         """Zero the grid (the node positions unless on the lattice or not summed)."""
         self.grid.clear(self.layout.n_nodes, positions=not isinstance(self.scheme, EMPM))
 
-    def _apply_forcing(self) -> None:
-        """A manufactured solution's body force at the step's start (host)."""
-        if self.transfers.forcing is not None:
-            self.transfers.apply_forcing(self.X0, self.time)
+    def _apply_forcing(self, state: State) -> None:
+        """The external loads' body force (mpm.loads), or a manufactured solution's, at the step's start."""
+        if self.transfers.forcing is not None or self.transfers.loads is not None:
+            self.transfers.apply_forcing(state, self.X0, self.time)
 
     def _rasterize(self, state: State, write: bool = True) -> None:
         """P2G (mpm.p2g); the plastic return mapping stored when ``write``."""

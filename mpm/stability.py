@@ -10,7 +10,8 @@ Three criteria, checked after every step (:class:`Detector`):
   W_in the work of the boundary conditions on the grid, summed over the
   steps (per node and step the positive part of J . v_bc, J = m (v_bc -
   v_free) the boundary's impulse: an upper bound of the energy put in;
-  static walls and colliders do none, mpm.grid), and
+  static walls and colliders do none, mpm.grid) plus the external loads'
+  work, dt sum f_p . v_p at each step's start velocities (mpm.loads), and
   ``scale`` the largest kinetic plus elastic energy of the earlier states, at least
   the floor 1/2 M (1e-3 c)^2 + M |g| dx (M the total mass, c the slowest
   wave speed): an oscillating or falling body moves energy between the
@@ -122,7 +123,7 @@ class Detector:
     def step(self, report) -> list[Trip]:
         """Speed and inversion after a step (mpm.solver.StepReport); the
         boundaries' work of the step is added to W_in."""
-        self.work += report.boundary_work / self.n_grids
+        self.work += report.boundary_work / self.n_grids + report.load_work
         trips = []
         for b, name in enumerate(self.names):
             J = float(report.min_J[b]) if np.isfinite(report.min_J[b]) else 1.0
@@ -317,7 +318,7 @@ def make_detection(energy_on: bool):
     @wp.func
     def step(control: StepControl, status: StepStatus, laws: BodyLaws, params: DetectParams, n_bodies: int):
         """Speed and inversion after the step; its boundaries' work is added."""
-        control.work[0] = control.work[0] + status.boundary_work[0] / params.n_grids
+        control.work[0] = control.work[0] + status.boundary_work[0] / params.n_grids + status.load_work[0]
         tripped = bool(False)
         fired = int(0)
         for b in range(n_bodies):

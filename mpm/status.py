@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-STEP, BODY, BOX, TRIP, DIAG, AXIS = "step", "body", "box", "trip", "diag", "axis"
+STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD = "step", "body", "box", "trip", "diag", "axis", "load"
 TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stability)
 
 # why the steps stopped: the host acts, then (PAUSE, REGRID) the run goes on
@@ -39,7 +39,7 @@ HALTS = ("running", "done", "pause", "regrid", "nonfinite", "outside", "detectio
 @dataclass(frozen=True)
 class Field:
     name: str
-    per: str  # STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS
+    per: str  # STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis)
     reset: float  # the value before a step (the identity of its reduction), or at the start
     doc: str
 
@@ -49,6 +49,7 @@ FIELDS = (
     Field("nonfinite", STEP, 0.0, "particles with a non-finite position, velocity or F^sn"),
     Field("outside", STEP, 0.0, "particles that left the domain interior"),
     Field("boundary_work", STEP, 0.0, "positive work of the boundary conditions on the grid, all grids [J]"),
+    Field("load_work", STEP, 0.0, "work of the external loads over the step, dt sum f_p . v_p [J] (mpm.loads)"),
     Field("kinetic", STEP, 0.0, "kinetic energy of the new state [J] (track_energy)"),
     Field("potential", STEP, 0.0, "its gravitational potential energy -sum m g . x [J] (track_energy)"),
     Field("elastic", STEP, 0.0, "elastic energy of the state the step started from [J] (P2G)"),
@@ -67,6 +68,7 @@ FIELDS = (
     Field("max_F_norm", BODY, 0.0, "the largest |F^sn|_inf (walls-only Lagrangian scenes)"),
     Field("box_lo", BOX, math.inf, "bounding box of the new positions, lower corner [m]"),
     Field("box_hi", BOX, -math.inf, "upper corner [m]"),
+    Field("load_position", LOAD, 0.0, "mean position of each load's particles at the step's start [m] (mpm.loads)"),
     Field("trip", TRIP, 0.0, "the trips' records (TRIP_SIZE values each, mpm.stability)"),
     Field("diagnostics", DIAG, 0.0, "the new state's diagnostics as summed (mpm.diagnostics)"),
 )
@@ -125,11 +127,12 @@ class StepBuffer:
     :class:`StepControl` (``control``): :meth:`reset` (the status), :meth:`read`,
     ``flat`` (one row of the history)."""
 
-    def __init__(self, n_bodies: int, dim: int, n_diagnostics: int, device, max_trips: int | None = None):
-        self.n_bodies, self.dim = n_bodies, dim
+    def __init__(self, n_bodies: int, dim: int, n_diagnostics: int, device, max_trips: int | None = None,
+                 n_loads: int = 0):
+        self.n_bodies, self.dim, self.n_loads = n_bodies, dim, n_loads
         self.max_trips = max_trips if max_trips is not None else 1 + 3 * n_bodies
         sizes = {STEP: 1, BODY: n_bodies, BOX: n_bodies * dim, TRIP: TRIP_SIZE * self.max_trips,
-                 DIAG: n_diagnostics, AXIS: dim}
+                 DIAG: n_diagnostics, AXIS: dim, LOAD: max(n_loads, 1) * dim}
         self.slices: dict[str, slice] = {}
         start = 0
         for f in FIELDS + CONTROL:
@@ -201,6 +204,8 @@ class StepReport:
     body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s] (track_energy; else 0)
     min_F_stretch: np.ndarray | None = None  # per body: smallest singular value of F (track_J; else inf)
     boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
+    load_work: float = 0.0  # [J] work of the external loads over the step (mpm.loads)
+    load_position: np.ndarray | None = None  # per load: its particles' mean position at the step's start [m]
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
     removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
@@ -240,7 +245,8 @@ class StepReport:
             box_hi=v["box_hi"].reshape(nb, dim).copy(), body_speed=np.sqrt(v["max_speed2"]),
             min_F_stretch=np.sqrt(v["min_F_stretch2"]),
             max_F_norm=v["max_F_norm"].copy() if reach else None,
-            boundary_work=float(v["boundary_work"][0]), contact_nodes=int(v["contact_nodes"][0]),
+            boundary_work=float(v["boundary_work"][0]), load_work=float(v["load_work"][0]),
+            load_position=v["load_position"].reshape(-1, dim).copy(), contact_nodes=int(v["contact_nodes"][0]),
             removed=removed.astype(np.int64) if removed.any() else None,
             kinetic=float(v["kinetic"][0]) if energy else float("nan"),
             potential=float(v["potential"][0]) if energy else float("nan"),

@@ -16,6 +16,7 @@ import numpy as np
 import warp as wp
 
 from .g2p import make_g2p
+from .loads import Loads
 from .p2g import make_p2g
 from .scene import WALL_TYPES
 
@@ -52,7 +53,8 @@ class Transfers:
     ``fused``: stencils located in the transfers instead of cached
     (mpm.stencil.fuse); ``commit``: G2P does the configuration update too;
     ``with_stress`` False: P2G leaves the stress to the implicit solve;
-    ``forcing``: a manufactured solution's body force (mpm.analytic);
+    ``forcing``: a manufactured solution's body force (mpm.analytic), set on
+    the host; the model's external loads (mpm.loads) set it on the device;
     ``bound_reach``: G2P bounds |F^sn|_inf (walls-only Lagrangian scenes);
     ``removal``: particles leave at open faces; ``marks``: count dJ >=
     epsilon; ``epsilon``: the criterion's threshold."""
@@ -64,7 +66,8 @@ class Transfers:
         t, k = model.types, model.kernel
         self.model, self.launch, self.buffer = model, launch, buffer
         self.forcing = forcing
-        self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, forcing is not None, lagrangian=lagrangian,
+        body_force = forcing is not None or model.loads is not None
+        self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, body_force, lagrangian=lagrangian,
                               with_stress=with_stress, fused=fused, batched=batched), g) for g in model.groups]
         self.g2p = make_g2p(t, k, transfer, record_dJ, marks, lagrangian=lagrangian,
                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
@@ -79,16 +82,22 @@ class Transfers:
         self.epsilon = t.scalar(epsilon if np.isfinite(epsilon) else 0.0)
         with wp.ScopedDevice(model.device):
             # body force per unit mass [m/s^2] of a manufactured solution, set every step
-            self.body_force = wp.zeros(model.n_particles if forcing else 1, dtype=t.vec)
+            # or of the external loads, set at every step's start
+            self.body_force = wp.zeros(model.n_particles if body_force else 1, dtype=t.vec)
+        self.loads = Loads(model, launch, buffer, self.body_force) if model.loads is not None else None
 
     def kernels(self) -> list:
-        return [k for k, _ in self.p2g] + [self.g2p]
+        return [k for k, _ in self.p2g] + [self.g2p] + (self.loads.kernels() if self.loads else [])
 
-    def apply_forcing(self, X0: np.ndarray, time: float) -> None:
-        """The manufactured solution's body force at the initial positions
+    def apply_forcing(self, state, X0: np.ndarray, time: float) -> None:
+        """The body force of the step: the external loads' at the device's
+        step start, or the manufactured solution's at the initial positions
         ``X0`` [m] and ``time`` [s] (host)."""
-        b = self.forcing.body_force(X0, time)
-        self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
+        if self.loads is not None:
+            self.loads.apply(state)
+        if self.forcing is not None:
+            b = self.forcing.body_force(X0, time)
+            self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
 
     def rasterize(self, state, grid, layout, const, write: bool) -> None:
         """P2G over the device's step: the plastic return mapping (stored when

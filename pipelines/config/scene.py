@@ -13,6 +13,7 @@ import numpy as np
 from omegaconf import MISSING, OmegaConf
 
 import mpm
+from mpm.loads import LOAD_KINDS, Load
 from mpm.materials import Material
 from mpm.sampling import PARTICLE_VOLUMES
 from mpm.scene import CONTACT_TYPES, WALL_TYPES
@@ -22,7 +23,7 @@ from .fields import ConfigError, Context, Family, check, choice, number, plain, 
 from .physics import MATERIAL
 from .shapes import SHAPES, ShapeConfig, fixed_shape
 
-__all__ = ["BodyConfig", "ColliderConfig", "RegionConfig", "SceneConfig", "ShapeConfig", "make_scene"]
+__all__ = ["BodyConfig", "ColliderConfig", "LoadConfig", "RegionConfig", "SceneConfig", "ShapeConfig", "make_scene"]
 
 
 def angular(key: str, w, ctx: Context):
@@ -87,6 +88,53 @@ class RegionConfig:
                                             size="dim")
     start: float = setting(0.0, "[s] when the motion starts", ge=0.0)
     end: Optional[float] = setting(None, "[s] when it ends; null: never")
+
+    def problems(self):
+        if self.end is not None and not self.end > self.start:
+            return [("end", f"{self.end} out of range; accepted: end > start ({self.start})")]
+        return []
+
+
+def profile_table(key: str, value, ctx: Context):
+    """Rows [t - start (s), factor]: times >= 0 and non-decreasing."""
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ConfigError(key, f"{value!r}; accepted: a list of [t - start (s), factor] rows")
+    rows = [vector(f"{key}[{i}]", row, 2) for i, row in enumerate(value)]
+    for i, (a, b) in enumerate(zip(rows, rows[1:])):
+        if b[0] < a[0]:
+            raise ConfigError(f"{key}[{i + 1}]", f"time {b[0]} before the row above's {a[0]}; accepted: "
+                                                 "non-decreasing times")
+    if rows[0][0] < 0.0:
+        raise ConfigError(f"{key}[0]", f"time {rows[0][0]}; accepted: >= 0 (after start)")
+    return rows
+
+
+@dataclass
+class LoadConfig:
+    """An external load (mpm.loads): a point load, a traction on a face or a
+    body force on a region, scaled in time by its profile (constant, a ramp
+    or a table) while start <= t < end."""
+
+    name: str = setting("", "a name for the recording")
+    kind: str = setting("point", "point (a total force [N]; 2D: N per m of depth), traction (force per area "
+                                 "[Pa] on a face) or body (force per volume [N/m^3])", choices=LOAD_KINDS)
+    force: List[float] = setting([0.0, 0.0], "the force, traction or force density at factor 1", size="dim")
+    body: Any = setting(None, "the body: its index or name; null: every body", parse=body_ref)
+    select: Optional[ShapeConfig] = setting(None, "the initial positions it takes (traction: the face is its "
+                                                  "outermost layer along normal; body: null takes the whole "
+                                                  "body)", parse=fixed_shape)
+    at: Optional[List[float]] = setting(None, "[m] a point load on the count particles nearest this point",
+                                        size="dim")
+    count: int = setting(1, "the particles a point load at 'at' is shared by", ge=1)
+    normal: Optional[List[float]] = setting(None, "a traction's face: its outward normal", size="dim")
+    area: Optional[float] = setting(None, "a traction's face area [m^2; 2D: m] its particles' areas are scaled "
+                                          "to; null: sum V_p / s (exact for a face spanning whole sampling "
+                                          "spacings)", gt=0.0)
+    start: float = setting(0.0, "[s] when the load starts", ge=0.0)
+    end: Optional[float] = setting(None, "[s] when it ends; null: never")
+    ramp: float = setting(0.0, "[s] a linear rise from 0 to the full load; 0: sudden", ge=0.0)
+    table: Optional[Any] = setting(None, "rows [t - start (s), factor] interpolated linearly, held at both "
+                                         "ends (instead of ramp)", parse=profile_table)
 
     def problems(self):
         if self.end is not None and not self.end > self.start:
@@ -203,6 +251,7 @@ class SceneConfig:
                                   gt=0.0, le=1.0)
     bodies: List[BodyConfig] = setting([], "the bodies", nonempty="at least one body")
     regions: List[RegionConfig] = setting([], "kinematic boundary regions")
+    loads: List[LoadConfig] = setting([], "external loads: point loads, tractions, body forces")
     colliders: List[ColliderConfig] = setting([], "rigid colliders", family=COLLIDERS)
     size: str = setting("default", "a key of sizes: its values replace resolution, ppc, ...")
     sizes: Dict[str, Any] = setting({}, "name -> {resolution: ..., ppc: ...}")
@@ -240,15 +289,17 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                        name=b.name or f"body{i}", velocity=b.velocity, angular_velocity=b.angular_velocity,
                        ppc=b.ppc, deformation=b.deformation) for i, b in enumerate(sc.bodies)]
     names = [b.name for b in bodies]
+    def body_index(key: str, body):
+        if body is None:
+            return None
+        if isinstance(body, str):
+            return names.index(choice(key, body, names))
+        return number(key, body, int, {"keyed": True, "ge": 0, "le": len(bodies) - 1})
+
     regions = []
     for i, r in enumerate(sc.regions):
         rkey = f"{key}.regions[{i}]"
-        body = r.body
-        if isinstance(body, str):
-            body = choice(f"{rkey}.body", body, names)
-            body = names.index(body)
-        else:
-            number(f"{rkey}.body", body, int, {"keyed": True, "ge": 0, "le": len(bodies) - 1})
+        body = body_index(f"{rkey}.body", r.body)
         regions.append(mpm.KinematicRegion(
             body=body, select=r.select.build(f"{rkey}.select", replace(ctx, rng=None)), name=r.name,
             velocity=r.velocity, angular_velocity=r.angular_velocity, velocity_gradient=r.velocity_gradient,
@@ -258,9 +309,20 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
                       contact_fill=sc.contact_fill,
                       regions=regions, particle_resolution=sc.particle_resolution,
-                      colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)])
+                      colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)],
+                      loads=[_load(f"{key}.loads[{i}]", ld, body_index, ctx) for i, ld in enumerate(sc.loads)])
     scene.solution = _solution(sc.solution, f"{key}.solution", scene)
     return scene, sc
+
+
+def _load(key: str, ld: LoadConfig, body_index, ctx: Context) -> Load:
+    load = Load(kind=ld.kind, force=ld.force, body=body_index(f"{key}.body", ld.body),
+                select=None if ld.select is None else ld.select.build(f"{key}.select", replace(ctx, rng=None)),
+                at=ld.at, count=ld.count, normal=ld.normal, area=ld.area, start=ld.start,
+                end=math.inf if ld.end is None else ld.end, ramp=ld.ramp, table=ld.table, name=ld.name)
+    for name, message in load.problems(ctx.dim, 10**9):
+        raise ConfigError(f"{key}.{name}", message)
+    return load
 
 
 def _solution(solution, key: str, scene: mpm.Scene):

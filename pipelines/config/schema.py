@@ -77,10 +77,11 @@ def group_fields() -> dict[str, list[dataclasses.Field]]:
     """Every dataclass that defines a part of the configuration -> its fields
     (for the documentation and the tests)."""
     from .colliders import COLLIDERS
-    from .scene import SOLUTION, BodyConfig, RegionConfig
+    from .scene import SOLUTION, BodyConfig, LoadConfig, RegionConfig
     from .shapes import SHAPES
 
     classes = [Config, RunSettings, LogSettings, KernelConfig, MapSpec, SceneConfig, BodyConfig, RegionConfig,
+               LoadConfig,
                mpm.Detection]
     for family in (*GROUPS.values(), SHAPES, COLLIDERS, SOLUTION):
         classes += list(family.variants.values())

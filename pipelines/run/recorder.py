@@ -22,6 +22,7 @@ from mpm import analytic
 
 from . import run_metrics
 from .progress import Progress
+from .load_track import LoadTrack
 from .run_metrics import Drift, median, peak_rss_mb, plastic_fields
 from ..recording.sinks import RunMeta, Sink
 
@@ -67,6 +68,7 @@ class Recorder(mpm.Observer):
         self.fracture_step = -1
         self._pieces = None  # (fracture per body, fragments per body) at the last count
         self.inside_max = None  # per collider: the most particles seen inside it
+        self.loads: LoadTrack | None = None  # the external loads' track
         self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
         self.error_last: dict | None = None
         self._error_step = -1
@@ -148,6 +150,7 @@ class Recorder(mpm.Observer):
         log = self.spec.log
         self.started = True
         self.X0 = self.solver.X0  # initial positions [m], float64
+        self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
         self._pending[:] = [0, 0.0, driver.initial.copy(), {
             "config_updates": 0.0, **(self.errors() if self.solution is not None else {})}]
         if log.particles:
@@ -175,6 +178,9 @@ class Recorder(mpm.Observer):
         if report.removed is not None:
             self.record_removed(report)
         self.record_updates(report)
+        row = self.loads.add(report) if self.loads is not None else None  # the step's start: load, load point
+        if row and log.scalars:
+            self.sink.scalars(max(report.step - 1, 0), report.time - report.dt, row)
         self.sink.timings(self.step, self.t, {"step_time_ms": self.step_ms[-1], **(
             {"update_ms": self.update_ms[-1]} if report.updated else {})})
         t1 = time.perf_counter()
@@ -230,9 +236,8 @@ class Recorder(mpm.Observer):
 
     # ------------------------------------------------------------ scalars
     def measure(self, extra: dict, diagnostics: np.ndarray | None = None) -> None:
-        """The state just reached (its ``diagnostics``, as the driver measured
-        them, or measured now); its elastic energy arrives with the next step's
-        P2G (or from :meth:`finish`)."""
+        """The state just reached (its ``diagnostics``, as the driver measured them, or measured now); its
+        elastic energy arrives with the next step's P2G (or from :meth:`finish`)."""
         d = diagnostics.copy() if diagnostics is not None else self.solver.measure(self.state, elastic=False)
         self._pending[:] = [self.step, self.t, d, extra]
 
@@ -241,9 +246,7 @@ class Recorder(mpm.Observer):
         d[self.names.index("elastic_energy")] = elastic_energy
         self.drift.add(d)
         if self.spec.log.scalars:
-            row = dict(zip(self.names, d.tolist()))
-            row["total_energy"] = self.drift.energy(d)
-            row.update(extra)
+            row = {**dict(zip(self.names, d.tolist())), "total_energy": self.drift.energy(d), **extra}
             self.sink.scalars(step, t, row)
         self._pending.clear()
 
@@ -286,8 +289,7 @@ class Recorder(mpm.Observer):
     # ------------------------------------------------------------ particles
     def particles(self) -> None:
         """Particles, dJ and the plastic fields of the current state."""
-        # copies: on the CPU .numpy() is a view of memory the next step
-        # overwrites, and the sink may serialise later
+        # copies: on the CPU .numpy() is a view of memory the next step overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.solver.options.record_dJ else None
         fields = plastic_fields(self.model, self.state)
@@ -417,8 +419,8 @@ class Recorder(mpm.Observer):
             self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
         steps = self.step
         m.update(steps=steps, sim_time=self.t)
-        # (the last step, shortened to land on the duration, is not a step the rule chose;
-        # dt_reference_factor: the stable step against what a fresh reference would allow)
+        # (the last step, shortened to land on the duration, is not a step the rule chose; dt_reference_factor:
+        # the stable step against what a fresh reference would allow)
         m.update(self.driver.summary() if self.driver is not None else mpm.Driver.no_steps())
         m.update(step_time_ms=median(self.step_ms), log_time_ms=median(self.log_ms),
                  loop_time_s=sum(self.step_ms) / 1e3)
@@ -473,6 +475,8 @@ class Recorder(mpm.Observer):
         spilled = run_metrics.spilled(self.model, self.state)
         if spilled:
             m["spilled"] = spilled
+        if self.loads is not None:
+            m["loads"] = self.loads.summary(self.state.x.numpy().astype(np.float64), self.t)
         pieces = self.solver.fracture.fragments()  # exact at the end
         m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
         run_metrics.save_final_state(self.out_dir / "final_state.npz", self.model, self.state, self.X0, self.step,

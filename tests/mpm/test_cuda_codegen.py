@@ -74,6 +74,7 @@ import warp as wp
 import mpm
 from mpm.colliders import KINDS, Collider
 from mpm.kernels import Kernel
+from mpm.loads import Load
 from mpm.launch import kernel_name
 from mpm.material_point import MaterialPoint
 from mpm.meshes import MeshShape
@@ -175,6 +176,7 @@ class Case:
     track_energy: bool = False
     track_J: bool = False
     forcing: bool = False
+    loads: bool = False  # a point load, a traction and a body force (mpm.loads)
     batched: bool = False  # the driver runs 10 steps between read-backs (mpm.driver)
     detect: str | None = None  # the driver's blow-up detection: stop | warn | off (None: stop
     # with the step's energies, which the detection needs; off without them)
@@ -215,9 +217,15 @@ def scene(case: Case, dim: int) -> mpm.Scene:
         regions = [mpm.KinematicRegion(body=0, select=mpm.Box((centres[0],) + (0.5,) * (dim - 1), (0.05,) * dim),
                                        velocity=(0.1,) + (0.0,) * (dim - 1))]
     colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0) for i, k in enumerate(case.colliders)]
+    loads = []
+    if case.loads:
+        c, f = (centres[0],) + (0.5,) * (dim - 1), (0.0, -1.0, 0.0)[:dim]
+        loads = [Load("point", f, at=c, count=2), Load("body", f, ramp=0.1),
+                 Load("traction", f, select=mpm.Box(c, (0.2,) * dim), normal=(1.0,) + (0.0,) * (dim - 1),
+                      table=((0.0, 0.0), (0.1, 1.0), (0.2, 0.5)))]
     return mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, ppc=1, bodies=bodies,
                      gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact, regions=regions,
-                     colliders=colliders, solution=_Forcing() if case.forcing else None)
+                     colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads)
 
 
 def scheme(case: Case):
@@ -278,6 +286,8 @@ def cases(dim: int) -> list[Case]:
         Case(record_dJ=True, track_energy=True, track_J=True, fuse=True),
         Case(scheme="tlmpm", record_dJ=True, track_energy=True, track_J=True),
         Case(forcing=True), Case(scheme="tlmpm", materials=("neo_hookean",), forcing=True),
+        # external loads: explicit, implicit, in batches
+        Case(loads=True), Case(scheme="tlmpm", loads=True, implicit=True), Case(batched=True, loads=True),
         # the driver: its detection warning or off; steps in batches (every stage's early exits,
         # the device's configuration updates, its diagnostics), Eulerian fused and cached,
         # Lagrangian, with contact, regions, colliders and open walls

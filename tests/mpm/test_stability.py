@@ -180,7 +180,7 @@ def test_detector_criteria_on_synthetic_reports():
     limit = 4.0 * (c + 3.0 + np.sqrt(1.0 + 2 * 10.0 * 2.0))
 
     def report(speed, J, stretch):
-        return SimpleNamespace(boundary_work=0.0, min_J=np.array([J, J]), stiffening=np.zeros(2),
+        return SimpleNamespace(boundary_work=0.0, load_work=0.0, min_J=np.array([J, J]), stiffening=np.zeros(2),
                                body_speed=np.array([speed, 0.0]), min_F_stretch=np.array([stretch, stretch]))
 
     assert det.speed_limit(0, 1.0, 0.0) == pytest.approx(limit)
