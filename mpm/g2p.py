@@ -1,6 +1,7 @@
 """Grid to particle (G2P), averaged over the kernel's G grids (A-ULMPM paper,
 eq. 28, 30, 31; notation: mpm.transfer):
     v_p = 1/G sum_g sum_i W_ip v_i,   C_p = 1/G sum_g sum_i W_ip v_i r^T K_p (MLS, APIC),
+    FLIP: v_p <- v_p^PIC + beta (v_p^n - 1/G sum_g sum_i W_ip p0_i / m_i) (the blend beta),
     x_p += dt v_p,   F^{sn} += dt grad v,   dJ_p = |det F^{sn} - 1|,
 grad v = C_p for MLS, 1/G sum v_i grad_ip^T for APIC and PIC. On the way,
 the step's stability figures (mpm.status).
@@ -101,7 +102,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     min_stretch2 = make_min_stretch2(t)
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
-    affine = transfer != "pic"
+    affine = transfer not in ("pic", "flip")
+    flip = transfer == "flip"
     affine_from_gradient = affine and kernel.gradient_affine
     with_B = affine and not affine_from_gradient  # B = sum w v r^T for C
     reference, cached = make_cached(t, kernel, not mls, fused)
@@ -154,6 +156,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         shape: wp.array(dtype=t.ivec),
         # Grid in:
         grid_v: wp.array(dtype=t.vec),
+        grid_m: wp.array(dtype=S),  # (FLIP)
+        grid_p0: wp.array(dtype=t.vec),  # FLIP: the momentum P2G transferred alone
+        flip_share: S,  # FLIP: beta, the share of the particle's own velocity updated by the grid's change
         # Stencil cache:
         cache: Cache,
         # Step:
@@ -194,6 +199,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                     commit_reference(p, x[p], Fsn[p], F0s[p], body_params[b], F0s, Fsn, cache, dx)
                 return
         vp = vec()
+        v_transferred = vec()  # FLIP: sum w p0_i / m_i
         B = mat()
         grad_v = mat()
         u0, ph = reference(p, cache)
@@ -215,6 +221,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                         w, r, i = node(a, bb, c, flat, fx, W, st, dx)
                         vi = grid_v[i]
                         wv = w * vi
+                        if wp.static(flip):
+                            if w > S(0.0):
+                                v_transferred += (w / grid_m[i]) * grid_p0[i]
                         vb += wv
                         if wp.static(dim == 3):
                             col2, rc = slab(col2, rc, wv)
@@ -230,6 +239,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 else:
                     B += dx * wp.matrix_from_cols(col0, col1)
         vp = S(inv_G) * vp
+        v_new = vp  # the particle's new velocity (the positions move with PIC's, vp)
+        if wp.static(flip):
+            v_new = vp + flip_share * (v[p] - S(inv_G) * v_transferred)
         Cp = mat()
         if wp.static(mls):
             if wp.static(per_particle_K):
@@ -268,7 +280,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                     commit_reference(p, xp, Fsn_old, F0s[p], body_params[b], F0s, Fsn, cache, dx)
                 return
         x[p] = xp
-        v[p] = vp
+        v[p] = v_new
         C[p] = Cp
         if wp.static(not commit):
             Fsn[p] = Fs
@@ -296,13 +308,13 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         wp.atomic_max(status.max_rate2, b, f64(rate2))
 
         # stability monitor and bounding box of the new positions
-        v2 = f64(wp.dot(vp, vp))
+        v2 = f64(wp.dot(v_new, v_new))
         wp.atomic_max(status.max_v2, 0, v2)
         if wp.static(track_energy):
             wp.atomic_add(status.kinetic, 0, f64(0.5) * f64(mass[p]) * v2)
             wp.atomic_add(status.potential, 0, -f64(mass[p]) * f64(wp.dot(gravity, xp)))
             wp.atomic_max(status.max_speed2, b, v2)
-        if not (wp.isfinite(xp) and wp.isfinite(vp) and wp.isfinite(Fs)):
+        if not (wp.isfinite(xp) and wp.isfinite(v_new) and wp.isfinite(Fs)):
             wp.atomic_add(status.nonfinite, 0, f64(1.0))
         else:
             outside = False

@@ -107,15 +107,16 @@ class GridLayout:
 class GridArrays:
     """The nodal fields of every box of a :class:`GridLayout`, flat: mass
     ``m``, momentum then velocity ``v``, mass-weighted then current node
-    position ``q``, and with kinematic regions the mass each node draws from
-    a region ``kin`` and the region's number ``kin_id``. The arrays grow
+    position ``q``, with kinematic regions the mass each node draws from
+    a region ``kin`` and the region's number ``kin_id``, and with the FLIP
+    transfer the momentum transferred alone ``p0``. The arrays grow
     (by half again) when the layout no longer fits; :meth:`live` views the
     layout's nodes."""
 
-    def __init__(self, t: Types, device, regions: bool):
-        self.t, self.device, self.regions = t, device, regions
+    def __init__(self, t: Types, device, regions: bool, flip: bool = False):
+        self.t, self.device, self.regions, self.flip = t, device, regions, flip
         self.capacity = 0
-        self.m = self.v = self.q = self.kin = self.kin_id = None
+        self.m = self.v = self.q = self.kin = self.kin_id = self.p0 = None
         self._views = None  # (node count, m, views) of live()
 
     def reserve(self, n: int) -> None:
@@ -131,21 +132,24 @@ class GridArrays:
             n_kin = self.capacity if self.regions else 1
             self.kin = wp.zeros(n_kin, dtype=t.scalar)
             self.kin_id = wp.zeros(n_kin, dtype=wp.int32)
+            self.p0 = wp.zeros(self.capacity if self.flip else 1, dtype=t.vec)
 
     def live(self, n: int) -> tuple:
-        """Views (m, v, q, kin, kin_id) of the first ``n`` nodes (kept while the
+        """Views (m, v, q, kin, kin_id, p0) of the first ``n`` nodes (kept while the
         node count and the arrays stay: slicing a Warp array every step costs
         more host time than zeroing the 2D ball's grid)."""
         if self._views is None or self._views[0] != n or self._views[1] is not self.m:
-            arrays = (self.m, self.v, self.q, self.kin, self.kin_id)
+            arrays = (self.m, self.v, self.q, self.kin, self.kin_id, self.p0)
             self._views = (n, self.m, tuple(a[:n] if len(a) >= n else a for a in arrays))
         return self._views[2]
 
     def clear(self, n: int, positions: bool) -> None:
         """Zero the first ``n`` nodes' fields (the positions only if ``positions``)."""
-        m, v, q, kin, kin_id = self.live(n)
+        m, v, q, kin, kin_id, p0 = self.live(n)
         m.zero_()
         v.zero_()
+        if self.flip:
+            p0.zero_()
         if positions:
             q.zero_()
         if self.regions:

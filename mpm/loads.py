@@ -256,9 +256,10 @@ def make_apply_loads(t: Types):
         tau = time - w[0]
         a = first[l]
         b = first[l + 1]
-        k = a
-        while k < b and table_t[k] <= tau:
-            k = k + 1
+        k = a  # the first row after tau (the times do not decrease)
+        for j in range(a, b):
+            if table_t[j] <= tau:
+                k = j + 1
         if k == a:
             return table_f[a]
         if k == b:

@@ -7,6 +7,7 @@ mpm.materials.plastic):
     m_i      = sum_p W_ip m_p
     m_i v_i  = sum_p W_ip [m_p v_p + m_p C_p r] - dt V_p^0 P(F^{0n}) F^{0s,T} grad_ip
     m_i q_i  = sum_p W_ip m_p (x_p + F^{sn}_p r)     (current node positions)
+    p0_i     = sum_p W_ip m_p v_p                    (FLIP: the momentum transferred alone)
 with grad_ip = K_p r W_ip for the MLS transfer (force and momentum fused as in
 MLS-MPM) and the kernel's own weight gradient for APIC and PIC (no affine
 term for PIC). After division by m_i the nodal velocity holds the internal-
@@ -72,7 +73,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     needs_L = material.needs_velocity_gradient
     per_particle_K = kernel.moment is None
     mls = transfer == "mls" and not kernel.gradient_affine
-    affine = transfer != "pic"
+    affine = transfer not in ("pic", "flip")
+    flip = transfer == "flip"
     reference, cached = make_cached(t, kernel, not mls, fused)
     plastic = material.plastic
     plastic_update = stiffening = stress_energy = None
@@ -121,6 +123,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         grid_m: wp.array(dtype=S),
         grid_mv: wp.array(dtype=t.vec),
         grid_mq: wp.array(dtype=t.vec),
+        grid_p0: wp.array(dtype=t.vec),  # FLIP: the transferred momentum alone, sum w m v
         region: wp.array(dtype=wp.int32),
         grid_kin: wp.array(dtype=S),
         grid_kin_id: wp.array(dtype=wp.int32),
@@ -165,6 +168,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         if wp.static(not with_stress):
             stress = t.mat()
         mv = m * v[p]
+        mv0 = mv
         if wp.static(with_body_force):
             mv = mv + (m * dt) * body_force[p]
         mC = m * Cp
@@ -214,6 +218,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                         if wp.static(positions):
                             if sum_positions != 0:
                                 wp.atomic_add(grid_mq, i, w * qc)
+                        if wp.static(flip):
+                            wp.atomic_add(grid_p0, i, w * mv0)
                         if wp.static(with_regions):
                             if rid > 0:
                                 wp.atomic_add(grid_kin, i, w * m)

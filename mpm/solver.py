@@ -42,7 +42,7 @@ from .schemes import AULMPM, EMPM, scene_kind
 from .status import StepBuffer, StepReport
 from .stencil import fuse
 from .timestep import StepRule
-from .transfer import TRANSFERS, GridConstants, Transfers
+from .transfer import AFFINE_FREE, TRANSFERS, GridConstants, Transfers
 
 
 @dataclass
@@ -50,7 +50,10 @@ class SolverOptions:
     record_dJ: bool = False
     """write the per-particle dJ field every step (for logging)"""
     transfer: str = "mls"
-    """mls | apic | pic (mpm.transfer.TRANSFERS)"""
+    """mls | apic | pic | flip (mpm.transfer.TRANSFERS)"""
+    flip: float = 0.95
+    """the flip transfer's blend: the share of the particle's velocity updated
+    by the grid's change (1: FLIP, 0: PIC)"""
     integrator: Explicit | Implicit = field(default_factory=Explicit)
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
     track_J: bool = False
@@ -74,6 +77,13 @@ class SolverOptions:
     let :class:`mpm.Driver` run several steps between two read-backs
     (its ``sync_every`` > 1; explicit integrator only)"""
 
+    def check(self) -> None:
+        """ValueError naming the option for a transfer or blend out of range."""
+        if self.transfer not in TRANSFERS:
+            raise ValueError(f"transfer {self.transfer!r}; accepted: {', '.join(TRANSFERS)}")
+        if not 0.0 <= self.flip <= 1.0:
+            raise ValueError(f"flip {self.flip!r}; accepted: 0 <= flip <= 1")
+
 
 class Solver:
     """Advances a :class:`State` of a :class:`Model` with a scheme. Its parts are public: ``layout``,
@@ -88,8 +98,7 @@ class Solver:
             scheme = scheme.resolved(scene_kind(b.material for b in model.scene.bodies))
         self.scheme, self.options = scheme, options or SolverOptions()
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
-        if opt.transfer not in TRANSFERS:
-            raise ValueError(f"transfer {opt.transfer!r}; accepted: {', '.join(TRANSFERS)}")
+        opt.check()
         if scene.contact == "shared" and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
         implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched
@@ -101,7 +110,7 @@ class Solver:
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
-        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0)
+        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip")
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched)
                         if nb > 1 and scene.contact == "frictionless" else None)
@@ -123,8 +132,8 @@ class Solver:
             record_dJ=opt.record_dJ, marks=scheme.tracks_marks(), epsilon=getattr(scheme, "epsilon", None) or 0.0,
             track_energy=opt.track_energy, track_J=opt.track_J, removal=self.conditions.open,
             bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
-            batched=batched)
-        per_particle_K = k.moment is None and opt.transfer != "pic"  # K_p cached per particle
+            batched=batched, flip=opt.flip)
+        per_particle_K = k.moment is None and opt.transfer not in AFFINE_FREE  # K_p cached per particle
         self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
                                      affine=scheme.affine,
                                      gradients=opt.transfer != "mls" or k.gradient_affine, fused=self.fused,

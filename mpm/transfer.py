@@ -20,10 +20,15 @@ from .loads import Loads
 from .p2g import make_p2g
 from .scene import WALL_TYPES
 
-TRANSFERS = ("mls", "apic", "pic")
+TRANSFERS = ("mls", "apic", "pic", "flip")
 """mls: affine momentum with C, MLS force K_p r w (Hu et al. 2018); apic:
 affine momentum, force and F from the kernel gradient (Jiang et al. 2015);
-pic: no affine term, force and F from the kernel gradient."""
+pic: no affine term, force and F from the kernel gradient; flip: as pic, and
+G2P blends the particle's own velocity updated by the grid's change (FLIP,
+Brackbill & Ruppel 1986) into PIC's (``SolverOptions.flip``, Zhu & Bridson
+2005's PIC/FLIP blend)."""
+AFFINE_FREE = ("pic", "flip")
+"""the transfers without an affine term C (no MLS moment read)"""
 
 
 @dataclass(frozen=True)
@@ -62,9 +67,10 @@ class Transfers:
     def __init__(self, model, launch, buffer, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
                  with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
                  track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None,
-                 batched: bool = False):
+                 batched: bool = False, flip: float = 0.0):
         t, k = model.types, model.kernel
         self.model, self.launch, self.buffer = model, launch, buffer
+        self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
         self.forcing = forcing
         body_force = forcing is not None or model.loads is not None
         self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, body_force, lagrangian=lagrangian,
@@ -109,7 +115,7 @@ class Transfers:
             self.launch(kernel, g.count, [
                 m.mass, m.volume, m.body, m.body_params, layout.shape_d, state.x, state.v, state.C,
                 state.F0s, state.Fsn, self.body_force, state.history, state.stencils, const.dx, const.K,
-                g.start, int(write), grid.m, grid.v, grid.q, m.region, grid.kin, grid.kin_id, b.status,
+                g.start, int(write), grid.m, grid.v, grid.q, grid.p0, m.region, grid.kin, grid.kin_id, b.status,
                 b.control])
 
     def interpolate(self, state, grid, layout, const) -> None:
@@ -117,6 +123,7 @@ class Transfers:
         F^sn, the criterion's counts and the step's figures."""
         m, b = self.model, self.buffer
         self.launch(self.g2p, m.n_particles, [
-            m.body, layout.shape_d, grid.v, state.stencils, const.dx, const.K, b.control, self.epsilon,
+            m.body, layout.shape_d, grid.v, grid.m, grid.p0, self.flip, state.stencils, const.dx, const.K, b.control,
+            self.epsilon,
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
             m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params])

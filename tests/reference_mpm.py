@@ -269,7 +269,7 @@ def node_momentum(transfer, w, m, v, C, S, Kp, r, grad):
 
 
 def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravity, walls, dt,
-                 transfer="mls", wall_cells=3, body=None):
+                 transfer="mls", wall_cells=3, body=None, flip=0.95):
     """One Eulerian step with a B-spline kernel (``kernel``: linear, quadratic,
     cubic) and a transfer (mls, apic, pic); returns new (x, v, C, F). Each
     body on a grid of its own (``body``: per-particle body index).
@@ -278,6 +278,8 @@ def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravit
         apic: m_i v_i += w (m v + m C r) - dt V P F^T grad w,  C <- B K_p,
               F <- (I + dt sum v_i grad w^T) F
         pic:  m_i v_i += w m v - dt V P F^T grad w,  C <- 0,  F as apic
+        flip: as pic, then v_p <- v_pic + flip (v_p - sum w p0_i / m_i),
+              p0_i = sum w m v (the momentum transferred alone); x moves with v_pic
     with B = sum w v_i r^T and K_p = D_p^-1. Walls act on nodes within
     (wall_cells - 1/2) dx of a face (:func:`apply_walls`)."""
     if body is not None and len(np.unique(body)) > 1:
@@ -286,7 +288,7 @@ def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravit
             sel = body == b
             res = bspline_step(x[sel], v[sel], C[sel], F[sel], mass[sel], vol[sel],
                                [mo for mo, s in zip(models, sel) if s], [pr for pr, s in zip(prms, sel) if s],
-                               kernel, dx, domain, gravity, walls, dt, transfer, wall_cells)
+                               kernel, dx, domain, gravity, walls, dt, transfer, wall_cells, flip=flip)
             for o, r in zip(out, res):
                 o[sel] = r
         return tuple(out)
@@ -295,25 +297,31 @@ def bspline_step(x, v, C, F, mass, vol, models, prms, kernel, dx, domain, gravit
     band = (wall_cells - 0.5) * dx
     stencils = [bspline_stencil(order, x[p], dx) for p in range(n)]
     Kp = [np.linalg.inv(sum(w * np.outer(r, r) for _, w, _, r in st)) for st in stencils]
-    m_i, mv_i = {}, {}
+    m_i, mv_i, p0_i = {}, {}, {}
     for p in range(n):
         S = dt * vol[p] * stress(models[p], F[p], C[p], prms[p]) @ F[p].T
         for key, w, grad, r in stencils[p]:
             m_i[key] = m_i.get(key, 0.0) + w * mass[p]
             mv_i[key] = mv_i.get(key, 0.0) + node_momentum(transfer, w, mass[p], v[p], C[p], S, Kp[p], r, grad)
+            p0_i[key] = p0_i.get(key, 0.0) + w * mass[p] * v[p]
     v_i = {key: (apply_walls(mv_i[key] / m + dt * np.asarray(gravity), np.array(key) * dx, domain, walls, band)
                  if m > 0 else np.zeros(d)) for key, m in m_i.items()}
     xn, vn, Cn, Fn = x.copy(), np.zeros_like(v), np.zeros_like(C), F.copy()
     for p in range(n):
         B = np.zeros((d, d))
         G = np.zeros((d, d))
+        transferred = np.zeros(d)
         for key, w, grad, r in stencils[p]:
             vn[p] += w * v_i[key]
             B += w * np.outer(v_i[key], r)
             G += np.outer(v_i[key], grad)
-        Cn[p] = B @ Kp[p] if transfer != "pic" else 0.0
+            if w > 0:
+                transferred += w * p0_i[key] / m_i[key]
+        Cn[p] = B @ Kp[p] if transfer not in ("pic", "flip") else 0.0
         grad_v = Cn[p] if transfer == "mls" else G
         xn[p] = x[p] + dt * vn[p]
+        if transfer == "flip":
+            vn[p] = vn[p] + flip * (v[p] - transferred)
         Fn[p] = (np.eye(d) + dt * grad_v) @ F[p]
         if models[p] == "fluid":
             Fn[p] = np.linalg.det(Fn[p]) ** (1.0 / d) * np.eye(d)

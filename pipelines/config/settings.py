@@ -108,7 +108,10 @@ class KernelConfig:
     """Interpolation kernel (mpm.kernels) and the transfer that uses it (mpm.transfer)."""
 
     name: str = setting("quadratic", "the kernel", choices=tuple(mpm.KERNELS))
-    transfer: str = setting("mls", "the transfer of the affine velocity field", choices=TRANSFERS)
+    transfer: str = setting("mls", "the transfer: mls, apic (affine), pic, flip (a PIC/FLIP blend)",
+                            choices=TRANSFERS)
+    flip: float = setting(0.95, "transfer=flip: the share of each particle's own velocity updated by the grid's "
+                                "change (1: FLIP, 0: PIC)", ge=0.0, le=1.0)
 
 
 @dataclass

@@ -42,6 +42,7 @@ class RunSpec:
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
     detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
     stability_map: MapSpec | None = None  # the job is a stability map (pipelines.sweeps.stability)
+    flip: float = 0.95  # the flip transfer's blend (mpm.SolverOptions.flip)
     material_used: bool = True  # some body takes the material group (else every body brings its own)
 
     @property
@@ -166,4 +167,5 @@ def resolve(cfg) -> RunSpec:
             run.device = "cpu"
     return RunSpec(scene=scene, scene_name=str(sc.name), scheme=scheme, kernel=mpm.KERNELS[kernel.name],
                    transfer=kernel.transfer, run=run, log=log, seed=seed, integrator=integrator, detect=detect,
-                   stability_map=stability_map, material_used=any(b.material is None for b in sc.bodies))
+                   stability_map=stability_map, flip=kernel.flip,
+                   material_used=any(b.material is None for b in sc.bodies))

@@ -66,7 +66,7 @@ def solver_options(spec: RunSpec) -> mpm.SolverOptions:
     detection's measurements only when it is on, the batched steps' early
     exits only when the host reads back less than every step."""
     detect = spec.detect.action != "off"
-    return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer,
+    return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer, flip=spec.flip,
                              integrator=spec.integrator, track_energy=detect, fuse=spec.run.fuse,
                              track_J=detect and any(not b.material.invertible for b in spec.scene.bodies),
                              batched=sync_every(spec) > 1)

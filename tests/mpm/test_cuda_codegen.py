@@ -270,7 +270,7 @@ def cases(dim: int) -> list[Case]:
         out.append(Case(scheme="tlmpm", kernel=k, transfer=tr, implicit=True))
     # every material implicit; the options; all on the linear kernel, the quickest to
     # compile (their code does not depend on the kernel)
-    out += [Case(materials=(m,), transfer=TRANSFERS[i % 3], implicit=True) for i, m in enumerate(materials)]
+    out += [Case(materials=(m,), transfer=TRANSFERS[i % len(TRANSFERS)], implicit=True) for i, m in enumerate(materials)]
     out += [
         Case(), Case(scheme="aulmpm_paper"), Case(scheme="aulmpm_rotate"),
         Case(scheme="tlmpm", implicit=True, psd=False),

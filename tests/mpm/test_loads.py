@@ -111,9 +111,11 @@ def test_a_bad_load_is_refused_naming_its_field(load, key):
 
 
 # ------------------------------------------------------------------ the impulse, every scheme and integrator
-@pytest.mark.parametrize("scheme, integrator", [
-    ("empm", "explicit"), ("tlmpm", "explicit"), ("aulmpm", "explicit"), ("empm", "implicit"), ("tlmpm", "implicit")])
-def test_momentum_gained_is_the_loads_impulse(scheme, integrator):
+@pytest.mark.parametrize("scheme, integrator, transfer", [
+    ("empm", "explicit", "mls"), ("tlmpm", "explicit", "mls"), ("aulmpm", "explicit", "mls"),
+    ("empm", "implicit", "mls"), ("tlmpm", "implicit", "apic"), ("empm", "explicit", "flip"),
+    ("tlmpm", "explicit", "flip"), ("tlmpm", "explicit", "pic")])
+def test_momentum_gained_is_the_loads_impulse(scheme, integrator, transfer):
     """A free body (no gravity, no wall reached): every transfer conserves
     momentum, so after n steps sum_p m_p v_p = sum_n dt F(t_n), the loads'
     total force at each step's start (the profiles evaluated on the device
@@ -124,7 +126,8 @@ def test_momentum_gained_is_the_loads_impulse(scheme, integrator):
              Load("body", (0.0, 20.0), ramp=0.003)]
     model, state = mpm.build(bar_scene(loads, resolution=32), QUADRATIC, "float64")  # (the walls out of reach)
     implicit = integrator == "implicit"
-    opts = mpm.SolverOptions(integrator=mpm.Implicit(newton_tol=1e-10) if implicit else mpm.Explicit())
+    opts = mpm.SolverOptions(integrator=mpm.Implicit(newton_tol=1e-10) if implicit else mpm.Explicit(),
+                             transfer=transfer)
     solver = mpm.Solver(model, {"empm": mpm.EMPM, "tlmpm": mpm.TLMPM, "aulmpm": mpm.AULMPM}[scheme](), opts)
     solver.prepare(state)
     impulse = np.zeros(2)

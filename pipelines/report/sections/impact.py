@@ -73,14 +73,14 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
     have = [j for j in jobs if j.scene == SCENE and j.data_file("recording.rrd") is not None]
     if not have:
         return absent(title, f"no {SCENE} job with a recording (+experiment=impact)")
-    headers = ["scheme", "kernel", "transfer", "status", "steps", "contact from [s]", "contact to [s]",
+    headers = ["scheme", "kernel", "transfer", "resolution", "status", "steps", "contact from [s]", "contact to [s]",
                "separated", "energy kept", "closest approach", "momentum drift"]
     rows = []
-    for j in sorted(have, key=lambda j: (j.scheme, j.kernel, j.transfer)):
+    for j in sorted(have, key=lambda j: (j.scheme, j.kernel, j.transfer, j.resolution or 0)):
         rec = read(j.data_file("recording.rrd"))  # (two small disks: their frames are small)
         f = impact_figures(rec.scalars, rec.clock)
         closest = closest_approach(rec.positions, rec.body)
-        rows.append([j.scheme, j.kernel, j.transfer, j.status, j.metrics.get("steps"), fmt(f["contact_start"], 3),
+        rows.append([j.scheme, j.kernel, j.transfer, j.resolution, j.status, j.metrics.get("steps"), fmt(f["contact_start"], 3),
                      fmt(f["contact_end"], 3), {None: "", True: "yes", False: "no"}[f["separated"]],
                      fmt(f["energy_kept"], 3), fmt(closest, 3), fmt(j.metrics.get("momentum_drift"), 2)])
     write_csv(out / "impact.csv", headers, rows)

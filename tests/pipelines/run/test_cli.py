@@ -31,7 +31,8 @@ BAD_INPUTS = [
     (["scheme=aulmpm", "scheme.affine=twist"], "scheme.affine: 'twist' unknown; accepted: keep, transform, rotate"),
     (["scheme=tlmpm", "scheme.epsilon=1"], "scheme.epsilon: unknown key; accepted: name"),
     (["kernel=nope"], "kernel=nope: unknown option; accepted: compact, cubic, linear, quadratic"),
-    (["kernel.transfer=flip"], "kernel.transfer: 'flip' unknown; accepted: mls, apic, pic"),
+    (["kernel.transfer=blend"], "kernel.transfer: 'blend' unknown; accepted: mls, apic, pic, flip"),
+    (["kernel.flip=1.5"], "kernel.flip: 1.5 out of range; accepted: kernel.flip >= 0.0, kernel.flip <= 1.0"),
     (["material=steel"], "material=steel: unknown option; accepted: fixed_corotated, fluid, nacc, neo_hookean, sand, snow, viscoplastic, viscous, von_mises"),
     (["scene.bodies.0.shape.center=[0.5,0.9]"], "scene.bodies[0]: particles outside the domain"),
     (["scene.bodies.0.shape.radius=0"], "scene.bodies[0].shape.radius: 0.0 out of range"),
@@ -73,7 +74,7 @@ BAD_INPUTS = [
     (["+foo=1"], "foo: unknown key; accepted: detect, expected, integrator,"),
     (["+scene.bodies.0.colour=red"], "scene.bodies[0].colour: unknown key; accepted: angular_velocity,"),
     (["+scene.bodies.0.shape.radiuss=1"], "scene.bodies[0].shape.radiuss: unknown key; accepted: axis,"),
-    (["+kernel.support=5"], "kernel.support: unknown key; accepted: name, transfer"),
+    (["+kernel.support=5"], "kernel.support: unknown key; accepted: flip, name, transfer"),
     (["scene.contact_fill=2"], "scene.contact_fill: 2.0 out of range; accepted: scene.contact_fill > 0.0, "
                                "scene.contact_fill <= 1.0"),
     # messages that said too little or blamed the wrong key
