@@ -222,8 +222,10 @@ class Driver:
                        "nonfinite", None, {})
         elif self.detection.action != "off":
             m = s.model
+            mass = m.mass.numpy().astype(np.float64)
+            loads = m.loads.acceleration([mass[a:a + n].sum() for a, n in m.body_ranges]) if m.loads else 0.0
             self.detector = Detector(self.detection, m.scene, s.conditions.speed(), self.v0, m.kernel.n_grids,
-                                     float(m.mass.numpy().astype(np.float64).sum()))
+                                     float(mass.sum()), load_acceleration=loads)
             trips = self.detector.initial(state.numpy()["F"], m.body.numpy())
             if trips:
                 t = trips[0]

@@ -45,7 +45,8 @@ def make_min_stretch2(t: Types):
 def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_marked: bool,
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
-             bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False):
+             bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False,
+             loads: bool = False):
     """G2P for all particles, for the step ``control.dt`` (``batched``: nothing
     in a step the driver skips, mpm.driver).
 
@@ -77,6 +78,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
     potential energy -m g . x [J], and each body's largest |v_p|^2
     (mpm.stability; no extra pass);
+    ``loads``: the external loads' work over the step (mpm.loads), the
+    trapezoidal dt m_p b_p . (v_p + v_p') / 2 with the step's body force b_p
+    and the particle's velocities before and after, into ``status.load_work``
+    (exact for a free particle, and no work under a load held still);
     ``track_inversion``: the smallest J and the smallest stretch of F (its
     smallest singular value, squared; in 3D a lower bound, see
     :func:`make_min_stretch2`) per body (mpm.stability).
@@ -185,6 +190,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         open_hi: t.vec,
         # with commit:
         body_params: wp.array(dtype=t.params),
+        # with loads: the step's body force [m/s^2]
+        body_force: wp.array(dtype=t.vec),
     ):
         if wp.static(batched):
             if control.skip[0] != f64(0.0):
@@ -279,6 +286,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                 if wp.static(commit):  # F^sn was not advanced for a removed particle
                     commit_reference(p, xp, Fsn_old, F0s[p], body_params[b], F0s, Fsn, cache, dx)
                 return
+        if wp.static(loads):
+            work = S(0.5) * dt * mass[p] * wp.dot(body_force[p], v[p] + v_new)
+            wp.atomic_add(status.load_work, 0, f64(work))
         x[p] = xp
         v[p] = v_new
         C[p] = Cp

@@ -27,9 +27,11 @@ predicted velocity, like gravity). The profile s_l(t) is 0 outside
 (held at both ends): a constant load is the table ((0, 1),), a ramp over
 ``ramp`` seconds ((0, 0), (ramp, 1)), a sudden load the constant one.
 
-The loads' work over the step, dt sum_p s f_p . v_p (velocities at its
-start), goes to the step's ``load_work`` (mpm.status), which the blow-up
-detection counts as energy put in (mpm.stability).
+The loads' work over the step, sum_p dt f_p . (v_p + v_p') / 2 with the
+particle's velocities before and after it (G2P sums it: exact for a free
+particle, none under a load held still), goes to the step's ``load_work``
+(mpm.status), which the blow-up detection counts as energy put in
+(mpm.stability).
 """
 
 from __future__ import annotations
@@ -172,6 +174,18 @@ class LoadTable:
         owner = np.repeat(self.particles, np.diff(self.offsets))
         return np.unique(owner[self.entry_load == i])
 
+    def acceleration(self, body_masses) -> float:
+        """The largest acceleration [m/s^2] a load can give the bodies it acts
+        on as a whole: its total force at its largest profile factor over
+        their mass (the blow-up detection's speed allowance, mpm.stability)."""
+        out = 0.0
+        for i, load in enumerate(self.loads):
+            peak = float(np.abs(load.rows()[:, 1]).max())
+            M = float(np.sum(body_masses)) if load.body is None else float(body_masses[load.body])
+            if M > 0.0:
+                out = max(out, peak * float(np.linalg.norm(self.summary[i]["total_force"])) / M)
+        return out
+
     def force(self, t: float) -> np.ndarray:
         """The total force of every load at time ``t`` [s], summed [N]."""
         s = np.array([load.factor(t) for load in self.loads])
@@ -239,9 +253,9 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
 @functools.cache
 def make_apply_loads(t: Types):
     """``apply_loads``: per loaded particle, the body force b_p = sum_l
-    s_l(t) f_lp / m_p [m/s^2] at the step's start ``control.t``; the
-    loads' work over the step into ``status.load_work`` and each load's
-    mean particle position into ``status.load_position``."""
+    s_l(t) f_lp / m_p [m/s^2] at the step's start ``control.t``, and each
+    load's mean particle position into ``status.load_position`` (G2P sums
+    the loads' work, mpm.g2p)."""
     f64 = wp.float64
     S = t.scalar
 
@@ -280,7 +294,6 @@ def make_apply_loads(t: Types):
         table_f: wp.array(dtype=f64),
         mass: wp.array(dtype=S),
         x: wp.array(dtype=t.vec),
-        v: wp.array(dtype=t.vec),
         control: StepControl,
         status: StepStatus,
         body_force: wp.array(dtype=t.vec),
@@ -301,7 +314,6 @@ def make_apply_loads(t: Types):
         b = t.vec()
         if m > S(0.0):
             b = f / m
-            wp.atomic_add(status.load_work, 0, control.dt[0] * f64(wp.dot(f, v[p])))
         body_force[p] = b
 
     return apply_loads
@@ -336,5 +348,5 @@ class Loads:
     def apply(self, state) -> None:
         """The loaded particles' body force at the device's step start."""
         b = self.buffer
-        self.launch(self.kernel, self.n, self.arrays + [self.model.mass, state.x, state.v, b.control, b.status,
+        self.launch(self.kernel, self.n, self.arrays + [self.model.mass, state.x, b.control, b.status,
                                                         self.body_force])

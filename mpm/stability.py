@@ -11,7 +11,7 @@ Three criteria, checked after every step (:class:`Detector`):
   steps (per node and step the positive part of J . v_bc, J = m (v_bc -
   v_free) the boundary's impulse: an upper bound of the energy put in;
   static walls and colliders do none, mpm.grid) plus the external loads'
-  work, dt sum f_p . v_p at each step's start velocities (mpm.loads), and
+  work, the kinetic energy their impulses give the particles (mpm.loads), and
   ``scale`` the largest kinetic plus elastic energy of the earlier states, at least
   the floor 1/2 M (1e-3 c)^2 + M |g| dx (M the total mass, c the slowest
   wave speed): an oscillating or falling body moves energy between the
@@ -19,12 +19,14 @@ Three criteria, checked after every step (:class:`Detector`):
   manufactured solutions), whose work is not accounted;
 * speed: a particle of body b faster than
 
-      speed_factor * (c_b + u_boundary + sqrt(v0^2 + 2 |g| H)),
+      speed_factor * (c_b + u_boundary + sqrt(v0^2 + 2 (|g| + a_load) H)),
 
   c_b the body's wave speed at its most compressed particle (grown by a
   hardening material's factor), u_boundary the fastest collider or
-  kinematic region, v0 the fastest initial particle and H the domain's
-  largest extent (the speed a free fall through the domain adds);
+  kinematic region, v0 the fastest initial particle, H the domain's
+  largest extent (the speed a free fall through the domain adds) and a_load
+  the largest acceleration an external load gives the bodies it acts on
+  (mpm.loads.LoadTable.acceleration: a fall under the load too);
 * inversion: det F <= ``min_J``, or a singular value of F below
   ``min_stretch`` (degenerate), at a particle of a model that cannot invert
   (every model but fixed corotated and snow: their energies take log J or
@@ -90,15 +92,16 @@ class Detector:
     """The criteria for one run. ``scene``: mpm.Scene; ``boundary_speed``
     [m/s] the fastest collider or kinematic region; ``v0`` [m/s] the
     fastest initial particle; ``n_grids`` the kernel's grids (each carries
-    the full mass, so the boundaries' work is summed G times)."""
+    the full mass, so the boundaries' work is summed G times);
+    ``load_acceleration`` [m/s^2] the loads' largest (a_load)."""
 
     def __init__(self, options: Detection, scene, boundary_speed: float, v0: float, n_grids: int,
-                 total_mass: float):
+                 total_mass: float, load_acceleration: float = 0.0):
         self.options = options
         self.names = [b.name for b in scene.bodies]
         self.materials = [b.material for b in scene.bodies]
         g = float(np.linalg.norm(scene.gravity))
-        fall = math.sqrt(v0 * v0 + 2.0 * g * max(scene.domain))
+        fall = math.sqrt(v0 * v0 + 2.0 * (g + load_acceleration) * max(scene.domain))
         self.speed_base = boundary_speed + fall
         self.check_J = np.array([not getattr(m, "invertible", False) for m in self.materials])
         self.energy_on = not getattr(scene.solution, "has_body_force", False)

@@ -49,7 +49,7 @@ FIELDS = (
     Field("nonfinite", STEP, 0.0, "particles with a non-finite position, velocity or F^sn"),
     Field("outside", STEP, 0.0, "particles that left the domain interior"),
     Field("boundary_work", STEP, 0.0, "positive work of the boundary conditions on the grid, all grids [J]"),
-    Field("load_work", STEP, 0.0, "work of the external loads over the step, dt sum f_p . v_p [J] (mpm.loads)"),
+    Field("load_work", STEP, 0.0, "work of the external loads over the step [J] (mpm.loads)"),
     Field("kinetic", STEP, 0.0, "kinetic energy of the new state [J] (track_energy)"),
     Field("potential", STEP, 0.0, "its gravitational potential energy -sum m g . x [J] (track_energy)"),
     Field("elastic", STEP, 0.0, "elastic energy of the state the step started from [J] (P2G)"),

@@ -78,7 +78,8 @@ class Transfers:
         self.g2p = make_g2p(t, k, transfer, record_dJ, marks, lagrangian=lagrangian,
                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
                             track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
-                            bound_reach=bound_reach, commit=commit, project=project, batched=batched)
+                            bound_reach=bound_reach, commit=commit, project=project, batched=batched,
+                            loads=model.loads is not None)
         margin = k.margin * model.dx
         open_code = WALL_TYPES.index("open")
         self.inside_lo = t.vec(*([margin] * t.dim))
@@ -126,4 +127,4 @@ class Transfers:
             m.body, layout.shape_d, grid.v, grid.m, grid.p0, self.flip, state.stencils, const.dx, const.K, b.control,
             self.epsilon,
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
-            m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params])
+            m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force])

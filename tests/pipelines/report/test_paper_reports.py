@@ -54,6 +54,23 @@ def test_martin_moyce_data_are_monotone():
     assert MARTIN_MOYCE_Z[0] > 1.0  # the front has left the column's width a
 
 
+def test_connected_front_leaves_out_detached_spray():
+    """A block of particles 0.01 m apart over [0, 0.2] x [0, 0.05], a drop
+    0.05 m ahead of it (5 spacings: detached) and a chain of particles 0.015
+    m apart leading off its front (1.5 spacings: attached): the bulk's front
+    is the chain's end, not the drop."""
+    from pipelines.report.sections.dam_break import connected_front
+
+    s = 0.01
+    block = np.stack(np.meshgrid(np.arange(0.0, 0.2001, s), np.arange(0.0, 0.0501, s)), -1).reshape(-1, 2)
+    chain = np.array([[0.2 + 0.015 * k, 0.0] for k in range(1, 5)])  # to x = 0.26
+    drop = np.array([[0.31, 0.01]])
+    x = np.concatenate([block, chain, drop])
+    assert connected_front(x, s, np.zeros(2)) == pytest.approx(0.26)
+    assert connected_front(np.concatenate([block, drop]), s, np.zeros(2)) == pytest.approx(0.2)
+    assert connected_front(np.concatenate([block, [[0.215, 0.0]]]), s, np.zeros(2)) == pytest.approx(0.215)
+
+
 @pytest.mark.slow
 def test_dam_break_front_against_the_experiment(tmp_path):
     """A short 2D dam break: its front starts at Z = 1 and the report reads
