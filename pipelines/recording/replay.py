@@ -250,6 +250,9 @@ def main(argv=None) -> int:
     p.add_argument("--reproduce", action="store_true", help="re-run and compare")
     p.add_argument("--repair", action="store_true", help="add the footer a killed run could not write")
     args = p.parse_args(argv)
+    if args.every < 1:
+        print(f"error: --every: {args.every}; accepted: an integer >= 1 (every N-th logged step)", file=sys.stderr)
+        return 2
     if args.recording.is_dir():
         args.recording = args.recording / "recording.rrd"
     if not args.recording.is_file():

@@ -43,6 +43,10 @@ def run(cfg: DictConfig) -> dict:
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     try:
+        experiment = hc.runtime.choices.get("experiment")
+        if experiment and hc.mode != RunMode.MULTIRUN:  # its sweep would be ignored: one default job would run
+            raise ConfigError("experiment", f"{experiment} is a sweep; accepted: run it with -m (python -m "
+                                            f"pipelines.run -m +experiment={experiment})")
         spec = resolve(cfg)
         check_memory(spec)
     except ConfigError as e:

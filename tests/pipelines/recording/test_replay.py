@@ -127,3 +127,19 @@ def test_a_file_that_is_no_recording_is_one_line(tmp_path):
                        cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip().splitlines() == [r.stderr.strip()] and "not a readable Rerun recording" in r.stderr
+
+
+@pytest.mark.parametrize("every", ["0", "-3"])
+def test_every_below_one_is_refused_in_one_line(tmp_path, every):
+    """--every N takes every N-th logged step: N < 1 is refused before the
+    recording is read, naming the option and what it accepts."""
+    from pipelines.recording.replay import main
+
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main([str(tmp_path), "--frames", str(tmp_path / "f"), "--every", every])
+    assert code == 2 and not (tmp_path / "f").exists()
+    assert err.getvalue().strip() == f"error: --every: {every}; accepted: an integer >= 1 (every N-th logged step)"

@@ -33,6 +33,8 @@ BAD_INPUTS = [
     (["kernel=nope"], "kernel=nope: unknown option; accepted: compact, cubic, linear, quadratic"),
     (["kernel.transfer=blend"], "kernel.transfer: 'blend' unknown; accepted: mls, apic, pic, flip"),
     (["kernel.flip=1.5"], "kernel.flip: 1.5 out of range; accepted: kernel.flip >= 0.0, kernel.flip <= 1.0"),
+    (["+experiment=impact"], "experiment: impact is a sweep; accepted: run it with -m (python -m pipelines.run -m "
+                             "+experiment=impact)"),
     (["material=steel"], "material=steel: unknown option; accepted: fixed_corotated, fluid, nacc, neo_hookean, sand, snow, viscoplastic, viscous, von_mises"),
     (["scene.bodies.0.shape.center=[0.5,0.9]"], "scene.bodies[0]: particles outside the domain"),
     (["scene.bodies.0.shape.radius=0"], "scene.bodies[0].shape.radius: 0.0 out of range"),
