@@ -1,5 +1,5 @@
 """Reference solutions of loaded beams, for the external-load benchmarks
-(mpm.loads; conf/scene/cantilever_2d.yaml, conf/scene/bar_traction_2d.yaml).
+(mpm.loads; conf/scene/cantilever_2d.yaml and the bar of tests/mpm/test_loads.py).
 
 * :func:`cantilever_tip`: a cantilever of length L, height H and unit depth
   under a tip shear force P [N per metre of depth], small deflection:

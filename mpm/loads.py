@@ -205,7 +205,7 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
         idx = np.concatenate([np.arange(s, s + c) for s, c in (body_ranges[b] for b in bodies)])
         f = np.asarray(load.force, float)
         V = volume[idx]
-        measure = float("nan")
+        measure = {}  # the face's area or the region's volume
         if load.kind == "point" and load.at is not None:
             dist = np.linalg.norm(x[idx] - np.asarray(load.at, float), axis=1)
             keep = np.argsort(dist, kind="stable")[:int(load.count)]
@@ -226,18 +226,15 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
             if load.area is not None:
                 area *= load.area / area.sum()
             forces = area[:, None] * f
-            measure = float(area.sum())
+            measure = {"area": float(area.sum())}
         elif load.kind == "point":
             forces = (V[keep] / V[keep].sum())[:, None] * f
         else:
             forces = V[keep][:, None] * f
-            measure = float(V[keep].sum())
+            measure = {"volume": float(V[keep].sum())}
         entries.append((idx[keep], i, forces))
         summary.append({"name": load.name or f"load{i}", "kind": load.kind, "particles": int(len(keep)),
-                        "area" if load.kind == "traction" else "volume": measure,
-                        "total_force": [float(c) for c in forces.sum(axis=0)]})
-        if load.kind == "point":
-            del summary[-1]["volume"]
+                        **measure, "total_force": [float(c) for c in forces.sum(axis=0)]})
     p = np.concatenate([e[0] for e in entries])
     which = np.concatenate([np.full(len(e[0]), e[1]) for e in entries])
     forces = np.concatenate([e[2] for e in entries])

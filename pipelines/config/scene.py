@@ -316,13 +316,11 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
 
 
 def _load(key: str, ld: LoadConfig, body_index, ctx: Context) -> Load:
-    load = Load(kind=ld.kind, force=ld.force, body=body_index(f"{key}.body", ld.body),
+    """The load of ``ld`` (its consistency is checked with the scene's: mpm.model.check_scene)."""
+    return Load(kind=ld.kind, force=ld.force, body=body_index(f"{key}.body", ld.body),
                 select=None if ld.select is None else ld.select.build(f"{key}.select", replace(ctx, rng=None)),
                 at=ld.at, count=ld.count, normal=ld.normal, area=ld.area, start=ld.start,
                 end=math.inf if ld.end is None else ld.end, ramp=ld.ramp, table=ld.table, name=ld.name)
-    for name, message in load.problems(ctx.dim, 10**9):
-        raise ConfigError(f"{key}.{name}", message)
-    return load
 
 
 def _solution(solution, key: str, scene: mpm.Scene):

@@ -27,6 +27,7 @@ class LoadTrack:
         self.origin = np.array([X0[m].mean(axis=0) for m in self.members])  # [m]
         # the profile holds its last value from here on [s]
         self.hold = np.array([ld.start + float(ld.rows()[-1, 0]) for ld in table.loads])
+        self.end = np.array([ld.end for ld in table.loads])  # [s] and it ends here
         self.sum_u = np.zeros((len(self.names), self.dim))
         self.sum_t = np.zeros(len(self.names))
 
@@ -36,7 +37,7 @@ class LoadTrack:
             return {}
         t0 = report.time - report.dt
         u = report.load_position[:len(self.names)] - self.origin
-        held = (t0 >= self.hold) & np.array([t0 < ld.end for ld in self.table.loads])
+        held = (t0 >= self.hold) & (t0 < self.end)
         self.sum_u[held] += report.dt * u[held]
         self.sum_t[held] += report.dt
         row = {}

@@ -63,9 +63,15 @@ def connected_front(x: np.ndarray, spacing: float, origin: np.ndarray) -> float:
     return float(x[inside, 0].max())
 
 
-def front(job: Job, connected: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
-    """(T, Z) of the job's surge front from its recording, or None;
-    ``connected``: the bulk's front only (:func:`connected_front`)."""
+def front(job: Job) -> tuple[np.ndarray, np.ndarray] | None:
+    """(T, Z) of the job's surge front (any particle) from its recording, or None."""
+    f = fronts(job)
+    return None if f is None else f[:2]
+
+
+def fronts(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(T, Z of any particle, Z of the bulk, :func:`connected_front`) from
+    the job's recording (read once), or None."""
     cfg = job.config or {}
     try:
         scene = cfg["scene"]
@@ -84,9 +90,9 @@ def front(job: Job, connected: bool = False) -> tuple[np.ndarray, np.ndarray] | 
     back = center[0] - half[0]
     spacing = dx / np.sqrt(ppc)
     corner = np.array([back, center[1] - half[1]])
-    z = np.array([(connected_front(x, spacing, corner) if connected else x[:, 0].max()) + 0.5 * spacing - back
-                  for x in rec.positions])
-    return rec.times * np.sqrt(2.0 * g / a), z / a
+    z = np.array([x[:, 0].max() for x in rec.positions]) + 0.5 * spacing - back
+    z_bulk = np.array([connected_front(x, spacing, corner) for x in rec.positions]) + 0.5 * spacing - back
+    return rec.times * np.sqrt(2.0 * g / a), z / a, z_bulk / a
 
 
 def deviations(T: np.ndarray, Z: np.ndarray) -> tuple[int, float, float, float | None]:
@@ -108,12 +114,12 @@ def section_dam_break(jobs: list[Job], out: Path) -> list[str]:
         return []
     curves, rows = {}, []
     for j in sorted(have, key=lambda j: (j.resolution or 0, j.label)):
-        f = front(j)
+        f = fronts(j)
         if f is None or len(f[0]) < 2:
             continue
-        bulk = front(j, connected=True)
-        curves[(j.label, j.resolution)] = bulk
-        rows.append([j.label, j.resolution, j.rel, *deviations(*f), *deviations(*bulk)[1:]])
+        T, Z, Z_bulk = f
+        curves[(j.label, j.resolution)] = (T, Z_bulk)
+        rows.append([j.label, j.resolution, j.rel, *deviations(T, Z), *deviations(T, Z_bulk)[1:]])
     if not rows:
         return absent(title, "no dam_break_2d job has a readable recording")
     write_csv(out / "dam_break.csv", ["label", "resolution", "dir", "points", "mean_relative_deviation",
