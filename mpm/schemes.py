@@ -9,8 +9,8 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
 * TLMPM (s = 0): never update - total Lagrangian MPM (de Vaucorbeil 2020).
 * AULMPM: update a body when the fraction of its particles with
   dJ_p >= epsilon reaches eta (``criterion="paper"``: eq. 33 exactly as
-  published). ``criterion="distortion"`` (the default with a fluid or a
-  plastic body, :data:`DEFAULTS`) also updates when any particle reaches dJ_p >= dJ_max or has its
+  published). ``criterion="distortion"`` (the default,
+  :data:`DEFAULTS`) also updates when any particle reaches dJ_p >= dJ_max or has its
   reference cell squeezed below ``stretch_min`` of its width in some
   direction (the smallest singular value s of F^sn). Why (RESULTS.md,
   "A-ULMPM on fluids"): a fluid resists no shear, and a lone
@@ -32,14 +32,16 @@ weights are recomputed. The affine matrix C is a velocity gradient with
 respect to the old reference: ``affine="keep"`` leaves it as it is (what
 classic APIC/MLS-MPM does when the reference moves every step, and what makes
 EMPM conserve angular momentum to round-off); ``affine="transform"``
-re-expresses it in the new reference, C <- C (F^sn)^-1, which loses far less
-angular momentum over the rare updates of A-ULMPM on solids. With the
-frequent updates of a fluid, transform is unstable: a lone splash particle
-whose affine field squeezes its reference cell to half (stretch_min = 0.5)
-gets C doubled at every update, every few steps, and the step
-collapses (seen on the droplet with the compact kernel); keep is the
-default there. ``affine="rotate"`` turns C by the rotation R of F^sn = R U
-alone, C <- C R^T: the spin crosses the update and |C| never grows.
+re-expresses it in the new reference, C <- C (F^sn)^-1, which loses less
+angular momentum than keep over the rare updates of A-ULMPM on solids but
+amplifies C by 1/s where a reference cell is squeezed to s of its width: an
+impact that crushes a particle (s -> 0) before the update blows C up, and
+with the frequent updates of a fluid a lone splash particle whose affine
+field squeezes its cell to half gets C doubled at every update (seen on the
+droplet with the compact kernel, and on a soft ball's impact).
+``affine="rotate"`` (the solids' default) turns C by the rotation R of
+F^sn = R U alone, C <- C R^T: the spin crosses the update and |C| never
+grows; keep is the default of fluids and plastic bodies.
 """
 
 import functools
@@ -53,15 +55,21 @@ from .params import param
 AFFINE = ("keep", "transform", "rotate")
 CRITERIA = ("paper", "distortion")
 # A-ULMPM's parameters per kind of scene:
-# solids take the paper's (0.5, 0.1) and its criterion, no bounds (their large
-# elastic deformations are what the Lagrangian reference handles; an update
-# would only expose them to numerical fracture); plastic bodies the paper's
-# (0.01, 0.01) with both distortion bounds at 0.5; fluids (no shear stiffness)
-# the paper's (0.01, 0.01) with the stretch bound 0.9, which keeps the step
-# within 10 % of EMPM's and won the aulmpm_tradeoff measurement (RESULTS.md)
+# solids take the paper's (0.5, 0.1) with the stretch bound 0.05: a reference
+# cell squeezed to 5 % of its width updates the body before it collapses (an
+# impact crushes a few particles long before 10 % of them change volume by
+# half, and the step shrinks with the cell), while the isochoric shear of a
+# twist or a vortex (cells down to about 0.1 of their width) keeps its
+# Lagrangian reference (RESULTS.md, "Stability maps"); the paper itself names
+# other criteria (the conditioning of F) as ones its framework takes. C is
+# rotated over an update (never amplified; C (F^sn)^-1 grows as 1/s at a
+# crushed particle). Plastic bodies the paper's (0.01, 0.01) with
+# both distortion bounds at 0.5; fluids (no shear stiffness) the paper's
+# (0.01, 0.01) with the stretch bound 0.9, which keeps the step within 10 % of
+# EMPM's and won the aulmpm_tradeoff measurement (RESULTS.md)
 DEFAULTS = {
-    "solid": dict(epsilon=0.5, eta=0.1, dJ_max=math.inf, stretch_min=0.0, affine="transform",
-                  criterion="paper"),
+    "solid": dict(epsilon=0.5, eta=0.1, dJ_max=math.inf, stretch_min=0.05, affine="rotate",
+                  criterion="distortion"),
     "plastic": dict(epsilon=0.01, eta=0.01, dJ_max=0.5, stretch_min=0.5, affine="keep",
                     criterion="distortion"),
     "fluid": dict(epsilon=0.01, eta=0.01, dJ_max=math.inf, stretch_min=0.9, affine="keep",
@@ -119,10 +127,10 @@ class AULMPM:
     Null parameters take the defaults of the scene's kind (:func:`scene_kind`,
     :data:`DEFAULTS`): with a fluid present epsilon = eta = 0.01, criterion
     distortion with stretch_min = 0.9 and no dJ_max, affine keep; with a
-    plastic body the same but dJ_max = stretch_min = 0.5; solids only
-    epsilon = 0.5, eta = 0.1 (the paper's choices), criterion paper, affine
-    transform. The paper's criterion ignores dJ_max and stretch_min (giving
-    them is an error).
+    plastic body the same but dJ_max = stretch_min = 0.5; solids epsilon =
+    0.5, eta = 0.1 (the paper's choices), criterion distortion with
+    stretch_min = 0.05 and no dJ_max, affine rotate. The paper's criterion
+    ignores dJ_max and stretch_min (giving them is an error).
     ``epsilon = inf`` never updates (TLMPM), ``epsilon = 0`` always (EMPM).
     """
 

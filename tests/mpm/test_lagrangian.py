@@ -290,7 +290,7 @@ def test_water_drop_on_an_elastic_block(scheme):
 
 
 def test_aulmpm_affine_default_depends_on_the_scene_kind():
-    assert mpm.AULMPM().resolved("solid").affine == "transform"
+    assert mpm.AULMPM().resolved("solid").affine == "rotate"
     assert mpm.AULMPM().resolved("fluid").affine == "keep"
     assert mpm.AULMPM(affine="transform").resolved("fluid").affine == "transform"
 

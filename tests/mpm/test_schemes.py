@@ -123,11 +123,12 @@ def test_aulmpm_criteria():
 def test_aulmpm_defaults_follow_the_materials():
     solid = mpm.AULMPM().resolved("solid")
     fluid = mpm.AULMPM().resolved("fluid")
-    assert (solid.epsilon, solid.eta, solid.dJ_max, solid.stretch_min) == (0.5, 0.1, float("inf"), 0.0)
+    assert (solid.epsilon, solid.eta, solid.dJ_max, solid.stretch_min) == (0.5, 0.1, float("inf"), 0.05)
     plastic = mpm.AULMPM().resolved("plastic")
     assert (fluid.epsilon, fluid.eta, fluid.dJ_max, fluid.stretch_min) == (0.01, 0.01, float("inf"), 0.9)
     assert (plastic.epsilon, plastic.eta, plastic.dJ_max, plastic.stretch_min) == (0.01, 0.01, 0.5, 0.5)
-    assert (solid.criterion, fluid.criterion, plastic.criterion) == ("paper", "distortion", "distortion")
+    assert (solid.criterion, fluid.criterion, plastic.criterion) == ("distortion",) * 3
+    assert mpm.AULMPM(criterion="paper").resolved("solid").stretch_min == 0.0  # eq. 33 alone: no bounds
     kind, M = mpm.schemes.scene_kind, mpm.MATERIALS
     assert kind([M["fixed_corotated"]()]) == "solid"
     assert kind([M["fixed_corotated"](), M["sand"]()]) == kind([M["viscoplastic"]()]) == "plastic"

@@ -208,3 +208,21 @@ def test_a_crushed_reference_is_named_as_the_lagrangian_limit(tmp_path):
     tl = execute(spec_for(over + ["scheme=tlmpm"]), tmp_path / "tlmpm", sink=Sink())
     assert tl["status"] == "unstable" and tl["unstable_criterion"] == "dt_collapse"
     assert "a reference cell is crushed to " in tl["reason"] and "TLMPM never updates its reference" in tl["reason"]
+
+
+def test_aulmpm_defaults_complete_the_soft_impact(tmp_path):
+    """The same soft ball: A-ULMPM's solid defaults (stretch bound 0.5, C
+    rotated over an update) update before a reference cell collapses and
+    complete like EMPM; eq. 33 alone (10 % of the particles at dJ >= 0.5)
+    never fires before TLMPM's collapse, and re-expressing C in the crushed
+    reference (C (F^sn)^-1, |F^sn^-1| up to 1/s) blows it up."""
+    over = ["scene=stability_ball_2d", "material.E=1e3", "run.duration=0.5", "log.every=0", "log.progress=false",
+            "scheme=aulmpm"]
+    au = execute(spec_for(over), tmp_path / "defaults", sink=Sink())
+    assert au["status"] == "completed", au["reason"]
+    assert (au["affine"], au["config_updates"]["total"] > 0) == ("rotate", True)
+    paper = execute(spec_for(over + ["scheme.criterion=paper"]), tmp_path / "paper", sink=Sink())
+    assert paper["status"] == "unstable" and paper["unstable_criterion"] == "dt_collapse"
+    assert "A-ULMPM's criterion did not update it in time" in paper["reason"]
+    transform = execute(spec_for(over + ["scheme.affine=transform"]), tmp_path / "transform", sink=Sink())
+    assert transform["status"] == "unstable", "C (F^sn)^-1 at a crushed particle no longer blows up"
