@@ -71,6 +71,29 @@ def test_connected_front_leaves_out_detached_spray():
     assert connected_front(np.concatenate([block, [[0.215, 0.0]]]), s, np.zeros(2)) == pytest.approx(0.215)
 
 
+def test_dam_break_references_and_their_measures():
+    """The height table is Martin & Moyce's Table 6 against tau = t sqrt(g/a):
+    no point falls faster than free fall (H >= 1 - tau^2 / 4 for the column's
+    top); the MPS front is monotone and leads the experiment at equal Z. A
+    front shifted by dT in time leads the experiment by exactly dT; the
+    column's height is the top of the particles near the back wall."""
+    from pipelines.report.sections.dam_break import (MARTIN_MOYCE_H, MARTIN_MOYCE_TAU, MPS_T, MPS_Z,
+                                                     column_height, time_lead)
+
+    assert np.all(MARTIN_MOYCE_H >= 1.0 - MARTIN_MOYCE_TAU ** 2 / 4.0)
+    assert not np.all(MARTIN_MOYCE_H >= 1.0 - (MARTIN_MOYCE_TAU / np.sqrt(2.0)) ** 2 / 4.0)  # read as T: too fast
+    assert np.all(np.diff(MPS_T) > 0) and np.all(np.diff(MPS_Z) > 0)
+    assert time_lead(MPS_T, MPS_Z, MARTIN_MOYCE_T, MARTIN_MOYCE_Z) == pytest.approx(-0.24, abs=0.03)
+    T = np.linspace(0.0, 4.0, 401)
+    Z_exp = np.interp(T, MARTIN_MOYCE_T, MARTIN_MOYCE_Z)  # the experiment, linear between its points
+    for dT in (0.0, -0.3, 0.2):
+        assert time_lead(T + dT, Z_exp, MARTIN_MOYCE_T[1:-1], MARTIN_MOYCE_Z[1:-1]) == pytest.approx(dT, abs=1e-9)
+    assert time_lead(T, np.ones_like(T), MARTIN_MOYCE_T, MARTIN_MOYCE_Z) is None  # reaches no station
+    x = np.array([[0.0, 0.1], [0.01, 0.12], [0.05, 0.3]])  # the last too far from the back wall
+    assert column_height(x, 0.0, 0.01) == pytest.approx(0.12)
+    assert np.isnan(column_height(x + [1.0, 0.0], 0.0, 0.01))
+
+
 @pytest.mark.slow
 def test_dam_break_front_against_the_experiment(tmp_path):
     """A short 2D dam break: its front starts at Z = 1 and the report reads
