@@ -4,6 +4,7 @@ checked settings a :class:`pipelines.config.validate.RunSpec` carries."""
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import List, Optional
@@ -15,7 +16,8 @@ from .fields import ConfigError, Context, setting
 
 PRECISIONS = ("float32", "float64")
 DEVICES = ("auto", "cpu", "cuda")
-COLORS = ("auto", "body", "dJ", "plastic_strain")  # log.color; dJ needs log.dJ, plastic_strain a plastic body
+# log.color; dJ needs log.dJ, plastic_strain a plastic body; speed: |v| [m/s], recorded then
+COLORS = ("auto", "body", "dJ", "plastic_strain", "speed")
 
 
 def reference(key: str, path, ctx: Context | None = None) -> str:
@@ -33,6 +35,9 @@ def recording_name(key: str, value, ctx: Context | None = None) -> str:
     if not name or "/" in name or "\\" in name or not name.endswith(".rrd") or name == ".rrd":
         raise ConfigError(key, f"{value!r}; accepted: a file name ending in .rrd, without a directory (it is "
                                "written into the run directory)")
+    if name.endswith(".timings.rrd"):
+        raise ConfigError(key, f"{value!r}: the name of a recording's timings file; accepted: a file name ending "
+                               "in .rrd but not in .timings.rrd")
     return name
 
 
@@ -76,8 +81,11 @@ class LogSettings:
     every: Optional[int] = setting(None, "particles every N steps; 0: none; null: log.fps frames per simulated "
                                          "second", ge=0)
     fps: float = setting(60.0, "particle frames per simulated second (when log.every is null)", gt=0.0)
-    color: str = setting("auto", f"particle colour: {', '.join(COLORS)} (auto: plastic_strain with a plastic "
+    color: str = setting("body", f"particle colour: {', '.join(COLORS)} (auto: plastic_strain with a plastic "
                                  "body, else dJ; dJ needs log.dJ, plastic_strain a plastic body)")
+    color_range: Optional[List[float]] = setting(None, "[low, high] of the colour map of log.color (speed: "
+                                                       "[m/s]); null: the field's fixed default (speed: the "
+                                                       "initial speed with a free fall over the scene)", size=2)
     size_warning_mb: float = setting(1000.0, "warn before a run whose recording would be larger [MB]", gt=0.0)
     dJ: bool = setting(True, "the per-particle dJ field with the particles")
     fracture_every: int = setting(20, "steps between evaluations of the fracture measure (and at the end)", ge=1)
@@ -85,6 +93,12 @@ class LogSettings:
     flush_every: int = setting(500, "steps between batched scalar sends", ge=1)
     progress: Optional[bool] = setting(None, "progress bar; null: on a terminal")
     recording: str = setting("recording.rrd", "file name inside the run directory", parse=recording_name)
+
+    def problems(self):
+        r = self.color_range
+        if r is not None and not (math.isfinite(r[0]) and math.isfinite(r[1]) and r[0] < r[1]):
+            return [("color_range", f"{list(r)}; accepted: [low, high], finite numbers with low < high")]
+        return []
 
     @property
     def particles(self) -> bool:

@@ -41,6 +41,7 @@ class Recording:
     complete: bool = True  # False: the file has no footer (the writer was killed)
     end: tuple = (0, 0.0)  # the last step with a scalar row or particles, and its time [s]
     clock: tuple = (np.zeros(0, np.int64), np.zeros(0))  # (steps, simulated times [s]) of the scalar rows
+    radius: float = 0.0  # the particles' drawn radius [m] (0: not recorded)
 
     @property
     def dim(self) -> int:
@@ -112,9 +113,9 @@ def read(path: str | Path, particles: bool = True) -> Recording:
     parts = data.reader(index="step", contents="/particles").to_pandas()
     pos_col = next((c for c in parts.columns if c.endswith(":positions")), None)
     steps, times, positions, dJs, fields, index = [], [], [], [], [], []
-    other = [c for c in parts.columns if c.startswith("/particles:")
+    other = [c for c in parts.columns if c.startswith("/particles:")  # the fields (AnyValues: no archetype)
              and c.split(":", 1)[1] not in ("dJ", "positions", "colors", "radii", "body_index")
-             and not c.split(":", 1)[1].startswith("Points")]
+             and ":" not in c.split(":", 1)[1]]
     if pos_col is not None:
         for _, row in parts.iterrows():
             if row[pos_col] is None:
@@ -142,6 +143,8 @@ def read(path: str | Path, particles: bool = True) -> Recording:
         if col is not None and len(static) and static[col].iloc[0] is not None:
             colors = np.asarray(static[col].iloc[0], dtype=np.uint32)
             body = np.unique(colors, return_inverse=True)[1]
+    radius = next((float(np.ravel(static[c].iloc[0])[0]) for c in static.columns if c.endswith(":radii")
+                   and len(static) and static[c].iloc[0] is not None and len(static[c].iloc[0])), 0.0)
     scalars_df = data.reader(index="step", contents="/scalars/**").to_pandas()
     scalars = _series(scalars_df, "/scalars")
     end = _end(scalars_df, steps, times)
@@ -159,7 +162,7 @@ def read(path: str | Path, particles: bool = True) -> Recording:
     colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,
-                     *_timings(timings_path(path)), index, complete, end, clock)
+                     *_timings(timings_path(path)), index, complete, end, clock, radius)
 
 
 def _end(df, steps: list, times: list) -> tuple[int, float]:
@@ -176,7 +179,7 @@ def _series(df, root: str) -> dict:
     """``root/<name>`` Scalars series of a step-indexed frame -> {name: (steps, values)}."""
     out = {}
     for c in df.columns:
-        if c.startswith(f"{root}/"):
+        if c.startswith(f"{root}/") and c.endswith(":scalars"):  # (not the series' names)
             name = c[len(root) + 1:].split(":")[0]
             s = df[["step", c]].dropna()
             out[name] = (s["step"].to_numpy(), np.array([v[0] for v in s[c]], dtype=np.float64))

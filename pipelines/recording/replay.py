@@ -4,10 +4,14 @@
   --web           serve it to a browser with Rerun's web viewer
   --frames DIR    render the particles to PNG frames without a display (and
                   DIR/video.mp4 where ffmpeg is installed): a fixed camera on
-                  the domain, colliders drawn, particles coloured by body or
-                  (--color dJ, plastic_strain, ...) by a field with a colour
-                  bar; 3D in perspective (--view 3d, --elev, --azim) or
-                  projected (--view xy|xz|zy)
+                  the domain (y up, axes in metres), the simulated time on
+                  each frame, colliders drawn in every view, every body drawn,
+                  coloured by body with a legend or (--color speed, dJ,
+                  plastic_strain, ...) by a field on a colour bar whose range
+                  is the run's (the recorded log.color) or else fixed for the
+                  frames (grey: no value, e.g. a body without
+                  plastic strain); 3D in perspective (--view 3d, --elev,
+                  --azim) or projected (--view xy|xz|zy)
   --reproduce     re-run the recorded configuration (its command-line
                   overrides, into a fresh directory reproduce-* beside the
                   recording, in its run directory) and compare the two
@@ -51,7 +55,9 @@ def open_viewer(path: Path, web: bool) -> int:
                         or sys.platform in ("darwin", "win32")):
         print("no display here: use --web to serve the web viewer, or --frames DIR", file=sys.stderr)
         return 2
-    cmd = [rerun_executable(), str(path)] + (["--web-viewer"] if web else [])
+    timings = recordings.timings_path(path)  # the wall-clock series, merged by the viewer
+    cmd = [rerun_executable(), str(path)] + ([str(timings)] if timings.is_file() else []) \
+        + (["--web-viewer"] if web else [])
     return subprocess.call(cmd)
 
 
@@ -99,9 +105,8 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
     out.mkdir(parents=True, exist_ok=True)
     L = _domain(rec, rec.positions)
     fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
-    values = [v for _, v in fields if v is not None]
-    vmin, vmax = (min(float(v.min()) for v in values), max(float(v.max()) for v in values)) if values \
-        else (0.0, 1.0)
+    vmin, vmax = _recorded_range(rec, color) or _value_range([v for _, v in fields if v is not None])
+    unit = (rec.properties.get("color:unit") or [""])[0] if _recorded_range(rec, color) else ""
     written = []
     for n, k in enumerate(range(0, len(rec.positions), every)):
         x = rec.positions[k]
@@ -116,8 +121,11 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
             fig, ax = plt.subplots(figsize=(size, size))
             mappable = _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift)
         if mappable is not None:
-            fig.colorbar(mappable, ax=ax, shrink=0.7, label=color)
-        ax.set_title(f"step {rec.steps[k]}, t = {rec.times[k]:.4f} s")
+            bar = fig.colorbar(mappable, ax=ax, shrink=0.7, label=f"{color}{unit and f' [{unit}]'} (grey: no value)")
+            bar.ax.set_title(f"{vmin:.3g} to {vmax:.3g}", fontsize=7)
+        elif rgb is not None:
+            _body_legend(ax, rec)
+        ax.set_title(f"t = {rec.times[k]:.4f} s (step {rec.steps[k]})")
         path = out / f"frame_{len(written):05d}.png"
         fig.savefig(path, dpi=100)
         plt.close(fig)
@@ -138,11 +146,80 @@ def _collider_shifts(rec: recordings.Recording, step: int) -> dict:
     return out
 
 
+NO_VALUE = (0.6, 0.6, 0.6)  # a particle without a value of the field (another body's material)
+COLLIDER_FACE, COLLIDER_EDGE = (0.55, 0.55, 0.62, 0.35), (0.35, 0.35, 0.4)
+
+
+def _recorded_range(rec: recordings.Recording, color: str) -> tuple[float, float] | None:
+    """The range the run fixed for ``color`` (recording property ``color``),
+    if it coloured its particles by that field."""
+    p = rec.properties
+    if (p.get("color:field") or [None])[0] != color or not p.get("color:low") or not p.get("color:high"):
+        return None
+    return float(p["color:low"][0]), float(p["color:high"][0])
+
+
+def _value_range(values: list) -> tuple[float, float]:
+    """(low, high) of the finite values of every frame: one range for all
+    frames; (0, 1) when there is none."""
+    finite = [v[np.isfinite(v)] for v in values]
+    finite = [v for v in finite if v.size]
+    if not finite:
+        return 0.0, 1.0
+    lo, hi = min(float(v.min()) for v in finite), max(float(v.max()) for v in finite)
+    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+
+
 def _paint(rgb, val, vmin, vmax) -> dict:
-    """Scatter colour arguments: a field on a colour map, or fixed colours."""
+    """Scatter colour arguments: a field on a colour map (grey where it has
+    no value), or fixed colours."""
     if val is not None:
-        return dict(c=val, cmap="viridis", vmin=vmin, vmax=vmax)
+        import matplotlib
+
+        cmap = matplotlib.colormaps["viridis"].with_extremes(bad=NO_VALUE)
+        return dict(c=val, cmap=cmap, vmin=vmin, vmax=vmax, plotnonfinite=True)
     return dict(c=rgb) if rgb is not None else {}
+
+
+def body_names(rec: recordings.Recording) -> list[str]:
+    """The bodies' names: recorded, else from the recorded config, else body0, body1, ..."""
+    n = int(rec.body.max()) + 1 if rec.body is not None and len(rec.body) else 0
+    names = list(rec.properties.get("bodies:names") or [])
+    if len(names) != n:
+        import yaml
+
+        try:
+            bodies = yaml.safe_load((rec.properties.get("config:yaml") or [""])[0])["scene"]["bodies"]
+            names = [b.get("name") or f"body{i}" for i, b in enumerate(bodies)]
+        except (TypeError, KeyError, AttributeError, yaml.YAMLError):
+            names = []
+    return names if len(names) == n else [f"body{i}" for i in range(n)]
+
+
+def _body_legend(ax, rec) -> None:
+    """One entry per body in its colour, and one per collider."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from .rerun_sink import PALETTE
+
+    handles = [Line2D([], [], ls="", marker="o", color=PALETTE[i % len(PALETTE)] / 255.0, label=name)
+               for i, name in enumerate(body_names(rec))]
+    handles += [Patch(facecolor=COLLIDER_FACE, edgecolor=COLLIDER_EDGE, label=f"collider {name}")
+                for name in (rec.colliders or {})]
+    if handles:
+        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
+
+
+def _marker_area(ax, rec, width: float, height: float) -> float:
+    """Scatter marker area [pt²]: a particle's recorded diameter at the
+    axes' scale (at least 1 pt² so that every particle shows)."""
+    if not rec.radius:
+        return 2.0
+    box = ax.get_position()  # figure fraction
+    w, h = ax.figure.get_size_inches() * 72.0 * (box.width, box.height)
+    per_metre = min(w / width, h / height)  # equal aspect
+    return max(1.0, (2.0 * rec.radius * per_metre) ** 2)
 
 
 def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
@@ -150,7 +227,8 @@ def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     swap = [0, 2, 1]
-    ax.scatter(x[:, 0], x[:, 2], x[:, 1], s=1.0, linewidths=0, depthshade=True, **_paint(rgb, val, vmin, vmax))
+    size = 0.5 * _marker_area(ax, rec, float(max(L)), float(max(L)))  # the perspective box is drawn smaller
+    ax.scatter(x[:, 0], x[:, 2], x[:, 1], s=size, linewidths=0, depthshade=True, **_paint(rgb, val, vmin, vmax))
     for name, geo in (rec.colliders or {}).items():
         if isinstance(geo, tuple):
             v, f = geo
@@ -173,14 +251,25 @@ def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
     a, b = (0, 1) if rec.dim == 2 else (axes[view[0]], axes[view[1]])
     depth = ({0, 1, 2} - {a, b}).pop() if rec.dim == 3 else None
     order = np.argsort(x[:, depth]) if depth is not None else slice(None)
-    sc = ax.scatter(x[order, a], x[order, b], s=2.0, linewidths=0,
+    sc = ax.scatter(x[order, a], x[order, b], s=_marker_area(ax, rec, L[a], L[b]), linewidths=0,
                     **_paint(None if rgb is None else rgb[order], None if val is None else val[order],
                              vmin, vmax))
     for name, geo in (rec.colliders or {}).items():
-        if rec.dim == 2 and isinstance(geo, list):
+        if isinstance(geo, list):  # 2D outlines
             for line in geo:
                 line = line + shift.get(name, 0.0)
-                ax.plot(line[:, 0], line[:, 1], color=(0.35, 0.35, 0.4), linewidth=1.0)
+                ax.plot(line[:, 0], line[:, 1], color=COLLIDER_EDGE, linewidth=1.0)
+        else:  # a 3D surface, projected: its triangles filled, those seen edge-on as lines
+            from matplotlib.collections import LineCollection, PolyCollection
+
+            v, f = geo
+            tri = (v + shift.get(name, 0.0))[:, [a, b]][f]  # (triangles, 3, 2) [m]
+            e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+            edge_on = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) <= 1e-9 * L[a] * L[b]
+            ax.add_collection(PolyCollection(tri[~edge_on], facecolors=COLLIDER_FACE, edgecolors="none", zorder=0))
+            if edge_on.any():  # a face along the depth axis (a wedge's or a plane's, seen from its edge)
+                ax.add_collection(LineCollection(tri[edge_on][:, [0, 1, 2, 0]], colors=[COLLIDER_EDGE],
+                                                 linewidths=1.5, zorder=0))
     ax.set_xlim(0, L[a])
     ax.set_ylim(0, L[b])
     ax.set_aspect("equal")
@@ -236,7 +325,10 @@ def repair(path: Path) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    from ..config.arguments import Parser, finite, output_dir
+
+    p = Parser(prog="python -m pipelines.replay", description=__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recording", type=Path)
     p.add_argument("--web", action="store_true", help="serve the web viewer")
     p.add_argument("--frames", type=Path, default=None, help="render PNG frames into this directory")
@@ -244,7 +336,7 @@ def main(argv=None) -> int:
     p.add_argument("--view", default="3d", choices=["3d", "xy", "xz", "zy"],
                    help="3D recordings: perspective (3d) or a projection plane")
     p.add_argument("--color", default="body",
-                   help="body, dJ, or a per-particle field of the recording (e.g. plastic_strain)")
+                   help="body, dJ, or a per-particle field of the recording (e.g. speed, plastic_strain)")
     p.add_argument("--elev", type=float, default=20.0, help="3d view: camera elevation [deg]")
     p.add_argument("--azim", type=float, default=-60.0, help="3d view: camera azimuth [deg]")
     p.add_argument("--reproduce", action="store_true", help="re-run and compare")
@@ -253,10 +345,19 @@ def main(argv=None) -> int:
     if args.every < 1:
         print(f"error: --every: {args.every}; accepted: an integer >= 1 (every N-th logged step)", file=sys.stderr)
         return 2
+    problem = output_dir("--frames", args.frames) or finite("--elev", args.elev) or finite("--azim", args.azim)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     if args.recording.is_dir():
         args.recording = args.recording / "recording.rrd"
     if not args.recording.is_file():
-        print(f"error: recording: {args.recording}: no such file", file=sys.stderr)
+        print(f"error: recording: {args.recording}: no such file; accepted: a run directory or its recording.rrd",
+              file=sys.stderr)
+        return 2
+    if args.recording.name.endswith(".timings.rrd"):
+        print(f"error: recording: {args.recording} holds a run's wall-clock timings, not its particles; accepted: "
+              f"the run's recording (python -m pipelines.replay {args.recording.parent})", file=sys.stderr)
         return 2
     try:
         complete = recordings.is_complete(args.recording)

@@ -19,17 +19,24 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
                       component ``dJ`` (per-particle |det F^sn - 1|) and,
                       with plastic materials, their fields (``J_P``,
                       ``plastic_strain``, ...: mpm.materials.Plastic.fields);
-                      colours by ``meta.color`` (a field on a colour map from
-                      0 to the largest value so far, or the body); once
+                      colours by ``meta.color`` (the body, or a field on
+                      the viridis map over a range fixed for the run:
+                      ``COLOR_RANGES``, ``log.color_range``, or for
+                      ``speed`` (|v| [m/s], recorded then) a bound found
+                      before the run); once
                       particles were removed at open walls, ``index`` (their
                       numbers) with the ones left; radii and ``body_index`` (body
                       per particle) are static
-  /legend             what the colours mean (a text updated with the range)
+  /legend             what the colours mean: map, field and range (static)
   /domain             the domain box and the inner wall faces (static)
-  /scalars/<name>     one Scalars series per physics/timing scalar, sent in
-                      batches with ``send_columns``
+  /colliders/<name>   each collider's surface (3D) or outline (2D)
+  /scalars/<name>     one Scalars series per physics scalar, sent in batches
+                      with ``send_columns``, named with its unit (SeriesLines)
   /events             TextLog lines with machine-readable values beside them
-  /__properties/...   resolved config, overrides, provenance
+  /__properties/...   resolved config, overrides, provenance, ``view`` (up axis)
+Up is +y (:mod:`pipelines.recording.layout`: view coordinates in 3D, a
+mirroring transform on the spatial entities in 2D); the blueprint opens on
+the ``sim_time`` timeline.
 and of the timings file:
   /timings/<name>     step_time_ms every step, update_ms on update steps
   /__properties/run   started, host, command
@@ -45,9 +52,8 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 
-from . import surfaces
+from . import layout, surfaces
 from .sinks import RunMeta, Sink, timings_path
 
 APP_ID = "aulmpm"
@@ -73,11 +79,28 @@ PALETTE_PACKED = packed(PALETTE)
 GREY_PACKED = packed(GREY)[0]
 
 
-def colormap(values: np.ndarray, top: float) -> np.ndarray:
-    """Packed viridis colours of ``values`` from 0 to ``top`` (clamped; grey
-    where not finite)."""
+# the colour map's range of each field, fixed for the run (other fields: DEFAULT_RANGE)
+COLOR_RANGES = {
+    "dJ": (0.0, 0.1),  # |det F^sn - 1|: a tenth of the volume
+    "plastic_strain": (0.0, 0.5),
+    "J_P": (0.8, 1.2), "density_ratio": (0.8, 1.2),
+    "hardening": (0.0, 1.0),
+}
+DEFAULT_RANGE = (0.0, 1.0)
+UNITS = {"speed": "m/s"}  # of the coloured fields that have one (the others are ratios)
+
+
+def color_range(field: str) -> tuple[float, float]:
+    """The fixed (low, high) of ``field`` on the colour map."""
+    return COLOR_RANGES.get(field, DEFAULT_RANGE)
+
+
+def colormap(values: np.ndarray, top: float, bottom: float = 0.0) -> np.ndarray:
+    """Packed viridis colours of ``values`` from ``bottom`` to ``top``
+    (clamped; grey where not finite)."""
     finite = np.isfinite(values)
-    level = np.where(finite, values, 0.0) * ((COLOR_LEVELS - 1) / (top or 1.0))
+    span = (top - bottom) or 1.0
+    level = (np.where(finite, values, bottom) - bottom) * ((COLOR_LEVELS - 1) / span)
     rgb = VIRIDIS_LUT[np.clip(level, 0.0, COLOR_LEVELS - 1).astype(np.intp)]
     rgb[~finite] = GREY_PACKED
     return rgb
@@ -109,7 +132,10 @@ class RerunSink(Sink):
         self._points = None
         self._moving = []
         self._color = "body"
-        self._range = 0.0  # the colour map's upper end: the largest value logged so far
+        self._range = DEFAULT_RANGE  # the colour map's (low, high), fixed for the run
+        self._source = ""  # where the range comes from
+        self._labelled: set[tuple] = set()  # scalar series named (with their unit) so far
+        self._dim = 2
         self._body = None
         self._frames: queue.Queue | None = None  # to the writer thread (threaded)
         self._writer: threading.Thread | None = None
@@ -129,15 +155,20 @@ class RerunSink(Sink):
         for name, values in meta.run_properties.items():
             self.clock.send_property(name, rr.AnyValues(**values))
         self._points = rr.Points2D if meta.dim == 2 else rr.Points3D
+        self._dim = meta.dim
         self._body = np.asarray(meta.particle_body)
         self._color, self._names = meta.color, meta.body_names
+        given, self._source = meta.color_range
+        self._range = tuple(given) if given is not None else color_range(self._color)
+        self._source = self._source or "fixed for the field"
+        layout.view_coordinates(rec, meta.dim)
+        rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
                 rr.AnyValues(body_index=self._body.astype(np.int32)), static=True)
-        if self._color == "body":
-            self._legend()
+        self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
-        rec.send_blueprint(self._blueprint(meta))
+        rec.send_blueprint(layout.blueprint(meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups))
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
@@ -161,51 +192,36 @@ class RerunSink(Sink):
         w = meta.wall_cells * meta.dx
         if meta.dim == 2:
             self.rec.log("domain", rr.Boxes2D(mins=[[0.0, 0.0], [w, w]], sizes=[L, L - 2 * w],
-                                              colors=[(200, 200, 200), (120, 120, 120)],
-                                              labels=["domain", "walls"]), static=True)
+                                              colors=[(200, 200, 200), (120, 120, 120)]), static=True)
         else:
             self.rec.log("domain", rr.Boxes3D(centers=[L / 2, L / 2], half_sizes=[L / 2, L / 2 - w],
                                               colors=[(200, 200, 200), (120, 120, 120)],
-                                              labels=["domain", "walls"]), static=True)
+                                              fill_mode=rr.components.FillMode.MajorWireframe), static=True)
 
     def _colors(self, values: np.ndarray | None, index: np.ndarray | None) -> np.ndarray:
         """Packed colour per particle: the body palette, or ``values`` on the
-        colour map (256 levels) from 0 to the largest value so far (grey where
-        not finite)."""
+        colour map (256 levels) over the run's fixed range (grey where not
+        finite)."""
         if self._color == "body" or values is None:
             body = self._body if index is None else self._body[index]
             return PALETTE_PACKED[body % len(PALETTE)]
-        largest = float(np.max(values, where=np.isfinite(values), initial=0.0))
-        if largest > self._range:
-            self._range = largest
-            self._legend()
-        return colormap(values, self._range)
+        return colormap(values, self._range[1], self._range[0])
 
     def _legend(self) -> None:
+        """The colour key (static): each body's colour, or the field, its map and range."""
         if self._color == "body":
-            text = "Particle colour: the body (" + ", ".join(
-                f"{n}: rgb{tuple(int(c) for c in PALETTE[i % len(PALETTE)])}" for i, n in enumerate(self._names)) + ")."
+            text = "**Particle colour: the body**\n\n" + "\n".join(
+                f"- {n}: rgb{tuple(int(c) for c in PALETTE[i % len(PALETTE)])}" for i, n in enumerate(self._names))
         else:
-            text = (f"Particle colour: **{self._color}** on the viridis map, from 0 (dark purple) to "
-                    f"**{self._range:.3g}** (yellow), the largest value logged so far; grey: no value "
-                    "(another material).")
-        self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
-
-    def _blueprint(self, meta: RunMeta):
-        view = rrb.Spatial2DView if meta.dim == 2 else rrb.Spatial3DView
-        series = [rrb.TimeSeriesView(name=name, origin="/",
-                                     contents=[s if s.startswith("/") else f"/scalars/{s}" for s in names])
-                  for name, names in meta.scalar_groups.items()]
-        return rrb.Blueprint(
-            rrb.Horizontal(
-                view(name="particles", origin="/", contents=["/particles", "/domain", "/colliders/**"]),
-                rrb.Vertical(rrb.TextDocumentView(name="colour", origin="/legend"), *series,
-                             rrb.TextLogView(name="events", origin="/events"),
-                             row_shares=[1] + [2] * len(series) + [2]),
-                column_shares=[3, 2],
-            ),
-            collapse_panels=False,
-        )
+            (lo, hi), unit = self._range, UNITS.get(self._color, "")
+            text = (f"**Particle colour: {self._color}{unit and f' [{unit}]'}** on the viridis map, fixed for "
+                    f"the run: {lo:.3g} (dark purple) to {hi:.3g} (yellow){unit and ' ' + unit}, clamped "
+                    f"({self._source}); grey: no value (another material)."
+                    "\n\nEvery per-particle field is in the recording (select a particle to read it).")
+        self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+        self.rec.send_property("color", rr.AnyValues(field=self._color, colormap="viridis" if self._color != "body"
+                                                     else "palette", low=self._range[0], high=self._range[1],
+                                                     unit=UNITS.get(self._color, ""), source=self._source))
 
     # ---------------------------------------------------------------- per step
     def particles(self, step, t, x, dJ, fields=None, index=None):
@@ -287,6 +303,9 @@ class RerunSink(Sink):
         for rec, root, buffer in ((self.rec, "scalars", self._buffer), (self.clock, "timings", self._timings)):
             for name, (steps, times, vals) in buffer.items():
                 if steps:
+                    if (root, name) not in self._labelled:  # the series' name in the viewer, with its unit
+                        self._labelled.add((root, name))
+                        rec.log(f"{root}/{name}", rr.SeriesLines(names=layout.label(name, self._dim)), static=True)
                     rec.send_columns(
                         f"{root}/{name}",
                         indexes=[rr.TimeColumn("step", sequence=steps),

@@ -40,6 +40,7 @@ class RunMeta:
     scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
     colliders: list = field(default_factory=list)  # mpm.colliders.Collider (drawn by the sink)
     color: str = "body"  # what colours the particles: body, dJ or a per-particle field
+    color_range: tuple = (None, "")  # ((low, high) or None: the field's default, where it comes from)
 
 
 class Sink:

@@ -108,10 +108,11 @@ def is_absent(lines: list[str]) -> bool:
 
 
 def bar_chart(path: Path, groups: list[str], values: dict[tuple[str, str], float], style: dict,
-              ylabel: str, log: bool = False) -> None:
-    """Bars of ``values[(group, label)]``, one cluster per group, one colour per label."""
+              ylabel: str, log: bool = False, title: str | None = None) -> None:
+    """Bars of ``values[(group, label)]``, one cluster per group, one colour
+    per label (in natural order), with the axis label (and unit) ``ylabel``."""
     plt = pyplot()
-    labels = sorted({lab for _, lab in values})
+    labels = sorted({lab for _, lab in values}, key=natural_key)
     width = 0.8 / max(len(labels), 1)
     fig, ax = plt.subplots(figsize=(max(6.0, 1.2 + len(groups) * len(labels) * 0.35), 4.5))
     for k, label in enumerate(labels):
@@ -122,6 +123,8 @@ def bar_chart(path: Path, groups: list[str], values: dict[tuple[str, str], float
     tilt = len(groups) > 3
     ax.set_xticklabels(groups, rotation=20 if tilt else 0, ha="right" if tilt else "center")
     ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
     if log:
         ax.set_yscale("log")
     ax.grid(True, axis="y", alpha=0.3)
@@ -142,3 +145,32 @@ def pareto_front(times, errors) -> np.ndarray:
         dominated = ok & (t <= t[i]) & (e <= e[i]) & ((t < t[i]) | (e < e[i]))
         front[i] = not dominated.any()
     return front
+
+
+# units of swept parameters, by the last part of their key
+PARAMETER_UNITS = {"E": "Pa", "K": "Pa", "rho": "kg/m³", "nu": "-", "dt": "s", "dt_max": "s", "duration": "s",
+                   "resolution": "cells", "particle_resolution": "cells", "epsilon": "-", "eta": "-", "cfl": "-",
+                   "steps": "steps", "viscosity": "Pa s", "yield_stress": "Pa", "friction_angle": "deg",
+                   "flip": "-", "ppc": "particles per cell", "gravity": "m/s²", "dJ_max": "-"}
+
+
+def parameter_label(key: str) -> str:
+    """An axis label for a swept override: its key and unit, e.g. ``material.E [Pa]``."""
+    unit = PARAMETER_UNITS.get(key.rsplit(".", 1)[-1])
+    return f"{key} [{unit}]" if unit else key
+
+
+def geometric(values) -> bool:
+    """Whether a sweep's values are better read on a log axis: positive,
+    distinct values that grow by factors within 2.5 times of one another and
+    not by a constant step (1, 2, 4, 8 and 1, 2, 5, 10 are; 1, 2, 3 is not),
+    or two values tenfold apart or more."""
+    v = np.unique(np.asarray([x for x in values if x is not None], dtype=np.float64))
+    if len(v) < 2 or v[0] <= 0:
+        return False
+    if len(v) == 2:
+        return bool(v[1] / v[0] >= 10.0)
+    ratios = v[1:] / v[:-1]
+    steps = np.diff(v)
+    arithmetic = np.ptp(steps) <= 0.05 * steps.mean()
+    return bool(not arithmetic and ratios.max() <= 2.5 * ratios.min())

@@ -23,7 +23,7 @@ from mpm import analytic
 from . import run_metrics
 from .progress import Progress
 from .load_track import LoadTrack
-from .run_metrics import Drift, median, peak_rss_mb, plastic_fields
+from .run_metrics import Drift, median, particle_fields, peak_rss_mb
 from ..recording.sinks import RunMeta, Sink
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
@@ -136,7 +136,7 @@ class Recorder(mpm.Observer):
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
-            color=self.spec.log.color,
+            color=self.spec.log.color, color_range=run_metrics.color_range(self.spec, model, self.state),
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
@@ -292,7 +292,7 @@ class Recorder(mpm.Observer):
         # copies: on the CPU .numpy() is a view of memory the next step overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.solver.options.record_dJ else None
-        fields = plastic_fields(self.model, self.state)
+        fields = particle_fields(self.model, self.state, speed=self.spec.log.color == "speed")
         index = self.solver.removals.kept  # the particles left inside, once some were removed at open walls
         if index is not None:
             x, dJ = x[index], (dJ[index] if dJ is not None else None)

@@ -92,6 +92,50 @@ def plastic_fields(model, state) -> dict[str, np.ndarray]:
     return out
 
 
+def particle_fields(model, state, speed: bool = False) -> dict[str, np.ndarray]:
+    """The plastic fields (:func:`plastic_fields`) and, with ``speed``, each
+    particle's speed |v| [m/s] (float32)."""
+    out = plastic_fields(model, state)
+    if speed:
+        out["speed"] = np.linalg.norm(state.v.numpy().astype(np.float64), axis=1).astype(np.float32)
+    return out
+
+
+def speed_range(scene, x: np.ndarray, v: np.ndarray) -> tuple[float, str]:
+    """A fixed top [m/s] of the speed colour map before the run, and how it
+    was found: the fastest of the initial particle speed with a free fall
+    from the highest particle to the lowest wall face along gravity,
+    sqrt(|v0|^2 + 2 |g| H), and the colliders' speeds; 1 m/s when all are 0."""
+    v0 = float(np.linalg.norm(v, axis=1).max()) if len(v) else 0.0
+    g = np.asarray(scene.gravity, float)
+    top, how = v0, "the initial particle speed"
+    if np.linalg.norm(g) > 0 and len(x):
+        down = g / np.linalg.norm(g)
+        wall = scene.wall_cells * scene.dx
+        floor = max(np.dot(c, down) for c in np.array(np.meshgrid(*[[wall, L - wall] for L in scene.domain]))
+                    .reshape(scene.dim, -1).T)  # the wall box's lowest corner along gravity
+        drop = max(floor - float((x @ down).min()), 0.0)
+        top = math.sqrt(v0 ** 2 + 2.0 * float(np.linalg.norm(g)) * drop)
+        how = f"sqrt(v0^2 + 2 g H): initial speed {v0:.3g} m/s, free fall H = {drop:.3g} m"
+    moving = max([c.speed() for c in scene.colliders] + [0.0])
+    if moving > top:
+        top, how = moving, "the fastest collider"
+    return (top, how) if top > 0 else (1.0, "nothing moves at the start: 1 m/s")
+
+
+def color_range(spec, model, state) -> tuple[tuple[float, float] | None, str]:
+    """The colour map's fixed (low, high) of ``log.color`` and where it comes
+    from: ``log.color_range``, for speed a bound before the run
+    (:func:`speed_range`), else None (the sink's default for the field)."""
+    log = spec.log
+    if log.color_range is not None:
+        return (float(log.color_range[0]), float(log.color_range[1])), "log.color_range"
+    if log.color == "speed":
+        top, how = speed_range(model.scene, state.x.numpy().astype(np.float64), state.v.numpy().astype(np.float64))
+        return (0.0, top), how
+    return None, ""
+
+
 def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[float, int, int]:
     """Estimated size of the recording [MB], its particle frames and steps,
     from the first step ``dt`` [s] (an adaptive step may shrink later);

@@ -1,5 +1,10 @@
-"""Conservation: the final drifts (conservation.csv) and the drift over time
-read from the recordings (conservation.png)."""
+"""Conservation: the final drifts (conservation.csv) and the numerical drift
+over time read from the recordings (conservation.png).
+
+A recording holds the bodies' momentum but not the impulse the walls give
+them, so a change of momentum is drift only where nothing acts from outside:
+the plot keeps the runs without gravity, colliders, kinematic regions, loads,
+a body force or open walls (:func:`external_forces`), and says so."""
 
 from __future__ import annotations
 
@@ -12,7 +17,7 @@ from mpm.diagnostics import relative_drift
 
 from ...recording.recordings import read
 from ..common import absent, add_image, md_table, natural_key, pyplot, write_csv
-from ..jobs import Job
+from ..jobs import Job, config_value
 from ..registry import section
 
 MAX_RECORDINGS = 40  # recordings read for the conservation plot
@@ -58,6 +63,32 @@ def drift_series(scalars: dict, prefix: str) -> tuple[np.ndarray, np.ndarray] | 
     return common, relative_drift(Q[0], Q, scale)
 
 
+def external_forces(config: dict | None) -> list[str]:
+    """What acts on the bodies from outside, read from a job's composed
+    config: gravity, colliders, kinematic regions, loads, a manufactured
+    solution's body force, open walls (mass and momentum leave); ["unknown
+    config"] without one. The domain's closed walls act only where a body
+    reaches them, which the recording does not say."""
+    if not isinstance(config, dict):
+        return ["unknown config"]
+    out = []
+    if any(float(g) != 0.0 for g in config_value(config, "scene", "gravity") or ()):
+        out.append("gravity")
+    for key, name in (("colliders", "colliders"), ("regions", "kinematic regions"), ("loads", "loads")):
+        if config_value(config, "scene", key):
+            out.append(name)
+    solution = config_value(config, "scene", "solution")
+    if isinstance(solution, dict):
+        from mpm.analytic import SOLUTIONS
+
+        kind = SOLUTIONS.get(str(solution.get("type")))
+        if kind is None or kind.has_body_force:
+            out.append("body force")
+    if "open" in (config_value(config, "scene", "walls") or ()):
+        out.append("open walls")
+    return out
+
+
 @section(order=60)
 def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
     """conservation.csv (final drifts from metrics.json) and conservation.png
@@ -71,18 +102,25 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
     lines = [f"## {title}", ""]
     if have:
         rows = [[j.rel, j.scene, j.label, j.resolution, j.status] + [j.num(k) for k in keys]
-                + [j.num("energy_initial"), j.num("energy_final")] for j in have]
+                + [j.num("energy_initial"), j.num("energy_final"),
+                   ", ".join(external_forces(j.config)) or "none"] for j in have]
         write_csv(out / "conservation.csv", ["dir", "scene", "label", "resolution", "status"] + list(keys)
-                  + ["energy_initial", "energy_final"], rows)
-        lines += ["Relative drifts between the first and the last measurement: mass, linear momentum "
+                  + ["energy_initial", "energy_final", "external"], rows)
+        lines += ["Relative changes between the first and the last measurement: mass, linear momentum "
                   "and angular momentum about the centre of mass, against the first value (against the "
-                  "quantity's scale where it starts near zero) ([conservation.csv](conservation.csv)).", ""]
+                  "quantity's scale where it starts near zero) ([conservation.csv](conservation.csv)). "
+                  "They are numerical drift only where nothing acts from outside (column *external*: "
+                  "none); elsewhere they include the external impulse, and every run includes the "
+                  "impulse of any closed wall its bodies reach (not recorded).", ""]
         lines += md_table(["dir", "scene", "label", "cells", "status", "mass", "momentum",
-                           "angular momentum"], [r[:8] for r in rows])
+                           "angular momentum", "external"], [r[:8] + r[-1:] for r in rows])
     if not with_rec:
         lines += ["No recording.rrd in the job directories: no drift over time.", ""]
         return lines
-    read_list = with_rec[:MAX_RECORDINGS]
+    forced = {j.rel: external_forces(j.config) for j in with_rec}
+    free = [j for j in with_rec if not forced[j.rel]]
+    left_out = [f"{j.rel} ({', '.join(forced[j.rel])})" for j in with_rec if forced[j.rel]]
+    read_list = free[:MAX_RECORDINGS]
     series, failed = [], []
     for j in read_list:
         try:
@@ -115,8 +153,8 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
                             label=f"{j.label} · {j.resolution}" if j.resolution else j.label)
                 ax.set_yscale("log")
                 ax.set_xlabel("time [s]" if use_time else "step")
-                ax.set_ylabel(f"relative {name} drift")
-                ax.set_title(f"{scene}: {name}")
+                ax.set_ylabel(f"relative {name} drift [-]")
+                ax.set_title(f"{scene}: numerical drift of the {name}")
                 ax.grid(True, which="both", alpha=0.3)
                 if ax.lines and len(ax.lines) <= 20:
                     ax.legend(fontsize=6)
@@ -126,10 +164,17 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
         lines += [f"Relative drift over {'time [s]' if use_time else 'steps'} read from {len(series)} "
                   "recording(s): |Q(t) - Q(0)| / |Q(0)| for the linear momentum P and the angular momentum L "
                   "about the centre of mass (against the quantity's scale where Q(0) is near zero: "
-                  f"two spheres colliding head-on), log scale floored at {DRIFT_FLOOR:g}; colours by method, one line per job.", ""]
-        add_image(lines, "conservation.png", "momentum drift over time")
-    if len(with_rec) > MAX_RECORDINGS:
-        lines += [f"Only the first {MAX_RECORDINGS} of {len(with_rec)} recordings were read.", ""]
+                  f"two spheres colliding head-on), log scale floored at {DRIFT_FLOOR:g}; colours by method, "
+                  "one line per job. Only runs on which nothing acts from outside are drawn: the recording "
+                  "holds no impulse of the walls, colliders or kinematic regions, so a change of momentum "
+                  "elsewhere mixes that impulse with the drift; a body that reaches a closed wall shows the "
+                  "wall's impulse here too.", ""]
+        add_image(lines, "conservation.png", "numerical momentum drift over time")
+    if left_out:
+        lines += ["No drift plotted for the runs with external forces (their impulse is not recorded): "
+                  + ", ".join(left_out) + ".", ""]
+    if len(free) > MAX_RECORDINGS:
+        lines += [f"Only the first {MAX_RECORDINGS} of {len(free)} recordings were read.", ""]
     if failed:
         lines += ["Recordings not plotted: " + ", ".join(failed) + ".", ""]
     return lines

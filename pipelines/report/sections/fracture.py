@@ -27,12 +27,16 @@ def section_fracture(jobs: list[Job], out: Path, style: dict) -> list[str]:
     for j in have:
         key = (group_name(j), j.label)
         values[key] = max(values.get(key, 0.0), j.num("fracture"))
-    bar_chart(out / "fracture.png", groups, values, style, "fraction of neighbour pairs torn apart")
     lines = [f"## {title}", "",
              "Fraction of initially neighbouring particle pairs torn apart at the end of the run, per "
              "method, grouped by scene and resolution, and the number of fragments "
              "([fracture.csv](fracture.csv)).", ""]
-    add_image(lines, "fracture.png", "numerical fracture")
+    if any(values.values()):
+        bar_chart(out / "fracture.png", groups, values, style, "pairs torn apart [fraction]",
+                  title="Numerical fracture at the end of each run")
+        add_image(lines, "fracture.png", "numerical fracture")
+    else:  # an empty chart says less than a line
+        lines += ["No job tore a pair apart: no plot.", ""]
     lines += md_table(["scene", "label", "cells", "fracture", "fragments"],
                       [[r[0], r[1], r[2], r[4], r[5]] for r in rows])
     return lines

@@ -96,11 +96,11 @@ def test_rerun_compare_finds_two_identical_runs_equal(tmp_path):
 
 def test_particles_are_logged_at_a_frame_rate_in_simulated_time(tmp_path):
     """log.every null: a frame at the first step at or past each multiple of
-    1 / log.fps, and the last step; colours by dJ with a legend."""
+    1 / log.fps, and the last step; coloured by body by default."""
     fps, duration = 100.0, 0.05
     cfg = compose_cfg(["scene.resolution=24", f"run.duration={duration}", f"log.fps={fps}"])
     spec = resolve(cfg)
-    assert spec.log.every is None and spec.log.color == "dJ"
+    assert spec.log.every is None and spec.log.color == "body"
     m = execute(spec, tmp_path, OmegaConf.to_yaml(cfg), [])
     assert m["status"] == "completed" and m["steps"] > 20
     rec = recordings.read(tmp_path / "recording.rrd")

@@ -1,0 +1,181 @@
+"""How a recording is shown: which way is up, where the 3D camera starts, and
+the blueprint (a particle view beside time series, one unit per plot, on
+the simulated-time timeline).
+
+Scenes have y up (gravity along -y). Rerun's 3D views take the up axis
+from the view coordinates logged at the root (``RIGHT_HAND_Y_UP``); its 2D
+views draw y downwards and ignore view coordinates, so 2D recordings carry a
+static transform that mirrors y (``FLIP_2D``) on the spatial entities
+(``/particles``, ``/domain``, ``/colliders``). The data themselves stay in
+the scene's coordinates (what :mod:`pipelines.recording.recordings` reads);
+the recording property ``view`` states the convention.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+FLIP_2D = (1.0, -1.0, 1.0)  # scale of the 2D spatial entities: y up on the screen
+SPATIAL_2D = ("particles", "domain", "colliders")  # the entities that carry the flip
+ELEVATION, AZIMUTH = 25.0, 35.0  # the initial 3D camera: above the floor, in front and to the right [deg]
+TIMELINE = "sim_time"  # the timeline the viewer opens on
+
+# unit of each scalar (2D: per metre of depth); a name "a/b" takes the unit of "a"
+_UNITS = {
+    "mass": ("kg", "kg/m"), "kinetic_energy": ("J", "J/m"), "elastic_energy": ("J", "J/m"),
+    "potential_energy": ("J", "J/m"), "total_energy": ("J", "J/m"),
+    "momentum": ("kg m/s", "kg/s"), "angular_momentum": ("kg m²/s", "kg m/s"),
+    "center_of_mass": ("m", "m"), "dt": ("s", "s"), "dt_fresh": ("s", "s"), "max_speed": ("m/s", "m/s"),
+    "step_time_ms": ("ms", "ms"), "update_ms": ("ms", "ms"),
+    "error/displacement": ("m", "m"), "error/velocity": ("m/s", "m/s"),
+    "config_updates": ("count", "count"), "fragments": ("count", "count"), "contact_nodes": ("count", "count"),
+    "removed": ("count", "count"), "inside_colliders": ("count", "count"),
+    "newton_iterations": ("count", "count"), "cg_iterations": ("count", "count"),
+    "fracture": ("fraction", "fraction"), "marked_fraction": ("fraction", "fraction"),
+    "min_stretch": ("ratio", "ratio"), "newton_residual": ("ratio", "ratio"),
+}
+
+
+WORDS = {"dt": "time step", "dt_fresh": "time step allowed now", "config_updates": "configuration updates"}
+
+
+def unit(name: str, dim: int) -> str:
+    """The unit of scalar ``name`` ("" when unknown)."""
+    name = name.rsplit("/", 1)[-1] if name.startswith("/") else name
+    for key in (name, name.split("/")[0], name.rstrip("_xyz").rstrip("_"),
+                name.split("/")[0].rstrip("_xyz").rstrip("_")):
+        if key in _UNITS:
+            return _UNITS[key][0 if dim == 3 else 1]
+    return ""
+
+
+def label(name: str, dim: int) -> str:
+    """A series' name in the viewer: words and unit, e.g. ``kinetic energy [J/m]``."""
+    u = unit(name, dim)
+    words = name.rsplit("/", 1)[-1] if name.startswith("/") else name
+    words = WORDS.get(words, words.removesuffix("_ms").replace("_", " "))
+    return f"{words} [{u}]" if u and u not in ("count", "fraction", "ratio") else \
+        f"{words} ({u})" if u else words
+
+
+def view_coordinates(rec: rr.RecordingStream, dim: int) -> None:
+    """Declare the scene's up axis (static): y up in both 2D and 3D."""
+    if dim == 3:
+        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        rec.send_property("view", rr.AnyValues(up="+y", coordinates="RIGHT_HAND_Y_UP"))
+    else:
+        for path in SPATIAL_2D:
+            rec.log(path, rr.Transform3D(scale=FLIP_2D), static=True)
+        rec.send_property("view", rr.AnyValues(
+            up="+y", flip=" ".join(f"/{p}" for p in SPATIAL_2D),
+            note="2D views draw y down: the spatial entities carry a transform scaling y by -1; "
+                 "their data are in the scene's coordinates (y up)"))
+
+
+def camera(domain, floor: float) -> rrb.EyeControls3D:
+    """An orbital camera above the floor (height ``floor`` [m]) looking at the
+    domain's centre from (ELEVATION, AZIMUTH), far enough to frame it."""
+    L = np.asarray(domain, float)
+    target = L / 2
+    el, az = np.radians(ELEVATION), np.radians(AZIMUTH)
+    direction = np.array([np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az)])
+    position = target + 1.3 * float(np.linalg.norm(L)) * direction
+    position[1] = max(position[1], floor + 0.5 * L[1])
+    return rrb.EyeControls3D(position=position.tolist(), look_target=target.tolist(), eye_up=[0.0, 1.0, 0.0])
+
+
+def series_views(groups: dict, dim: int) -> list:
+    """One time-series view per group and unit (named with the unit), the
+    whole run in view, legends in a corner, on the simulated-time timeline."""
+    views = []
+    for group, names in groups.items():
+        by_unit: dict[str, list[str]] = {}
+        for n in names:
+            by_unit.setdefault(unit(n, dim), []).append(n)
+        for u, members in by_unit.items():
+            title = group.split(" [")[0]
+            if len(by_unit) > 1:  # the group's quantities apart: named by the first (less its axis)
+                title = label(members[0], dim).split(" [")[0].split(" (")[0]
+                title = title[:-2] if len(members) > 1 and title[-2:] in (" x", " y", " z") else title
+            title = f"{title} [{u}]" if u else title
+            views.append(rrb.TimeSeriesView(
+                name=title, origin="/",
+                contents=[m if m.startswith("/") else f"/scalars/{m}" for m in members],
+                axis_x=rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.infinite(),
+                                                            end=rr.TimeRangeBoundary.infinite())),
+                plot_legend=rrb.PlotLegend(corner="RightBottom", visible=len(members) > 1)))
+    return views
+
+
+def blueprint(dim: int, domain, wall: float, groups: dict):
+    """The particle view (domain, floor and colliders drawn, y up) beside the
+    colour key, the time series (a tab each) and the events."""
+    L = np.asarray(domain, float)
+    contents = ["/particles", "/domain", "/colliders/**"]
+    if dim == 2:
+        m = 0.05 * float(L.max())
+        view = rrb.Spatial2DView(name="particles", origin="/", contents=contents,
+                                 visual_bounds=rrb.VisualBounds2D(x_range=[-m, L[0] + m],
+                                                                  y_range=[-L[1] - m, m]))
+    else:
+        view = rrb.Spatial3DView(
+            name="particles", origin="/", contents=contents, eye_controls=camera(L, wall),
+            line_grid=rrb.LineGrid3D(visible=True, plane=rr.components.Plane3D((0.0, 1.0, 0.0), wall),
+                                     spacing=float(10 ** np.floor(np.log10(L.max() / 4)))))
+    series = series_views(groups, dim)
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            view,
+            rrb.Vertical(rrb.TextDocumentView(name="colour", origin="/legend"), rrb.Tabs(*series, name="time series"),
+                         rrb.TextLogView(name="events", origin="/events"), row_shares=[1, 4, 2]),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False,
+    )
+
+
+def declared(path) -> dict:
+    """What a recording declares about its display, read back from the file:
+    ``up`` (the ``view`` property), ``coordinates`` (the root's view
+    coordinates, e.g. ``RUB``: x right, y up, z back), ``flip`` (entity ->
+    static scale), ``views`` (name -> class: 2D, 3D, TimeSeries, ...),
+    ``timeline`` (the time panel's), ``eye`` (the 3D camera: position,
+    look_target, eye_up) and ``grid`` (the 3D line grid's plane)."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(path))
+    data = reader.stream().collect()
+    static = data.reader(index=None, contents="/**").to_arrow_table()
+
+    def first(table, col):
+        values = [v for v in table.column(col).to_pylist() if v is not None] if col in table.column_names else []
+        return values[-1] if values else None
+
+    props = data.reader(index=None, contents="/__properties/**").to_arrow_table()
+    up = first(props, "property:view:up")
+    out = {"up": up[0] if up else None, "coordinates": None, "flip": {}, "views": {},
+           "timeline": None, "eye": {}, "grid": None}
+    xyz = first(static, "/:ViewCoordinates:xyz")
+    if xyz is not None:  # Rerun's codes: 1 up, 2 down, 3 right, 4 left, 5 forward, 6 back
+        out["coordinates"] = "".join("?UDRLFB"[int(c)] for c in np.ravel(xyz))
+    for c in static.column_names:
+        if c.endswith(":Transform3D:scale"):
+            out["flip"][c[1:].split(":")[0]] = tuple(np.ravel(first(static, c)).tolist())
+    if reader.blueprints():
+        bp = reader.store(store=reader.blueprints()[-1]).stream().collect()
+        table = bp.reader(index="blueprint", contents="/**").to_arrow_table()
+        for c in table.column_names:
+            if c.endswith(":ViewBlueprint:class_identifier"):
+                view = c.split(":")[0]
+                name = first(table, f"{view}:ViewBlueprint:display_name")
+                out["views"][name[0] if name else view] = first(table, c)[0]
+            elif ":EyeControls3D:" in c:
+                out["eye"][c.rsplit(":", 1)[1]] = np.ravel(first(table, c)).tolist()
+            elif c.endswith(":LineGrid3D:plane"):
+                out["grid"] = np.ravel(first(table, c)).tolist()
+        timeline = first(table, "/time_panel:TimePanelBlueprint:timeline")
+        out["timeline"] = timeline[0] if timeline else None
+    return out
