@@ -42,17 +42,23 @@ def file_digest(name: str) -> str:
         return hashlib.sha256(f.read()).hexdigest()[:16]
 
 
-@functools.cache
-def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(points (n, 3), triangles (m, 3)) of a mesh file, in its own units."""
-    path = asset_path(name)
-    if not os.path.exists(path):
-        raise FileNotFoundError(path)
+class MeshError(ValueError):
+    """A mesh file that cannot be used; the message names the file and why."""
+
+
+def _signed_volume(pts: np.ndarray, tris: np.ndarray, origin: np.ndarray) -> float:
+    """sum over the triangles of (a - o) . ((b - o) x (c - o)) / 6: the enclosed
+    volume, the same for every origin o when the surface is closed."""
+    a, b, c = (pts[tris[:, k]] - origin for k in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def _read(path: str) -> tuple[np.ndarray, np.ndarray]:
     if not path.lower().endswith((".usd", ".usda", ".usdc")):
         import trimesh
 
         mesh = trimesh.load(path, force="mesh", process=False)
-        return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32)
+        return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     from pxr import Usd, UsdGeom  # usd-core
 
     stage = Usd.Stage.Open(path)
@@ -68,8 +74,45 @@ def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
             for c in counts:  # fan-triangulate polygons
                 tris += [[idx[k], idx[k + j], idx[k + j + 1]] for j in range(1, c - 1)]
                 k += c
-            return pts, np.asarray(tris, np.int32)
-    raise ValueError(f"{path}: no mesh found")
+            return pts, np.asarray(tris, np.int64).reshape(-1, 3)
+    return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+
+
+@functools.cache
+def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 3), triangles (m, 3)) of a mesh file, in its own units.
+    Raises :class:`MeshError` for a file that is not a closed triangle mesh
+    enclosing a volume (a directory, an empty or unreadable file, no
+    triangles, non-finite vertices, indices past the vertices, a flat or
+    open surface)."""
+    path = asset_path(name)
+    if not os.path.exists(path):
+        raise MeshError(f"{name}: no such file")
+    if os.path.isdir(path):
+        raise MeshError(f"{name}: a directory, not a mesh file")
+    if os.path.getsize(path) == 0:
+        raise MeshError(f"{name}: an empty file")
+    try:
+        pts, tris = _read(path)
+    except Exception as e:  # noqa: BLE001 - any reader's failure: the file is not a mesh it can read
+        first = next((ln for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        raise MeshError(f"{name}: not a readable mesh ({type(e).__name__}: {first[:120]})") from None
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4 or len(tris) < 4:
+        raise MeshError(f"{name}: {len(pts)} vertices and {len(tris)} triangles: not a closed triangle mesh "
+                        "(a mesh file with no triangles, or not a mesh at all)")
+    bad = ~np.all(np.isfinite(pts), axis=1)
+    if bad.any():
+        raise MeshError(f"{name}: {int(bad.sum())} of its {len(pts)} vertices are not finite")
+    if tris.min() < 0 or tris.max() >= len(pts):
+        raise MeshError(f"{name}: a triangle refers to vertex {int(tris.max())}, past its {len(pts)} vertices")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    extent = float(np.max(hi - lo))
+    volume = _signed_volume(pts, tris, 0.5 * (lo + hi))
+    if extent <= 0.0 or abs(volume) <= 1e-9 * extent ** 3:
+        raise MeshError(f"{name}: encloses no volume (flat, or an open surface)")
+    if abs(_signed_volume(pts, tris, hi + extent) - volume) > 1e-6 * abs(volume):
+        raise MeshError(f"{name}: an open surface (its enclosed volume depends on the origin)")
+    return pts, tris.astype(np.int32)
 
 
 @warp_kernel

@@ -20,7 +20,6 @@ K(x) = 1 - |x| + sin(2 pi |x|) / (2 pi) on two grids shifted by -1/4, +1/4.
 
 from __future__ import annotations
 
-import argparse
 
 import numpy as np
 
@@ -100,11 +99,17 @@ def bound(kernel: str, mls: bool = True, dim: int = 2, per_axis: int = 2, nu: fl
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipelines.cfl_bound", description=__doc__.split("\n")[0])
-    parser.add_argument("--dim", type=int, default=2)
+    from .config.arguments import Parser
+
+    parser = Parser(prog="python -m pipelines.cfl_bound", description=__doc__.split("\n")[0])
+    parser.add_argument("--dim", type=int, default=2, choices=(2, 3))
     parser.add_argument("--per-axis", type=int, default=2, help="particles per cell and axis")
     parser.add_argument("--nu", type=float, default=0.3)
     args = parser.parse_args(argv)
+    if not 1 <= args.per_axis <= 8:
+        parser.error(f"--per-axis: {args.per_axis}; accepted: an integer from 1 to 8")
+    if not -1.0 < args.nu < 0.5:  # false for nan too
+        parser.error(f"--nu: {args.nu}; accepted: -1 < nu < 0.5")
     print("| kernel | MLS | kernel gradient |")
     print("|---|---|---|")
     for kernel in KERNELS:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 PATHS = ("uniaxial", "oedometer", "isotropic", "shear")
+MAX_STEPS = 1_000_000  # steps of a path at most (a step costs a kernel launch)
 
 
 def strain_history(strain: float, steps: int, cycle: bool) -> np.ndarray:
@@ -88,8 +89,10 @@ def plot(path: Path, names: list[str], data: np.ndarray, title: str, xlabel: str
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipelines.material_point", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    from .config.arguments import Parser, finite, output_file
+
+    parser = Parser(prog="python -m pipelines.material_point", description=__doc__,
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("overrides", nargs="*", help="material=<model> and material.<key>=<value>")
     parser.add_argument("--path", choices=PATHS, default="uniaxial")
     parser.add_argument("--strain", type=float, default=0.05, help="final Hencky strain (shear: gamma)")
@@ -104,8 +107,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {bad[0]}: not a material setting; accepted: material=<model>, material.<key>=<value>",
               file=sys.stderr)
         return 2
-    if args.steps < 1 or args.rate <= 0:
-        print("error: --steps and --rate: accepted: steps >= 1, rate > 0", file=sys.stderr)
+    problem = (finite("--strain", args.strain) or finite("--rate", args.rate, 0.0, strict=True)
+               or output_file("--out", args.out, ".png"))
+    if args.steps < 1 or args.steps > MAX_STEPS:
+        problem = f"--steps: {args.steps}; accepted: an integer from 1 to {MAX_STEPS}"
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     from hydra import compose, initialize_config_dir
 

@@ -245,7 +245,9 @@ SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel",
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m pipelines.bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    from ..config.arguments import Parser, output_file
+
+    p = Parser(prog="python -m pipelines.bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
     p.add_argument("--steps", type=int, default=None, help="steps per timed run")
     p.add_argument("--cold", action="store_true", help="compile into an empty kernel cache")
@@ -259,6 +261,10 @@ def main(argv=None) -> None:
                    help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
     p.set_defaults(speed=True)  # the first table (--only may leave it out)
     args = p.parse_args(argv)
+    if args.steps is not None and args.steps < 1:
+        p.error(f"--steps: {args.steps}; accepted: an integer >= 1")
+    if args.json is not None and (problem := output_file("--json", args.json, ".json")):
+        p.error(problem)
     for c in args.cases:
         if c not in CASES:
             p.error(f"unknown case {c!r}; accepted: {', '.join(CASES)}")

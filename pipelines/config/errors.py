@@ -6,7 +6,7 @@ import dataclasses
 import re
 
 from hydra.errors import MissingConfigException, OverrideParseException
-from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, OmegaConfBaseException,
+from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, ConfigTypeError, OmegaConfBaseException,
                               ValidationError)
 
 from .fields import ConfigError
@@ -39,7 +39,19 @@ def describe(exc: BaseException) -> str | None:
         return _first_line(exc)
     if isinstance(exc, OverrideParseException):
         return f"cannot parse the command line: {_first_line(exc)}"
+    merging = re.match(r"Error merging override ([^=]+)=(.*)", _first_line(exc))
+    if merging and isinstance(exc.__cause__, ConfigTypeError):
+        key, value = merging.groups()
+        kind = {"ListConfig": "a list", "DictConfig": "a mapping"}
+        m = re.match(r"Cannot merge (\w+) with (\w+)", _first_line(exc.__cause__))
+        if m:
+            return (f"{key}: {value} is {kind.get(m.group(1), m.group(1))}; accepted: "
+                    f"{kind.get(m.group(2), m.group(2))}")
     cause = exc.__cause__ if exc.__cause__ is not None else exc
+    located = re.search(r"\n\s*full_key: (\S+)\n\s*reference_type=(\S+)", str(cause))
+    if located and not isinstance(cause, (ConfigKeyError, ConfigAttributeError, ValidationError)):
+        key, kind = located.groups()
+        return f"{key}: cannot take this value ({_first_line(cause)}); accepted: {kind}"
     if isinstance(cause, (ConfigKeyError, ConfigAttributeError)):
         key = cause.full_key or getattr(cause, "key", "")
         accepted = _accepted_keys(cause.object_type)

@@ -5,8 +5,11 @@ their own modules), and the :class:`mpm.Scene` they build. A scene's file in
 
 from __future__ import annotations
 
+import functools
 import math
+import re
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 import numpy as np
@@ -23,6 +26,7 @@ from .fields import ConfigError, Context, Family, check, choice, number, plain, 
 from .physics import MATERIAL
 from .shapes import SHAPES, ShapeConfig, fixed_shape
 
+CONF = Path(__file__).resolve().parents[2] / "conf"
 __all__ = ["BodyConfig", "ColliderConfig", "LoadConfig", "RegionConfig", "SceneConfig", "ShapeConfig", "make_scene"]
 
 
@@ -50,7 +54,10 @@ def walls(key: str, value, ctx: Context) -> tuple:
 
 
 def body_ref(key: str, value, ctx: Context):
-    """A body's index or name (checked against the scene's bodies later)."""
+    """A body's index or name (checked against the scene's bodies later); null
+    where the field allows it (a load on every body)."""
+    if value is None:
+        return None
     return value if isinstance(value, str) else number(key, value, int, {"keyed": True, "ge": 0})
 
 
@@ -272,6 +279,21 @@ def check_size(node, key: str = "scene") -> None:
     if size not in names:
         raise ConfigError(f"{key}.size", f"{size!r} unknown for scene {node.get('name')}; "
                                          f"accepted: {', '.join(names)}")
+    if sizes and OmegaConf.is_dict(sizes[size]):  # a key of the chosen size that no scene reads: ignored
+        used = size_keys() | set(re.findall(SIZE_KEY, OmegaConf.to_yaml(node)))
+        for k in sizes[size].keys():
+            if k not in used:
+                raise ConfigError(f"{key}.sizes.{size}.{k}", f"unknown key: no scene reads it; accepted: "
+                                                           f"{', '.join(sorted(used))}")
+
+
+SIZE_KEY = r"\$\{scene\.size\}\.(\w+)\}"  # a scene's value read from its chosen size
+
+
+@functools.cache
+def size_keys() -> set[str]:
+    """The keys of a size that the files of conf/scene read."""
+    return {k for path in (CONF / "scene").glob("*.yaml") for k in re.findall(SIZE_KEY, path.read_text())}
 
 
 def make_scene(node, default_material: Material, key: str = "scene", seed: int = 0) -> tuple[mpm.Scene, SceneConfig]:
@@ -299,6 +321,9 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
     regions = []
     for i, r in enumerate(sc.regions):
         rkey = f"{key}.regions[{i}]"
+        if r.body is None:
+            raise ConfigError(f"{rkey}.body", f"missing; accepted: a body's index (0 to {len(bodies) - 1}) or name "
+                                              f"({', '.join(names)})")
         body = body_index(f"{rkey}.body", r.body)
         regions.append(mpm.KinematicRegion(
             body=body, select=r.select.build(f"{rkey}.select", replace(ctx, rng=None)), name=r.name,

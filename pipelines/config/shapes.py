@@ -13,7 +13,7 @@ from typing import Any, List, Optional
 import numpy as np
 
 import mpm
-from mpm.meshes import MESH_SUFFIXES, MeshShape, asset_path, mesh_assets
+from mpm.meshes import MESH_SUFFIXES, MeshError, MeshShape, asset_path, load_mesh, mesh_assets
 
 from .fields import ConfigError, Context, Family, number, setting, vector
 
@@ -42,12 +42,20 @@ def rotation(key: str, value, ctx: Context):
 
 
 def mesh_file(key: str, name, ctx: Context | None = None) -> str:
-    """A mesh file that exists, in a format the meshes module reads."""
+    """A mesh file that exists, in a format the meshes module reads, and
+    that it reads as a closed triangle mesh enclosing a volume."""
+    accepted = (f"an OBJ, PLY, STL or USD path, or warp:<asset> "
+                f"({', '.join('warp:' + a for a in mesh_assets())})")
     if not isinstance(name, str) or not os.path.exists(asset_path(name)):
-        raise ConfigError(key, f"{name!r}: no such file; accepted: an OBJ, PLY, STL or USD path, or "
-                               f"warp:<asset> ({', '.join('warp:' + a for a in mesh_assets())})")
+        raise ConfigError(key, f"{name!r}: no such file; accepted: {accepted}")
+    if os.path.isdir(asset_path(name)):
+        raise ConfigError(key, f"{name!r}: a directory; accepted: {accepted}")
     if not name.startswith("warp:") and not name.lower().endswith(MESH_SUFFIXES):
         raise ConfigError(key, f"{name!r}: unknown format; accepted: {', '.join(MESH_SUFFIXES)}")
+    try:
+        load_mesh(name)
+    except MeshError as e:
+        raise ConfigError(key, f"{e}; accepted: a closed triangle mesh enclosing a volume, {accepted}") from None
     return name
 
 

@@ -7,24 +7,28 @@ allocated here.
 
 from __future__ import annotations
 
+import functools
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from omegaconf import OmegaConf
 
 import mpm
 from mpm.integrators import Explicit
 from mpm.meshes import MeshShape, file_digest
 
 from .fields import ConfigError, check, number, plain
+from .overrides import check_literals
+from .particles import check_particles
 from .physics import make_detect, make_integrator, make_material, make_scheme
 from .scene import make_scene
 from .schema import Config
 from .settings import KernelConfig, LogSettings, MapSpec, RunSettings
 
 __all__ = ["ConfigError", "LogSettings", "MapSpec", "RunSettings", "RunSpec", "check_memory", "make_material",
-           "memory_estimate", "resolve"]
+           "memory_estimate", "resolve", "validate"]
 
 
 @dataclass
@@ -106,6 +110,26 @@ def memory_estimate(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> tup
     return particles * per_particle + nodes * per_node, particles, nodes
 
 
+def _memory_key(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> str:
+    """The setting that makes a run too large: the particles per cell of the
+    body with the most particles when particles take most of the memory at
+    more than ``PPC_TYPICAL`` per cell, else the grid (or the particles' grid)."""
+    need, particles, nodes = memory_estimate(scene, kernel, precision)
+    grid_only = memory_estimate(replace(scene, bodies=[]), kernel, precision)[0]
+    if need - grid_only > grid_only:  # the particles' share is the larger
+        counts = [memory_estimate(replace(scene, bodies=[b]), kernel, precision)[1] for b in scene.bodies]
+        i = int(np.argmax(counts))
+        body = scene.bodies[i]
+        if (body.ppc or scene.ppc) > PPC_TYPICAL:
+            return f"scene.bodies[{i}].ppc" if body.ppc else "scene.ppc"
+        if scene.particle_resolution is not None:
+            return "scene.particle_resolution"
+    return "scene.resolution"
+
+
+PPC_TYPICAL = 27  # particles per cell that the scenes use at most (3^3)
+
+
 def check_memory(spec: "RunSpec") -> None:
     """Refuse a run that cannot fit in this machine's memory (its estimate
     and the limit in the message), before anything is sampled or allocated.
@@ -116,7 +140,7 @@ def check_memory(spec: "RunSpec") -> None:
     have = _machine_memory()
     if have and need > MEMORY_FRACTION * have:
         gib = 2.0 ** 30
-        key = "scene.ppc" if particles * 200 > nodes * 50 and scene.ppc > 64 else "scene.resolution"
+        key = _memory_key(scene, kernel, precision)
         raise ConfigError(key, f"the run needs about {need / gib:.3g} GiB ({particles:.3g} particles, "
                                f"{nodes:.3g} grid nodes), more than {MEMORY_FRACTION:.0%} of this machine's "
                                f"{have / gib:.3g} GiB; accepted: a smaller grid or fewer particles per cell")
@@ -132,9 +156,44 @@ def _known_keys(cfg) -> None:
             raise ConfigError(key, f"unknown key; accepted: {', '.join(known)}")
 
 
+@functools.cache
+def _scale_keys() -> dict:
+    """Every key of the files of ``conf/scale`` (nested mappings merged)."""
+    import yaml
+
+    from .schema import CONF
+
+    def merge(into: dict, d: dict) -> dict:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                merge(into.setdefault(k, {}), v)
+            else:
+                into.setdefault(k, None)
+        return into
+
+    known: dict = {}
+    for path in sorted((CONF / "scale").glob("*.yaml")):
+        merge(known, yaml.safe_load(path.read_text()) or {})
+    return known
+
+
+def _known_scale(value, known: dict, key: str = "scale") -> None:
+    """A key under ``scale`` that no file of ``conf/scale`` has would be read
+    by nothing: refuse it (``+scale.<name>=...``)."""
+    if not isinstance(value, dict):
+        return
+    for k, v in value.items():
+        if k not in known:
+            raise ConfigError(f"{key}.{k}", f"unknown key; accepted: {', '.join(sorted(known))}")
+        if isinstance(known[k], dict):
+            _known_scale(v, known[k], f"{key}.{k}")
+
+
 def resolve(cfg) -> RunSpec:
     """Validate a composed :class:`pipelines.config.schema.Config`."""
     _known_keys(cfg)
+    if cfg.get("scale") is not None:
+        _known_scale(OmegaConf.to_container(cfg.scale, resolve=False), _scale_keys())
     run = check(RunSettings, plain(cfg.run), "run")
     scheme = make_scheme(cfg.scheme)
     integrator = make_integrator(cfg.integrator) if "integrator" in cfg else Explicit()
@@ -169,3 +228,41 @@ def resolve(cfg) -> RunSpec:
                    transfer=kernel.transfer, run=run, log=log, seed=seed, integrator=integrator, detect=detect,
                    stability_map=stability_map, flip=kernel.flip,
                    material_used=any(b.material is None for b in sc.bodies))
+
+
+def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
+    """Everything ``pipelines.run`` checks before a run starts: the
+    overrides' literals (:func:`pipelines.config.overrides.check_literals`),
+    the config (:func:`resolve`), this machine's memory
+    (:func:`check_memory`) and the particles
+    (:func:`pipelines.config.particles.check_particles`); returns the spec
+    and the warnings to print."""
+    check_literals(cfg, list(overrides))
+    spec = resolve(cfg)
+    check_memory(spec)
+    return spec, check_particles(spec.scene, spec.seed) + step_warnings(spec)
+
+
+def step_warnings(spec: RunSpec) -> list[str]:
+    """A fixed explicit ``run.dt`` above the step limit of a body at rest
+    (mpm.timestep, CFL 1: the wave speed and the initial speed), said before
+    the run whatever the material (a hardening one only stiffens from there)."""
+    if spec.run.dt is None or spec.integrator.name != "explicit":
+        return []
+    from mpm.timestep import cfl_dt
+
+    scene = spec.scene
+    limits = []
+    for i, b in enumerate(scene.bodies):
+        speed = float(np.linalg.norm(b.velocity)) if b.velocity is not None else 0.0
+        limits.append((cfl_dt(scene.dx, b.material.wave_speed(), speed, 1.0, b.material.kinematic_viscosity(),
+                              scene.dim), i))
+    limit, i = min(limits)
+    if spec.run.dt <= limit:
+        return []
+    body = scene.bodies[i]
+    hardens = " (a plastic material: hardening only lowers it)" if body.material.plastic else ""
+    return [f"run.dt={spec.run.dt:g} s is {spec.run.dt / limit:.3g} times the explicit step's stability limit, "
+            f"the CFL limit dx / (c + |v|) = {limit:.3g} s of body '{body.name or f'body{i}'}' ({body.material.name}) "
+            f"at rest{hardens}: expect the run to blow up (stable: run.dt <= {limit:.3g}, or run.dt=null, the "
+            f"adaptive step)"]

@@ -31,7 +31,6 @@ end of a multirun when listed under ``hydra.callbacks``.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import pkgutil
 import sys
@@ -80,12 +79,19 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipelines.report", description=__doc__.split("\n")[0])
+    from ..config.arguments import Parser, output_dir
+
+    parser = Parser(prog="python -m pipelines.report", description=__doc__.split("\n")[0])
     parser.add_argument("sweep_dir", type=Path, help="multirun sweep directory")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: the sweep dir)")
     args = parser.parse_args(argv)
     if not args.sweep_dir.is_dir():
-        print(f"error: {args.sweep_dir}: no such directory", file=sys.stderr)
+        print(f"error: sweep_dir: {args.sweep_dir}: no such directory; accepted: a multirun sweep directory "
+              "(multirun/<date>/<time>)", file=sys.stderr)
+        return 2
+    problem = output_dir("--out", args.out)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     print(write_report(args.sweep_dir, args.out))
     return 0

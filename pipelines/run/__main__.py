@@ -27,7 +27,8 @@ from omegaconf import DictConfig, OmegaConf
 from . import provenance
 from ..config import schema
 from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
-from ..config.validate import ConfigError, check_memory, resolve
+from ..config.overrides import check_groups, replace_inline_materials
+from ..config.validate import ConfigError, validate
 from .warp_setup import init_warp
 
 schema.register()
@@ -47,8 +48,7 @@ def run(cfg: DictConfig) -> dict:
         if experiment and hc.mode != RunMode.MULTIRUN:  # its sweep would be ignored: one default job would run
             raise ConfigError("experiment", f"{experiment} is a sweep; accepted: run it with -m (python -m "
                                             f"pipelines.run -m +experiment={experiment})")
-        spec = resolve(cfg)
-        check_memory(spec)
+        spec, warnings = validate(cfg, list(hc.overrides.task))
     except ConfigError as e:
         # said here too: a launcher's worker process never reaches main()
         print(f"error: {e}", file=sys.stderr)
@@ -59,6 +59,8 @@ def run(cfg: DictConfig) -> dict:
         else:
             _remove_if_empty(out_dir)
         return invalid
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     init_warp()  # a launcher's worker process did not pass through main()
     if cfg.run.plan:
         from .runner import plan
@@ -149,8 +151,10 @@ def main() -> None:
     """Hydra's own error reports are multi-line; ask it to raise instead and
     print configuration errors on one line with exit code 2."""
     os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+    sys.argv[1:] = replace_inline_materials(sys.argv[1:])
     init_warp()
     try:
+        check_groups(sys.argv[1:])
         _main()
     except KeyboardInterrupt:
         sys.exit(EXIT_CODES["interrupted"])

@@ -113,21 +113,27 @@ def deposit_row(d: Deposit) -> list:
 
 def main(argv: list[str] | None = None) -> int:
     """python -m pipelines.granular <run dir> ...: the deposit of finished runs."""
-    import argparse
     import sys
     from pathlib import Path
 
-    parser = argparse.ArgumentParser(prog="python -m pipelines.granular", description=main.__doc__)
+    from ...config.arguments import Parser
+
+    parser = Parser(prog="python -m pipelines.granular", description=main.__doc__)
     parser.add_argument("runs", nargs="+", type=Path, help="run directories (with final_state.npz)")
     args = parser.parse_args(argv)
-    print(" ".join(f"{h:>10}" for h in DEPOSIT_HEADERS) + "  run")
+    rows = []
     for run in args.runs:
         path = run / "final_state.npz" if run.is_dir() else run
-        if not path.is_file():
-            print(f"error: {run}: no final_state.npz", file=sys.stderr)
+        try:
+            with np.load(path) as f:
+                rows.append((deposit(f["x"].astype(float), f["X0"].astype(float)), run))
+        except (OSError, ValueError, KeyError, EOFError) as e:
+            why = "no final_state.npz" if not path.is_file() else f"not a run's final state ({type(e).__name__})"
+            print(f"error: runs: {run}: {why}; accepted: the directories of finished column-collapse runs",
+                  file=sys.stderr)
             return 2
-        with np.load(path) as f:
-            d = deposit(f["x"].astype(float), f["X0"].astype(float))
+    print(" ".join(f"{h:>10}" for h in DEPOSIT_HEADERS) + "  run")
+    for d, run in rows:
         print(" ".join(f"{v:>10.3f}" for v in deposit_row(d)) + f"  {run}")
     return 0
 

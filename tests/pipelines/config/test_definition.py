@@ -235,7 +235,8 @@ def test_values_no_type_states_are_checked_where_they_are_untyped():
     assert _message(["scene=water_bunny", "scene.colliders.0.inside=maybe"])[0] == "scene.colliders[0].inside"
     # null where the definition has no null: refused by the field's own check
     assert _message(["scene.walls=null"])[1].startswith("scene.walls: None; accepted: one of sticky, slip, open")
-    assert _message(["scene=yoyo", "scene.regions.0.body=null"])[1] == "scene.regions[0].body: missing; accepted: a number"
+    assert _message(["scene=yoyo", "scene.regions.0.body=null"])[1] == ("scene.regions[0].body: missing; accepted: a "
+                                                                      "body's index (0 to 0) or name (yoyo)")
 
 
 def test_run_sync_every_and_graph():

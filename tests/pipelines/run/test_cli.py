@@ -72,7 +72,7 @@ BAD_INPUTS = [
                                                      "final_state.npz there"),
     # input that was silently ignored
     (["+run.stepz=5"], "run.stepz: unknown key; accepted: cfl, device, dt,"),
-    (["+log.evry=3"], "log.evry: unknown key; accepted: color, dJ, every,"),
+    (["+log.evry=3"], "log.evry: unknown key; accepted: color, color_range, dJ, every,"),
     (["+foo=1"], "foo: unknown key; accepted: detect, expected, integrator,"),
     (["+scene.bodies.0.colour=red"], "scene.bodies[0].colour: unknown key; accepted: angular_velocity,"),
     (["+scene.bodies.0.shape.radiuss=1"], "scene.bodies[0].shape.radiuss: unknown key; accepted: axis,"),
@@ -115,6 +115,19 @@ BAD_INPUTS = [
     (["log.color=rainbow"], "log.color: 'rainbow'; accepted: auto, body, dJ"),
     (["log.color=plastic_strain"], "log.color: 'plastic_strain' (no plastic body in this scene)"),
     (["hydra.run.dir=/proc/no/run"], "hydra.run.dir: cannot create /proc/no"),
+    # selections, meshes, option types and nested keys: refused before the run directory is written
+    (["scene=cantilever_2d", "scene.loads.0.select.center=[0.2,0.1]"],
+     "scene.loads[0].select: load 'tip' selects no particle of body 'beam'"),
+    (["scene=cantilever_2d", "scene.regions.0.select.center=[0.2,0.1]"],
+     "scene.regions[0].select: region 'clamp' selects no particle of body 'beam'"),
+    (["scene.bodies.0.shape.radius=0.001"], "scene.bodies[0].shape: body 'ball' holds no particle"),
+    (["scene=yoyo", "scene.bodies.0.shape.parts.0.mesh=conf"], "scene.bodies[0].shape.parts[0].mesh: 'conf': a "
+                                                                "directory"),
+    (["integrator=implicit", "integrator.cg_max=many"], "integrator.cg_max: 'many' is not an integer"),
+    (["+scale.nope=1"], "scale.nope: unknown key; accepted: bar_grids,"),
+    (["log.dJ=2"], "log.dJ: 2 is not true or false; accepted: true, false"),
+    (["scene=1"], "scene: '1' is not an option's name; accepted: ball_in_cylinder,"),
+    (["scene.bodies.0.ppc=100000"], "scene.bodies[0].ppc: the run needs about"),
 ]
 
 

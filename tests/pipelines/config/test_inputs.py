@@ -1,0 +1,222 @@
+"""Bad input of every class refused in one line naming the key or file, the
+value and what is accepted, before anything is compiled or allocated: mesh
+files, selections that hold no particle, option types, unknown keys under
+nested groups, output paths and numbers of the tools; and the warnings of
+inputs that run (bodies overlapping at the start, a fixed step above the
+stability limit)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+
+import numpy as np
+import pytest
+
+from helpers import compose_cfg
+from pipelines.config.overrides import check_groups, replace_inline_materials
+from pipelines.config.validate import ConfigError, check_memory, resolve, validate
+
+
+def outcome(overrides: list[str]) -> tuple[list[str], ConfigError | None]:
+    """(warnings, None) or ([], the error) of pipelines.run's checks."""
+    overrides = replace_inline_materials(overrides)
+    try:
+        check_groups(overrides)
+        return validate(compose_cfg(overrides), overrides)[1], None
+    except ConfigError as e:
+        return [], e
+
+
+def refused(overrides: list[str]) -> ConfigError:
+    warnings, err = outcome(overrides)
+    assert err is not None, f"accepted: {overrides} ({warnings})"
+    assert "\n" not in str(err) and "accepted: " in str(err), str(err)
+    return err
+
+
+# ------------------------------------------------------------------ mesh files
+TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+BAD_MESHES = {  # file name -> (contents, a fragment of the problem); None: a directory
+    "folder.obj": (None, "a directory"),
+    "empty.obj": ("", "an empty file"),
+    "notes.obj": ("these are notes, not vertices\n", "not a closed triangle mesh"),
+    "short_vertex.obj": ("v 0 0 0\nv 1 0\nf 1 2 3\n", "not a readable mesh"),
+    "header_only.ply": ("ply\nformat ascii 1.0\nelement vertex 3\n", "not a readable mesh"),
+    "truncated.stl": ("solid x\nfacet normal 0 0\nendsolid\n", "not a closed triangle mesh"),
+    "garbage.stl": ("\x00\x01binary garbage" * 7, "mesh"),
+    "nan.obj": (TET.replace("v 1 0 0", "v nan 0 0"), "not finite"),
+    "inf.obj": (TET.replace("v 0 1 0", "v 0 inf 0"), "not finite"),
+    "flat.obj": ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\nf 1 3 2\nf 2 3 4\n", "no volume"),
+    "open.obj": (TET.rsplit("f ", 1)[0] + "f 1 2 3\n", "open surface"),
+    "bad_index.obj": (TET + "f 1 2 9\n", "not a readable mesh|past its"),
+}
+
+
+def _write(path, contents):
+    if contents is None:
+        path.mkdir()
+    else:
+        path.write_text(contents)
+    return str(path)
+
+
+@pytest.mark.parametrize("name", list(BAD_MESHES))
+def test_a_bad_mesh_file_is_refused_naming_the_file(name, tmp_path):
+    contents, fragment = BAD_MESHES[name]
+    path = _write(tmp_path / name, contents)
+    err = refused(["scene=yoyo", f"scene.bodies.0.shape.parts.0.mesh={path}"])
+    assert err.key == "scene.bodies[0].shape.parts[0].mesh" and path in str(err)
+    assert any(f in str(err) for f in fragment.split("|")), str(err)
+
+
+def test_a_closed_mesh_file_is_accepted_and_one_too_small_names_the_file(tmp_path):
+    path = _write(tmp_path / "tet.obj", TET)
+    warnings, err = outcome(["scene=yoyo", f"scene.bodies.0.shape.parts.0.mesh={path}"])
+    assert err is None
+    err = refused(["scene=elastic_ball_3d", "scene.bodies.0.shape.type=mesh", f"scene.bodies.0.shape.mesh={path}",
+                   "scene.bodies.0.shape.size=0.002", "scene.bodies.0.shape.radius=null"])
+    assert err.key == "scene.bodies[0].shape" and path in str(err) and "holds no particle" in str(err)
+
+
+# ------------------------------------------------------------------ selections
+@pytest.mark.parametrize("overrides, key, fragments", [
+    (["scene=cantilever_2d", "scene.loads.0.select.center=[0.2,0.1]"], "scene.loads[0].select",
+     ["load 'tip'", "body 'beam'", "[0.175, 0.225] x [0.04, 0.16]", "domain [0, 1.2] x [0, 0.9]"]),
+    (["scene=cantilever_2d", "scene.loads.0.body=null", "scene.loads.0.select.center=[1.1,0.2]"],
+     "scene.loads[0].select", ["of any body"]),
+    (["scene=cantilever_2d", "scene.regions.0.select.center=[0.2,0.1]"], "scene.regions[0].select",
+     ["region 'clamp'", "body 'beam'", "the body's particles", "domain"]),
+    (["scene=cantilever_2d", "scene.regions.0.select.half_size=[0.001,0.001]"], "scene.regions[0].select",
+     ["region 'clamp'"]),
+    (["scene=yoyo", "scene.regions.0.select.center=[0.1,0.3,0.1]"], "scene.regions[0].select", ["'anchor'"]),
+    (["scene=cantilever_2d", "scene.regions.0.body=null"], "scene.regions[0].body", ["beam"]),
+    (["scene.bodies.0.shape.radius=0.001"], "scene.bodies[0].shape", ["body 'ball'", "holds no particle", "domain"]),
+    (["scene=two_disks", "scene.bodies.1.ppc=1", "scene.bodies.1.shape.radius=0.004"], "scene.bodies[1].shape",
+     ["body 'b'"]),
+])
+def test_a_selection_without_particles_is_refused_before_the_run(overrides, key, fragments):
+    err = refused(overrides)
+    assert err.key == key and all(f in str(err) for f in fragments), str(err)
+
+
+def test_overlapping_bodies_are_warned_with_the_overlap_size():
+    warnings, err = outcome(["scene=two_disks", "scene.bodies.1.shape.center=[0.45,0.5]"])
+    assert err is None and len(warnings) == 1, warnings
+    assert "'a'" in warnings[0] and "'b'" in warnings[0] and "overlap at the start" in warnings[0]
+    n, area = (float(x) for x in re.search(r": (\d+) particles .* \(about ([\d.e+-]+) m\^2\)", warnings[0]).groups())
+    assert n > 0 and area > 0
+    assert outcome(["scene=two_disks"]) == ([], None)  # apart: nothing said
+
+
+# ------------------------------------------------------------------ option types and unknown keys
+@pytest.mark.parametrize("overrides, key", [
+    (["integrator=implicit", "integrator.newton_max=abc"], "integrator.newton_max"),
+    (["integrator=implicit", "integrator.cg_max=1.5"], "integrator.cg_max"),
+    (["integrator=implicit", "integrator.halvings=[1]"], "integrator.halvings"),
+    (["integrator=implicit", "integrator.newton_tol=nan"], "integrator.newton_tol"),
+    (["integrator=implicit", "integrator.line_search=2"], "integrator.line_search"),
+    (["integrator=implicit", "integrator.psd=maybe"], "integrator.psd"),
+    (["integrator=implicit", "integrator.displacement={a: 1}"], "integrator.displacement"),
+    (["integrator=explicit", "+integrator.newton_max=3"], "integrator.newton_max"),
+    (["log.dJ=2"], "log.dJ"),
+    (["run.plan=0"], "run.plan"),
+    (["scene=1"], "scene"),
+    (["scheme=null"], "scheme"),
+    (["+scale.no_such_size=1"], "scale.no_such_size"),
+    (["scale=paper", "+scale.update_cost_resolution.nope=3"], "scale.update_cost_resolution.nope"),
+    (["+scene.sizes.default.resolutoin=8"], "scene.sizes.default.resolutoin"),
+    (["scene.domain={a: 1}"], "scene.domain"),
+    (["stability_map={a: 1}"], "stability_map"),
+])
+def test_a_value_of_the_wrong_type_or_an_unknown_key_is_refused(overrides, key):
+    from pipelines.config.errors import describe
+
+    try:
+        err = refused(overrides)
+        text = str(err)
+    except Exception as e:  # noqa: BLE001 - composition errors: described in one line by the command line
+        text = describe(e)
+        assert text is not None, repr(e)
+    assert text.startswith(f"{key}:") and "\n" not in text, text
+
+
+def test_a_new_size_is_accepted_and_chosen():
+    assert outcome(["+scene.sizes.huge={resolution: 32}", "scene.size=huge"])[1] is None
+
+
+@pytest.mark.parametrize("override, key", [("scene.ppc=100000", "scene.ppc"),
+                                           ("scene.bodies.0.ppc=100000", "scene.bodies[0].ppc"),
+                                           ("scene.particle_resolution=100000", "scene.particle_resolution"),
+                                           ("scene.resolution=100000", "scene.resolution")])
+def test_a_run_too_large_names_what_makes_it_large(override, key):
+    with pytest.raises(ConfigError) as err:
+        check_memory(resolve(compose_cfg([override])))
+    assert err.value.key == key
+
+
+def test_an_inline_material_replaces_the_body_s_own():
+    """The documented override on a scene whose body brings its own material."""
+    from helpers import spec_for
+
+    over = replace_inline_materials(["scene=column_collapse_2d", "scene.bodies.0.material={model: fluid, K: 5e4}"])
+    m = spec_for(over).scene.bodies[0].material
+    assert m.name == "fluid" and m.K == 5e4 and m.rho == 1000.0  # the fluid's own defaults, nothing of the sand
+    err = refused(["scene=column_collapse_2d", "scene.bodies.0.material={model: fluid, E: 5e4}"])
+    assert err.key == "scene.bodies[0].material.E"
+
+
+def test_a_fixed_step_above_the_limit_is_warned_for_every_material():
+    for material in ("fixed_corotated", "snow", "von_mises", "sand", "fluid"):
+        warnings, err = outcome([f"material={material}", "run.dt=1e-2"])
+        assert err is None and any("stability limit" in w for w in warnings), (material, warnings)
+        assert outcome([f"material={material}", "run.dt=1e-7"]) == ([], None)
+
+
+# ------------------------------------------------------------------ the tools' paths and numbers
+def _call(main, argv) -> tuple[int, str]:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code
+    return code, err.getvalue().strip()
+
+
+def test_the_material_point_checks_its_output_and_numbers_before_computing(tmp_path, monkeypatch):
+    import pipelines.material_point as mp
+
+    monkeypatch.setattr(mp, "drive", lambda *a, **k: pytest.fail("computed before the checks"))
+    (tmp_path / "notes.txt").write_text("mine")
+    for argv, fragment in [(["--out", str(tmp_path / "missing" / "x.png")], "no folder"),
+                           (["--out", str(tmp_path / "notes.txt")], "ending in .png"),
+                           (["--out", str(tmp_path)], "ending in .png"),
+                           (["--strain", "nan"], "--strain: nan"), (["--rate", "inf"], "--rate: inf"),
+                           (["--rate", "0"], "--rate: 0"), (["--steps", "0"], "--steps: 0")]:
+        code, err = _call(mp.main, argv)
+        assert code == 2 and err.startswith("error: ") and fragment in err and "\n" not in err, err
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_replay_and_report_refuse_an_existing_file_as_an_output_folder(tmp_path):
+    from pipelines.recording.replay import main as replay
+    from pipelines.report import main as report
+
+    (tmp_path / "f.png").write_text("not a folder")
+    (tmp_path / "recording.rrd").write_text("")
+    code, err = _call(replay, [str(tmp_path), "--frames", str(tmp_path / "f.png")])
+    assert code == 2 and err.startswith("error: --frames:") and "is a file" in err
+    code, err = _call(report, [str(tmp_path), "--out", str(tmp_path / "f.png")])
+    assert code == 2 and err.startswith("error: --out:") and "is a file" in err
+    assert (tmp_path / "f.png").read_text() == "not a folder"
+
+
+def test_replay_of_a_timings_file_says_what_to_replay(tmp_path):
+    from pipelines.recording.replay import main as replay
+
+    timings = tmp_path / "recording.timings.rrd"
+    timings.write_bytes(np.zeros(8, np.uint8).tobytes())
+    code, err = _call(replay, [str(timings)])
+    assert code == 2 and "wall-clock timings" in err and f"python -m pipelines.replay {tmp_path}" in err
