@@ -160,7 +160,7 @@ class _Forcing:
 class Case:
     """One small scene and solver; what it sets is what the solver compiles."""
 
-    scheme: str = "empm"  # empm | tlmpm | aulmpm (the scene kind's defaults) | aulmpm_paper | aulmpm_rotate
+    scheme: str = "empm"  # empm | tlmpm | aulmpm (the scene kind's defaults) | aulmpm_paper | aulmpm_transform
     kernel: str = "linear"  # the quickest to compile
     transfer: str = "mls"
     materials: tuple[str, ...] = ("fixed_corotated",)  # one body each
@@ -231,7 +231,7 @@ def scene(case: Case, dim: int) -> mpm.Scene:
 def scheme(case: Case):
     return {"empm": mpm.EMPM, "tlmpm": mpm.TLMPM, "aulmpm": mpm.AULMPM,
             "aulmpm_paper": lambda: mpm.AULMPM(criterion="paper", affine="keep"),
-            "aulmpm_rotate": lambda: mpm.AULMPM(affine="rotate")}[case.scheme]()
+            "aulmpm_transform": lambda: mpm.AULMPM(affine="transform")}[case.scheme]()
 
 
 def driver(case: Case, dim: int, precision: str) -> mpm.Driver:
@@ -272,7 +272,7 @@ def cases(dim: int) -> list[Case]:
     # compile (their code does not depend on the kernel)
     out += [Case(materials=(m,), transfer=TRANSFERS[i % len(TRANSFERS)], implicit=True) for i, m in enumerate(materials)]
     out += [
-        Case(), Case(scheme="aulmpm_paper"), Case(scheme="aulmpm_rotate"),
+        Case(), Case(scheme="aulmpm_paper"), Case(scheme="aulmpm_transform"),
         Case(scheme="tlmpm", implicit=True, psd=False),
         # contact between bodies
         Case(materials=two), Case(materials=two, fuse=True), Case(scheme="tlmpm", materials=two),
@@ -294,7 +294,7 @@ def cases(dim: int) -> list[Case]:
         Case(detect="warn", track_energy=True, measure=True), Case(scheme="tlmpm", detect="off"),
         Case(batched=True, fuse=True, track_energy=True, measure=True), Case(batched=True, kernel="compact", measure=True),
         Case(batched=True, scheme="aulmpm", materials=("fluid",)), Case(batched=True, scheme="aulmpm_paper", track_energy=True),
-        Case(batched=True, scheme="aulmpm_rotate"),
+        Case(batched=True, scheme="aulmpm_transform"),
         Case(batched=True, scheme="tlmpm", detect="warn", track_energy=True), Case(batched=True, scheme="tlmpm", detect="off"),
         Case(batched=True, materials=two, measure=True), Case(batched=True, materials=two, contact="shared"),
         Case(batched=True, scheme="tlmpm", materials=two, regions=True, colliders=kinds(dim)),
