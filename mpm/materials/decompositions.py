@@ -67,7 +67,7 @@ def make_rotation(t: Types):
                 d = X[0, 0] * cof[0, 0] + X[0, 1] * cof[0, 1] + X[0, 2] * cof[0, 2]
                 g = S(1.0)
                 if change > S(1.0e-2):
-                    g = wp.pow(d, S(-1.0 / 3.0))
+                    g = wp.pow(d, S(MINUS_ONE_THIRD))
                 Y = S(0.5) * (g * X + cof / (g * d))
                 D = Y - X
                 X = Y
@@ -85,6 +85,7 @@ def make_rotation(t: Types):
 
 # Newton iterations of the 3D polar rotation before the SVD takes over
 MAX_NEWTON = 16
+MINUS_ONE_THIRD = -1.0 / 3.0  # a Python float: inside a Warp function the quotient would be float32
 
 
 @functools.cache

@@ -30,6 +30,8 @@ from .base import lame
 from .elasticity import hencky_elasticity, hencky_elasticity_hessian
 from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
 
+TWO_THIRDS = 2.0 / 3.0  # a Python float: inside the Warp function 2.0 / 3.0 is a float32 quotient
+
 
 @functools.cache
 def _flow(t: Types):
@@ -48,7 +50,7 @@ def _flow(t: Types):
         dev = eps - (tr / S(d)) * ones
         norm = wp.length(dev)
         yield_stress = params[2] + H * history[1]
-        delta = (S(2.0) * mu * norm - S(SQRT_2_3) * yield_stress) / (S(2.0) * mu + S(2.0 / 3.0) * H)
+        delta = (S(2.0) * mu * norm - S(SQRT_2_3) * yield_stress) / (S(2.0) * mu + S(TWO_THIRDS) * H)
         if delta > S(0.0):
             eps = eps - (delta / norm) * dev
         return exp_strain(eps), history

@@ -37,16 +37,8 @@ def impact_scene(material, dim):
                      ppc=1)
 
 
-# float64 evaluates the von Mises hardening term 2 H / 3 with 2/3 in float32 (a literal
-# expression inside the Warp function), 3e-8 off: its return mapping misses the
-# closed form by 2e-10 (test_plasticity.test_float64_von_mises_return_mapping_is_the_closed_form)
-VON_MISES_FLOAT32_CONSTANT = pytest.mark.xfail(
-    strict=True, reason="mpm/materials/von_mises.py: S(2.0 / 3.0) * H is computed in float32 in float64 runs")
-
-
 # every model in 2D; in 3D the two with the most branches
-@pytest.mark.parametrize("name,dim", [pytest.param(n, 2, marks=[VON_MISES_FLOAT32_CONSTANT] if n == "von_mises" else [])
-                                      for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
+@pytest.mark.parametrize("name,dim", [(n, 2) for n in PLASTIC] + [("sand", 3), ("nacc", 3)])
 def test_eulerian_plastic_step_matches_numpy_reference(name, dim, device):
     """float64, particle by particle: positions, velocities, affine matrices,
     the trial elastic deformation F^0s = (I + dt C) F_E and the history

@@ -27,12 +27,7 @@ def von_mises_stress(tau):
     return np.sqrt(1.5 * np.sum(dev * dev, axis=(-2, -1)))
 
 
-VON_MISES_FLOAT32_CONSTANT = ("mpm/materials/von_mises.py evaluates S(2.0 / 3.0) inside the Warp function: "
-                              "the literal quotient is float32 (0.66666669) in float64 runs")
-
-
-@pytest.mark.parametrize("H", [0.0, pytest.param(2.0e5, marks=pytest.mark.xfail(
-    strict=True, reason=VON_MISES_FLOAT32_CONSTANT))])
+@pytest.mark.parametrize("H", [0.0, 2.0e5])
 def test_von_mises_uniaxial_tension_yields_at_sigma_y(H):
     """Uniaxial Kirchhoff stress along x (lateral stresses solved to zero),
     stretch to 3 % Hencky strain. With principal directions fixed the Hencky
@@ -320,10 +315,7 @@ def test_viscoplastic_relaxation_does_not_depend_on_dt():
     assert out[0] > 50.0 / math.sqrt(1.0) * 0.99
 
 
-@pytest.mark.parametrize("hardening", [
-    0.0, pytest.param(1.0e4, marks=pytest.mark.xfail(
-        strict=True, reason="mpm/materials/von_mises.py evaluates S(2.0 / 3.0) inside the Warp function: "
-                            "the literal quotient is float32 (0.66666669) in float64 runs"))])
+@pytest.mark.parametrize("hardening", [0.0, 1.0e4])
 def test_float64_von_mises_return_mapping_is_the_closed_form(hardening):
     """One float64 return mapping of 200 random trial states (2D, most of them
     past yield) against the NumPy closed form of reference_mpm.plastic_return,
