@@ -62,7 +62,8 @@ def describe(exc: BaseException) -> str | None:
         m = re.match(r"Value '(.*)' of type '.*' could not be converted to (\w+)", msg)
         if m:
             kind = {"Float": "a number", "Integer": "an integer", "Boolean": "true or false"}
-            return f"{key}: {m.group(1)!r} is not {kind.get(m.group(2), m.group(2))}"
+            text = kind.get(m.group(2), m.group(2))
+            return f"{key}: {m.group(1)!r} is not {text}; accepted: {text}"
         m = re.match(r"Value '(.*)' is not a valid bool", msg)
         if m:
             return f"{key}: {m.group(1)!r} is not true or false; accepted: true, false"

@@ -156,7 +156,10 @@ def number(key: str, value, kind=float, meta: Mapping | None = None, name: str =
             raise ValueError
         v = kind(value)
     except (TypeError, ValueError, OverflowError):
-        raise ConfigError(key, f"{value!r} is not {'an integer' if kind is int else 'a number'}") from None
+        text = "an integer" if kind is int else "a number"
+        accepted = bounds(key, name or key.rsplit(".", 1)[-1], meta)
+        raise ConfigError(key, f"{value!r} is not {text}; accepted: {text}"
+                               + (f", {accepted}" if accepted else "")) from None
     accepted = bounds(key, name or key.rsplit(".", 1)[-1], meta)
     if not math.isfinite(v) and not (meta.get("inf") and v == math.inf):
         raise ConfigError(key, f"{v} is not finite; accepted: a finite number" + (f", {accepted}" if accepted else ""))

@@ -225,13 +225,13 @@ def test_values_no_type_states_are_checked_where_they_are_untyped():
     """Inline materials and closed-form solutions are free mappings to Hydra:
     their values are checked against their class all the same."""
     assert _message(["scene.bodies.0.material={model: fluid, K: abc}"])[1] == \
-        "scene.bodies[0].material.K: 'abc' is not a number"
+        "scene.bodies[0].material.K: 'abc' is not a number; accepted: a number, 0.0 < K"
     assert _message(["scene.bodies.0.material={model: fluid, K: true}"])[1] == \
-        "scene.bodies[0].material.K: True is not a number"
+        "scene.bodies[0].material.K: True is not a number; accepted: a number, 0.0 < K"
     assert _message(["scene.bodies.0.material={model: nacc, hardening: 3}"])[1] == \
         "scene.bodies[0].material.hardening: 3 is not true or false; accepted: true, false"
     assert _message(["scene=vibrating_bar_2d", "scene.solution.mode=1.5"])[1] == \
-        "scene.solution.mode: 1.5 is not an integer"
+        "scene.solution.mode: 1.5 is not an integer; accepted: an integer, scene.solution.mode >= 1"
     assert _message(["scene=water_bunny", "scene.colliders.0.inside=maybe"])[0] == "scene.colliders[0].inside"
     # null where the definition has no null: refused by the field's own check
     assert _message(["scene.walls=null"])[1].startswith("scene.walls: None; accepted: one of sticky, slip, open")
@@ -245,7 +245,7 @@ def test_run_sync_every_and_graph():
     spec = spec_for(["run.sync_every=10", "run.graph=true"])
     assert spec.run.sync_every == 10 and spec.run.graph is True
     assert _message(["run.sync_every=0"])[1] == "run.sync_every: 0 out of range; accepted: run.sync_every >= 1"
-    assert _message(["run.sync_every=2.5"])[1] == "run.sync_every: '2.5' is not an integer"
+    assert _message(["run.sync_every=2.5"])[1] == "run.sync_every: '2.5' is not an integer; accepted: an integer"
     assert _message(["run.graph=maybe"])[1] == "run.graph: 'maybe' is not true or false; accepted: true, false"
     doc = RunSettings.__dataclass_fields__["sync_every"].metadata["doc"]
     assert "null: 1 on the CPU, 10 on CUDA" in doc
