@@ -53,13 +53,19 @@ def check_groups(overrides: list[str]) -> None:
 
     for o in _parse(overrides):
         group = o.key_or_group.split("@")[0]
-        if group not in GROUPS or o.is_delete() or o.package is not None or o.is_sweep_override():
-            continue  # a sweep's options: each job's composition names a bad one
+        if group not in GROUPS or o.is_delete() or o.package is not None:
+            continue
         value = o.value()
-        names = value if isinstance(value, list) else [value]
+        if o.is_sweep_override():  # -m scene=a,b: each choice (a glob names options; a range none)
+            if type(value).__name__ == "Glob":
+                continue
+            names = list(getattr(value, "list", None) or [None])
+        else:
+            names = value if isinstance(value, list) else [value]
         if not all(isinstance(v, str) and v for v in names):
             accepted = ", ".join(options(group)) or "an option's name"
-            raise ConfigError(group, f"{o.get_value_element_as_str()!r} is not an option's name; accepted: {accepted}")
+            given = (o.input_line or "").split("=", 1)[-1] if o.is_sweep_override() else o.get_value_element_as_str()
+            raise ConfigError(group, f"{given!r} is not an option's name; accepted: {accepted}")
 
 
 def check_literals(cfg, overrides: list[str]) -> None:

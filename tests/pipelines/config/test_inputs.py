@@ -220,3 +220,17 @@ def test_replay_of_a_timings_file_says_what_to_replay(tmp_path):
     timings.write_bytes(np.zeros(8, np.uint8).tobytes())
     code, err = _call(replay, [str(timings)])
     assert code == 2 and "wall-clock timings" in err and f"python -m pipelines.replay {tmp_path}" in err
+
+
+@pytest.mark.parametrize("sweep,bad", [("scene=1,2", True), ("scene=yoyo,2", True), ("scheme=range(1,3)", True),
+                                       ("scene=yoyo,elastic_ball_2d", False), ("scene=glob(elastic_*)", False)])
+def test_a_sweep_over_a_group_names_options(sweep, bad):
+    """-m scene=1,2 failed inside Hydra with a traceback in every job: each
+    choice of a group's sweep is checked before anything runs."""
+    if not bad:
+        check_groups([sweep])
+        return
+    with pytest.raises(ConfigError) as e:
+        check_groups([sweep])
+    assert str(e.value).startswith(f"{sweep.split('=')[0]}: '{sweep.split('=', 1)[1]}' is not an option's name; "
+                                   f"accepted: ")
