@@ -224,44 +224,63 @@ def _rigid_velocity(body, x, dim):
     return v, C
 
 
+@dataclass
+class BodySample:
+    """One body's particles as :func:`build` places them."""
+
+    x: np.ndarray  # positions [m], the initial deformation applied
+    volume: float  # each particle's volume [m^d]
+    F: np.ndarray  # the initial deformation gradient (d, d)
+    volumes: dict  # the body's volume [m^d]: "volume" (used), "shape", "cells", "used" (which)
+
+
+def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
+    """Every body's particles in body order from one generator seeded with
+    ``seed`` (sampled in the reference shape, placed deformed); a body may
+    hold none (:func:`build` refuses it)."""
+    d, dxp = scene.dim, scene.particle_dx
+    rng = np.random.default_rng(seed)
+    raw = [sample_shape(b.shape, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
+           for b in scene.bodies]
+    out = []
+    for b, x in zip(scene.bodies, raw):
+        n, cell = len(x), dxp**d / (b.ppc or scene.ppc)
+        V = shape_volume(b.shape, d)
+        used = "shape" if V is not None and scene.particle_volume == "shape" else "cells"
+        F = np.eye(d)
+        if b.deformation is not None:
+            F = np.asarray(b.deformation, float)
+            c = 0.5 * (np.asarray(b.shape.bounds()[0], float) + np.asarray(b.shape.bounds()[1], float))
+            x = c + (x - c) @ F.T
+        out.append(BodySample(x, V / n if used == "shape" and n else cell, F,
+                              {"volume": V if used == "shape" else n * cell, "shape": V, "cells": n * cell,
+                               "used": used}))
+    return out
+
+
 def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str = "cpu",
           seed: int = 0) -> tuple[Model, State]:
     """Sample the bodies and allocate the model and initial state on ``device``."""
     check_scene(scene, kernel)
     t = make_types(scene.dim, precision)
     d, dx, dxp = scene.dim, scene.dx, scene.particle_dx
-    rng = np.random.default_rng(seed)
 
     # material models in order of first appearance; bodies grouped by model
     models = list(dict.fromkeys(type(b.material) for b in scene.bodies))
     order = sorted(range(len(scene.bodies)), key=lambda i: models.index(type(scene.bodies[i].material)))
-    samples = []
-    for i, b in enumerate(scene.bodies):
-        ppc = b.ppc or scene.ppc
-        x = sample_shape(b.shape, d, dxp, ppc, scene.jitter, rng, scene.lattice_offset)
-        if len(x) == 0:
+    samples = sample_bodies(scene, seed)
+    for i, s in enumerate(samples):
+        if len(s.x) == 0:
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
-        samples.append((x, ppc))
 
     xs, vs, Cs, ms, Vs, ids, hs, Fs = [], [], [], [], [], [], [], []
     body_ranges = [None] * len(scene.bodies)
-    volumes: list[dict | None] = [None] * len(scene.bodies)
+    volumes: list[dict | None] = [s.volumes for s in samples]
     groups: list[MaterialGroup] = []
     start = 0
     for i in order:
-        b, (x, ppc) = scene.bodies[i], samples[i]
+        b, x, vol, F = scene.bodies[i], samples[i].x, samples[i].volume, samples[i].F
         n = len(x)
-        vol = dxp**d / ppc
-        V = shape_volume(b.shape, d)
-        used = "shape" if V is not None and scene.particle_volume == "shape" else "cells"
-        volumes[i] = {"volume": V if used == "shape" else n * vol, "shape": V, "cells": n * vol, "used": used}
-        if used == "shape":
-            vol = V / n
-        F = np.eye(d)
-        if b.deformation is not None:  # sampled in the reference shape, placed deformed
-            F = np.asarray(b.deformation, float)
-            c = 0.5 * (np.asarray(b.shape.bounds()[0], float) + np.asarray(b.shape.bounds()[1], float))
-            x = c + (x - c) @ F.T
         Fs.append(np.broadcast_to(F, (n, d, d)))
         v, C = _rigid_velocity(b, x, d)
         if scene.solution is not None:

@@ -1,6 +1,6 @@
 """The particles a validated run will have, checked before anything is
-compiled or allocated: the bodies are sampled as :func:`mpm.build` samples
-them (the same seed, spacing and order), so that a body that holds no
+compiled or allocated: the bodies are sampled by :func:`mpm.model.sample_bodies`, as
+:func:`mpm.build` samples them, so that a body that holds no
 particle, a kinematic region or a load that selects none is refused in one
 line naming it, its bounds and the domain's; bodies that overlap at the
 start are said in a warning with the overlap's size."""
@@ -12,7 +12,7 @@ import numpy as np
 import mpm
 from mpm.loads import LoadError, resolve
 from mpm.meshes import MeshShape
-from mpm.sampling import sample_shape, shape_volume
+from mpm.model import sample_bodies
 
 from .fields import ConfigError
 
@@ -33,29 +33,14 @@ def _meshes(shape) -> list[str]:
     return [m for s in inner for m in _meshes(s)]
 
 
-def sample(scene: mpm.Scene, seed: int) -> list[np.ndarray]:
-    """Each body's initial particle positions, as mpm.build places them."""
-    d, dxp = scene.dim, scene.particle_dx
-    rng = np.random.default_rng(seed)
-    out = []
-    for b in scene.bodies:
-        x = sample_shape(b.shape, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
-        if b.deformation is not None and len(x):
-            F = np.asarray(b.deformation, float)
-            lo, hi = (np.asarray(v, float) for v in b.shape.bounds())
-            c = 0.5 * (lo + hi)
-            x = c + (x - c) @ F.T
-        out.append(x)
-    return out
-
-
 def check_particles(scene: mpm.Scene, seed: int, key: str = "scene") -> list[str]:
     """Raise :class:`ConfigError` for a body without particles, a region or a
     load that selects none; return warnings (bodies overlapping at the start)."""
     d, dxp = scene.dim, scene.particle_dx
     domain = _box([0.0] * d, scene.domain)
     names = [b.name or f"body{i}" for i, b in enumerate(scene.bodies)]
-    xs = sample(scene, seed)
+    samples = sample_bodies(scene, seed)
+    xs = [s.x for s in samples]
     for i, (b, x) in enumerate(zip(scene.bodies, xs)):
         if len(x):
             continue
@@ -76,11 +61,8 @@ def check_particles(scene: mpm.Scene, seed: int, key: str = "scene") -> list[str
                               f"it spans {_bounds(reg.select)}, the body's particles {_box(lo, hi)} (domain {domain});"
                               f" accepted: a selection that overlaps the body")
     if scene.loads:
-        vols, ids = [], []
-        for i, (b, x) in enumerate(zip(scene.bodies, xs)):
-            V = shape_volume(b.shape, d)
-            each = V / len(x) if V is not None and scene.particle_volume == "shape" else dxp ** d / (b.ppc or scene.ppc)
-            vols.append(np.full(len(x), each)), ids.append(np.full(len(x), i, np.int32))
+        vols = [np.full(len(s.x), s.volume) for s in samples]
+        ids = [np.full(len(s.x), i, np.int32) for i, s in enumerate(samples)]
         counts = [len(x) for x in xs]
         ranges = [(int(s), n) for s, n in zip(np.cumsum([0] + counts[:-1]), counts)]
         spacing = [(dxp ** d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
