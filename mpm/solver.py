@@ -112,7 +112,7 @@ class Solver:
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip")
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
-        self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched)
+        self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
                         if nb > 1 and scene.contact == "frictionless" else None)
         # the conditions act in the grid update, or after contact or the implicit solve
         self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
