@@ -70,7 +70,9 @@ class NewtonReport:
     residual0: float = 0.0  # initial |R| [kg m/s]
     backtracks: int = 0  # line-search halvings, all iterations together
     reason: str = ""  # why it failed, or what the near miss was
-    outcome: str = "converged"  # converged | near_miss | missed | diverged | stalled (see ImplicitSolve.solve)
+    # converged | near_miss (out of iterations, or the line search stalled, within newton_accept of the
+    # tolerance) | missed | diverged | stalled (see ImplicitSolve.solve)
+    outcome: str = "converged"
 
     @property
     def converged(self) -> bool:
@@ -337,10 +339,17 @@ class ImplicitSolve:
                 alpha *= 0.5
                 rep.backtracks += 1
             if not accepted:
-                rep.outcome = "stalled"
-                rep.reason = (f"Newton stalled: the line search found no decrease of the incremental potential "
-                              f"after {BACKTRACKS} halvings (residual {R / max(rep.residual0, 1e-300):.3g} of "
-                              f"the initial, iteration {rep.newton})")
+                said = (f"the line search found no decrease of the incremental potential after {BACKTRACKS} "
+                        f"halvings (residual {R / max(rep.residual0, 1e-300):.3g} of the initial, iteration "
+                        f"{rep.newton}")
+                if R <= opt.newton_accept * goal:
+                    # as close as a near miss: the potential's decrease is below its round-off
+                    rep.outcome = "near_miss"
+                    rep.reason = (f"Newton's near miss: {said}; tolerance {opt.newton_tol:g}, accepted within "
+                                  f"{opt.newton_accept:g}x of it)")
+                else:
+                    rep.outcome = "stalled"
+                    rep.reason = f"Newton stalled: {said})"
                 break
             v, v_try = v_try, v
             R_before, E, R = R, E_try, R_try

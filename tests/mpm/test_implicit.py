@@ -250,6 +250,25 @@ def test_newton_says_near_miss_missed_or_diverged(tmp_path):
     assert "up from" in wild["reason"]
 
 
+def test_a_stall_within_reach_of_the_tolerance_is_a_near_miss(tmp_path):
+    """A point of the stability map (+experiment=stability: the soft ball,
+    E = 1e3 Pa, A-ULMPM, linear kernel, float32, dt = 1.0 x dx / (c + v0)):
+    at step 3 Newton's line search finds no decrease of the incremental
+    potential with the residual at 1.17e-4 of the initial, 1.17x the
+    tolerance - the potential's decrease is below its float32 round-off. Within
+    newton_accept of the tolerance that is a near miss (counted, the run
+    completes); with newton_accept = 1 it stops the run as stalled."""
+    base = ["scene=stability_ball_2d", "scene.resolution=32", "scheme=aulmpm", "kernel=linear", "material.E=1e3",
+            "integrator=implicit", "run.dt=0.014465993951377472", "run.steps=100", "log.every=0",
+            "log.progress=false"]
+    near = execute(resolve(compose_cfg(base)), tmp_path / "near")
+    assert near["status"] == "completed", near["reason"]
+    assert near["implicit"]["near_misses"] >= 1
+    strict = execute(resolve(compose_cfg(base + ["integrator.newton_accept=1"])), tmp_path / "strict")
+    assert strict["status"] == "unstable" and strict["unstable_criterion"] == "newton"
+    assert "Newton stalled: the line search found no decrease" in strict["reason"], strict["reason"]
+
+
 def test_implicit_config_and_metrics(tmp_path):
     """integrator=implicit through the config: Newton and CG counts in
     metrics.json, the displacement limit as the step's binding term, and a
