@@ -167,7 +167,10 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         if wp.static(affine == "transform"):
             C[p] = C[p] * wp.inverse(Fs)
         if wp.static(affine == "rotate"):  # |C R^T| = |C|: the spin carried over, never amplified
-            C[p] = C[p] * wp.transpose(rotation(Fs))
+            # an inverted F^sn has no polar rotation (the closest one flips a direction, turning C by
+            # an arbitrary angle: the linear-kernel soft ball gained energy until it blew up): C kept
+            if wp.determinant(Fs) > S(0.0):
+                C[p] = C[p] * wp.transpose(rotation(Fs))
         X[p] = Xp
         F0s[p] = committed(Fs, F0s[p], body_params[b])
         Fsn[p] = wp.identity(n=dim, dtype=S)

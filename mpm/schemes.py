@@ -41,7 +41,8 @@ field squeezes its cell to half gets C doubled at every update (seen on the
 droplet with the compact kernel, and on a soft ball's impact).
 ``affine="rotate"`` (the solids' default) turns C by the rotation R of
 F^sn = R U alone, C <- C R^T: the spin crosses the update and |C| never
-grows; keep is the default of fluids and plastic bodies.
+grows; an inverted F^sn (det <= 0) has no such R and keeps C. Keep is the
+default of fluids and plastic bodies.
 """
 
 import functools

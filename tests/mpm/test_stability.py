@@ -226,3 +226,18 @@ def test_aulmpm_defaults_complete_the_soft_impact(tmp_path):
     assert "A-ULMPM's criterion did not update it in time" in paper["reason"]
     transform = execute(spec_for(over + ["scheme.affine=transform"]), tmp_path / "transform", sink=Sink())
     assert transform["status"] == "unstable", "C (F^sn)^-1 at a crushed particle no longer blows up"
+
+
+def test_aulmpm_keeps_C_of_an_inverted_reference(tmp_path):
+    """A point of the stability map (+experiment=stability): the soft ball
+    with the linear kernel at a fixed 0.3 x dx / (c + v0), where EMPM and
+    TLMPM complete. A-ULMPM updates it at almost every step after the impact
+    (a particle squeezed below the stretch bound), some particles with an
+    inverted F^sn; turning their C by the 'closest rotation' of an inverted
+    F^sn (which flips a direction: no spin) made the energy grow until the
+    run stopped at step 97. Keeping C there, the run completes."""
+    over = ["scene=stability_ball_2d", "scene.resolution=32", "material.E=1e3", "kernel=linear",
+            "run.dt=0.0043397981854132416", "run.steps=100", "log.every=0", "log.progress=false", "scheme=aulmpm"]
+    au = execute(spec_for(over), tmp_path / "aulmpm", sink=Sink())
+    assert au["status"] == "completed", au["reason"]
+    assert au["affine"] == "rotate" and au["config_updates"]["total"] > 10
