@@ -38,31 +38,18 @@ are equal and opposite; where three or more meet, the mass-weighted mean
 correction is taken off every body present. Each lattice node hands exactly
 that momentum to its nodes.
 
-Under the implicit integrator (mpm.implicit) contact is also part of the
-system: a bin where exactly two bodies a, b approach on the step's predictor
-becomes the linear constraint
-
-    B_g v = V_a . n_a + V_b . n_b = (V_a - V_b) . n_a = 0,
-    V_b = sum_{i in (b, g)} (m_i / G) v_i / M_bg   (the bin's mean velocity),
-
-i.e. row g of B has c_i = (m_i / G) / M_bg n_b at the bin's nodes of body b
-(G the kernel's number of grids). For the constraints every node is binned
-to its nearest lattice node, Lagrangian nodes too. The rows act on disjoint nodes, so B W B^T
-is diagonal for any per-node metric W, and the W-orthogonal projection onto
-B v = 0 is one bin sum and one node pass (:func:`make_contact_constraint`).
-With W = M^-1 that projection is the explicit correction above. The
-constraint's impulse B^T lambda gives the two bodies lambda n_a and
-lambda n_b = -lambda n_a: momentum is exchanged, not created. Bins with
-three or more bodies, and bins that start approaching during the solve, are
-left to the explicit pass after it.
+Under the implicit integrator contact is also a constraint of the system
+(mpm.contact_constraint); the lattice reads shared by both are in
+mpm.contact_lattice.
 """
 
 import functools
 
 import warp as wp
 
+from .contact_constraint import make_contact_constraint
+from .contact_lattice import make_corners, make_nearest, make_node_body, make_occupancy, make_outward
 from .launch import warp_kernel
-from .stencil import make_node_box
 from .status import StepControl, StepStatus
 from .types import Types
 
@@ -74,131 +61,6 @@ from .types import Types
 # and 0.58, one pass 0.92 and 0.62, two 1.56 and 0.69, three 1.83 and 0.71,
 # four 1.98 and 0.72 (each pass stops the disks a little earlier).
 GATHER_PASSES = 2
-
-
-@functools.cache
-def make_nearest(t: Types):
-    """``nearest(q, inv_dx, cells, strides) -> flat``: the global node closest to q."""
-    S = t.scalar
-
-    @wp.func
-    def nearest(q: t.vec, inv_dx: S, cells: t.ivec, strides: t.ivec):
-        flat = int(0)
-        for d in range(wp.static(t.dim)):
-            flat += wp.clamp(int(wp.round(q[d] * inv_dx)), 0, cells[d]) * strides[d]
-        return flat
-
-    return nearest
-
-
-@functools.cache
-def make_corners(t: Types):
-    """``cell_of(q, inv_dx) -> (base, frac)``: the lattice cell holding q and
-    q's place in it; ``corner(base, frac, k, cells, strides) -> (w, flat)``:
-    corner k of that cell (bit d of k: +1 along axis d), its linear weight
-    and flat index (clamped to the lattice). The 2^d weights sum to 1."""
-    S = t.scalar
-
-    @wp.func
-    def cell_of(q: t.vec, inv_dx: S):
-        base = t.ivec()
-        frac = t.vec()
-        for d in range(wp.static(t.dim)):
-            s = q[d] * inv_dx
-            c = wp.floor(s)
-            base[d] = int(c)
-            frac[d] = s - c
-        return base, frac
-
-    @wp.func
-    def corner(base: t.ivec, frac: t.vec, k: int, cells: t.ivec, strides: t.ivec):
-        w = S(1.0)
-        flat = int(0)
-        for d in range(wp.static(t.dim)):
-            bit = (k >> d) & 1
-            if bit == 1:
-                w *= frac[d]
-            else:
-                w *= S(1.0) - frac[d]
-            flat += wp.clamp(base[d] + bit, 0, cells[d]) * strides[d]
-        return w, flat
-
-    return cell_of, corner
-
-
-@functools.cache
-def make_node_body(t: Types):
-    node_box = make_node_box(t)
-
-    @wp.func
-    def node_body(i: int, offset: wp.array(dtype=wp.int32), n_bodies: int, n_grids: int):
-        """Body of flat node i (box b * n_grids + g starts at offset[box])."""
-        return node_box(i, offset, n_bodies * n_grids) // n_grids
-
-    return node_body
-
-
-@functools.cache
-def make_outward(t: Types):
-    """``outward(b, g, n_bodies, cells, strides, n_global, M) -> n_b``: body
-    b's unit outward normal at global node g, normalize(grad(M_others - M_b))
-    by central differences (one-sided at the lattice edge), M_others the
-    bodies present at g; 0 where the gradient vanishes."""
-    S = t.scalar
-    vec = t.vec
-
-    @wp.func
-    def outward(b: int, g: int, n_bodies: int, cells: t.ivec, strides: t.ivec, n_global: int,
-                M: wp.array(dtype=S)):
-        n = vec()
-        rest = g
-        for d in range(wp.static(t.dim)):
-            idx = rest // strides[d]
-            rest -= idx * strides[d]
-            minus = g - strides[d]
-            plus = g + strides[d]
-            if idx == 0:
-                minus = g
-            if idx == cells[d]:
-                plus = g
-            grad_b = M[b * n_global + plus] - M[b * n_global + minus]
-            grad_tot = S(0.0)  # over the bodies present at g
-            for c in range(n_bodies):
-                if M[c * n_global + g] > S(0.0):
-                    grad_tot += M[c * n_global + plus] - M[c * n_global + minus]
-            n[d] = grad_tot - S(2.0) * grad_b  # grad(M_others) - grad(M_b)
-        length = wp.length(n)
-        if length > S(0.0):
-            n = n / length
-        return n
-
-    return outward
-
-
-@functools.cache
-def make_occupancy(t: Types):
-    """``occupancy(g, n_bodies, n_global, rest_mass, M, P) -> (present, M, P,
-    volume)``: at global node g, the bodies present, their total mass and
-    momentum and the volume fraction they fill, sum_b M_bg / (rho_b dx^d)."""
-    S = t.scalar
-
-    @wp.func
-    def occupancy(g: int, n_bodies: int, n_global: int, rest_mass: wp.array(dtype=S), M: wp.array(dtype=S),
-                  P: wp.array(dtype=t.vec)):
-        present = int(0)
-        m_tot = S(0.0)
-        p_tot = t.vec()
-        volume = S(0.0)
-        for b in range(n_bodies):
-            m = M[b * n_global + g]
-            if m > S(0.0):
-                present += 1
-                m_tot += m
-                p_tot += P[b * n_global + g]
-                volume += m / rest_mass[b]
-        return present, m_tot, p_tot, volume
-
-    return occupancy
 
 
 @functools.cache
@@ -378,148 +240,6 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
             P[b * n_global + g] = vec()
 
     return splat, correct, clear
-
-
-@functools.cache
-def make_contact_constraint(t: Types):
-    """Contact as constraints of the implicit solve (the module docstring):
-    ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
-    before its ``clear``: the node's active bin and c_i), ``sums`` and
-    ``project`` (the W-orthogonal projection onto B v = 0).
-
-    ``sums`` / ``project`` modes, Pi_i the node's boundary projector and
-    c~_i = Pi_i c_i:
-      0 velocities, W = M^-1: lambda = B v / (B W B^T), v -= c~ lambda / m
-        (v then satisfies the constraints; prescribed components keep);
-      1 a residual r in range(Pi), W = Pi D^-1 Pi (D = ``inv_diag``^-1):
-        lambda = B W r / (B W B^T), r -= c~ lambda (the constraint's reaction
-        removed: the part of r the solve can still reduce);
-      2 as 1, and z = W r (the preconditioned residual of projected CG).
-    Modes 1 and 2 add the constrained nodes' |r|^2 (and r . z) to ``acc`` at
-    slots ``r2`` and ``rz`` (the node passes of mpm.implicit leave them out:
-    a difference of the reaction's square would drown a converged residual)."""
-    S = t.scalar
-    f64 = wp.float64
-    nearest = make_nearest(t)
-    node_body = make_node_body(t)
-    outward = make_outward(t)
-
-    @warp_kernel
-    def couple(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
-        offset: wp.array(dtype=wp.int32),
-        n_bodies: int,
-        n_grids: int,
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        rest_mass: wp.array(dtype=S),
-        fill: S,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        cbin: wp.array(dtype=wp.int32),  # out: the node's active bin g, or -1
-        coef: wp.array(dtype=t.vec),  # out: c_i = (m_i / G) / M_bg n_b
-    ):
-        """A node's constraint, if its bin is active: exactly two bodies a < c
-        fill it and approach on the predictor, (V_a - V_c) . n_a > 0, with
-        n_a = outward(a) and n_c = -n_a (every node of the bin finds the same)."""
-        i = wp.tid()
-        cbin[i] = -1
-        if grid_m[i] <= S(0.0):
-            return
-        b = node_body(i, offset, n_bodies, n_grids)
-        g = nearest(grid_q[i], inv_dx, cells, strides)
-        present = int(0)
-        volume = S(0.0)
-        a = int(-1)  # the first and second body present
-        c = int(-1)
-        for d in range(n_bodies):
-            m = M[d * n_global + g]
-            if m > S(0.0):
-                present += 1
-                volume += m / rest_mass[d]
-                if a < 0:
-                    a = d
-                else:
-                    c = d
-        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
-            return
-        n = outward(a, g, n_bodies, cells, strides, n_global, M)
-        if wp.length(n) <= S(0.0):
-            return
-        if not (wp.dot(P[a * n_global + g] / M[a * n_global + g] - P[c * n_global + g] / M[c * n_global + g], n)
-                > S(0.0)):
-            return
-        if b != a:
-            n = -n
-        cbin[i] = g
-        coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
-
-    @warp_kernel
-    def sums(
-        mode: int,
-        cbin: wp.array(dtype=wp.int32),
-        coef: wp.array(dtype=t.vec),
-        free: wp.array(dtype=t.mat),
-        m: wp.array(dtype=S),
-        inv_diag: wp.array(dtype=t.vec),
-        x: wp.array(dtype=t.vec),
-        num: wp.array(dtype=S),  # per bin: B W x (mode 0: B x)
-        den: wp.array(dtype=S),  # per bin: B W B^T
-    ):
-        i = wp.tid()
-        g = cbin[i]
-        if g < 0:
-            return
-        c = coef[i]
-        ct = free[i] * c
-        if mode == 0:
-            wp.atomic_add(num, g, wp.dot(c, x[i]))
-            wp.atomic_add(den, g, wp.dot(ct, ct) / m[i])
-        else:
-            w = inv_diag[i]
-            wp.atomic_add(num, g, wp.dot(ct, wp.cw_mul(w, x[i])))
-            wp.atomic_add(den, g, wp.dot(ct, wp.cw_mul(w, ct)))
-
-    @warp_kernel
-    def project(
-        mode: int,
-        cbin: wp.array(dtype=wp.int32),
-        coef: wp.array(dtype=t.vec),
-        free: wp.array(dtype=t.mat),
-        m: wp.array(dtype=S),
-        inv_diag: wp.array(dtype=t.vec),
-        num: wp.array(dtype=S),
-        den: wp.array(dtype=S),
-        x: wp.array(dtype=t.vec),  # in/out: v (mode 0) or r
-        z: wp.array(dtype=t.vec),  # out (mode 2): W r
-        acc: wp.array(dtype=f64),
-        r2: int,
-        rz: int,
-    ):
-        i = wp.tid()
-        g = cbin[i]
-        if g < 0:
-            return
-        lam = S(0.0)
-        if den[g] > S(0.0):
-            lam = num[g] / den[g]
-        Pi = free[i]
-        ct = Pi * coef[i]
-        if mode == 0:
-            x[i] = x[i] - ct * (lam / m[i])
-            return
-        r = x[i] - ct * lam
-        x[i] = r
-        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
-        if mode == 2:
-            zi = Pi * wp.cw_mul(inv_diag[i], r)
-            z[i] = zi
-            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
-
-    return couple, sums, project
 
 
 class Contact:

@@ -232,8 +232,8 @@ class ImplicitSolve:
         s.contact.couple(s.grid, s.layout, self.cbin, self.coef)
 
     def _project(self, mode: int, x, z=None) -> None:
-        """Project x onto the contact constraints (mpm.contact
-        ``make_contact_constraint``, modes 0-2)."""
+        """Project x onto the contact constraints
+        (mpm.contact_constraint, modes 0-2)."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
         sums, project = self._contact[1:]

@@ -1,0 +1,171 @@
+"""Contact as constraints of the implicit solve (mpm.implicit).
+
+Under the implicit integrator contact (mpm.contact) is also part of the
+system: a bin where exactly two bodies a, b approach on the step's predictor
+becomes the linear constraint
+
+    B_g v = V_a . n_a + V_b . n_b = (V_a - V_b) . n_a = 0,
+    V_b = sum_{i in (b, g)} (m_i / G) v_i / M_bg   (the bin's mean velocity),
+
+i.e. row g of B has c_i = (m_i / G) / M_bg n_b at the bin's nodes of body b
+(G the kernel's number of grids). For the constraints every node is binned
+to its nearest lattice node, Lagrangian nodes too. The rows act on disjoint
+nodes, so B W B^T is diagonal for any per-node metric W, and the
+W-orthogonal projection onto B v = 0 is one bin sum and one node pass
+(:func:`make_contact_constraint`). With W = M^-1 that projection is
+mpm.contact's explicit correction of a binned node. The
+constraint's impulse B^T lambda gives the two bodies lambda n_a and
+lambda n_b = -lambda n_a: momentum is exchanged, not created. Bins with
+three or more bodies, and bins that start approaching during the solve, are
+left to the explicit pass after it.
+"""
+
+import functools
+
+import warp as wp
+
+from .contact_lattice import make_nearest, make_node_body, make_outward
+from .launch import warp_kernel
+from .types import Types
+
+
+@functools.cache
+def make_contact_constraint(t: Types):
+    """Contact as constraints of the implicit solve (the module docstring):
+    ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
+    before its ``clear``: the node's active bin and c_i), ``sums`` and
+    ``project`` (the W-orthogonal projection onto B v = 0).
+
+    ``sums`` / ``project`` modes, Pi_i the node's boundary projector and
+    c~_i = Pi_i c_i:
+      0 velocities, W = M^-1: lambda = B v / (B W B^T), v -= c~ lambda / m
+        (v then satisfies the constraints; prescribed components keep);
+      1 a residual r in range(Pi), W = Pi D^-1 Pi (D = ``inv_diag``^-1):
+        lambda = B W r / (B W B^T), r -= c~ lambda (the constraint's reaction
+        removed: the part of r the solve can still reduce);
+      2 as 1, and z = W r (the preconditioned residual of projected CG).
+    Modes 1 and 2 add the constrained nodes' |r|^2 (and r . z) to ``acc`` at
+    slots ``r2`` and ``rz`` (the node passes of mpm.implicit leave them out:
+    a difference of the reaction's square would drown a converged residual)."""
+    S = t.scalar
+    f64 = wp.float64
+    nearest = make_nearest(t)
+    node_body = make_node_body(t)
+    outward = make_outward(t)
+
+    @warp_kernel
+    def couple(
+        grid_m: wp.array(dtype=S),
+        grid_q: wp.array(dtype=t.vec),
+        offset: wp.array(dtype=wp.int32),
+        n_bodies: int,
+        n_grids: int,
+        inv_dx: S,
+        cells: t.ivec,
+        strides: t.ivec,
+        n_global: int,
+        rest_mass: wp.array(dtype=S),
+        fill: S,
+        M: wp.array(dtype=S),
+        P: wp.array(dtype=t.vec),
+        cbin: wp.array(dtype=wp.int32),  # out: the node's active bin g, or -1
+        coef: wp.array(dtype=t.vec),  # out: c_i = (m_i / G) / M_bg n_b
+    ):
+        """A node's constraint, if its bin is active: exactly two bodies a < c
+        fill it and approach on the predictor, (V_a - V_c) . n_a > 0, with
+        n_a = outward(a) and n_c = -n_a (every node of the bin finds the same)."""
+        i = wp.tid()
+        cbin[i] = -1
+        if grid_m[i] <= S(0.0):
+            return
+        b = node_body(i, offset, n_bodies, n_grids)
+        g = nearest(grid_q[i], inv_dx, cells, strides)
+        present = int(0)
+        volume = S(0.0)
+        a = int(-1)  # the first and second body present
+        c = int(-1)
+        for d in range(n_bodies):
+            m = M[d * n_global + g]
+            if m > S(0.0):
+                present += 1
+                volume += m / rest_mass[d]
+                if a < 0:
+                    a = d
+                else:
+                    c = d
+        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
+            return
+        n = outward(a, g, n_bodies, cells, strides, n_global, M)
+        if wp.length(n) <= S(0.0):
+            return
+        if not (wp.dot(P[a * n_global + g] / M[a * n_global + g] - P[c * n_global + g] / M[c * n_global + g], n)
+                > S(0.0)):
+            return
+        if b != a:
+            n = -n
+        cbin[i] = g
+        coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
+
+    @warp_kernel
+    def sums(
+        mode: int,
+        cbin: wp.array(dtype=wp.int32),
+        coef: wp.array(dtype=t.vec),
+        free: wp.array(dtype=t.mat),
+        m: wp.array(dtype=S),
+        inv_diag: wp.array(dtype=t.vec),
+        x: wp.array(dtype=t.vec),
+        num: wp.array(dtype=S),  # per bin: B W x (mode 0: B x)
+        den: wp.array(dtype=S),  # per bin: B W B^T
+    ):
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0:
+            return
+        c = coef[i]
+        ct = free[i] * c
+        if mode == 0:
+            wp.atomic_add(num, g, wp.dot(c, x[i]))
+            wp.atomic_add(den, g, wp.dot(ct, ct) / m[i])
+        else:
+            w = inv_diag[i]
+            wp.atomic_add(num, g, wp.dot(ct, wp.cw_mul(w, x[i])))
+            wp.atomic_add(den, g, wp.dot(ct, wp.cw_mul(w, ct)))
+
+    @warp_kernel
+    def project(
+        mode: int,
+        cbin: wp.array(dtype=wp.int32),
+        coef: wp.array(dtype=t.vec),
+        free: wp.array(dtype=t.mat),
+        m: wp.array(dtype=S),
+        inv_diag: wp.array(dtype=t.vec),
+        num: wp.array(dtype=S),
+        den: wp.array(dtype=S),
+        x: wp.array(dtype=t.vec),  # in/out: v (mode 0) or r
+        z: wp.array(dtype=t.vec),  # out (mode 2): W r
+        acc: wp.array(dtype=f64),
+        r2: int,
+        rz: int,
+    ):
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0:
+            return
+        lam = S(0.0)
+        if den[g] > S(0.0):
+            lam = num[g] / den[g]
+        Pi = free[i]
+        ct = Pi * coef[i]
+        if mode == 0:
+            x[i] = x[i] - ct * (lam / m[i])
+            return
+        r = x[i] - ct * lam
+        x[i] = r
+        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
+        if mode == 2:
+            zi = Pi * wp.cw_mul(inv_diag[i], r)
+            z[i] = zi
+            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
+
+    return couple, sums, project
