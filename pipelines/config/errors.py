@@ -9,7 +9,7 @@ from hydra.errors import MissingConfigException, OverrideParseException
 from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, ConfigTypeError, OmegaConfBaseException,
                               ValidationError)
 
-from .fields import ConfigError
+from .fields import ConfigError, override_key
 
 EXIT_CONFIG = 2
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}  # of a run, by status
@@ -23,6 +23,62 @@ def _accepted_keys(object_type) -> str:
     if object_type is not None and dataclasses.is_dataclass(object_type):
         return ", ".join(f.name for f in dataclasses.fields(object_type))
     return ""
+
+
+def _inner_list(key: str, value: str, cause) -> tuple[str, str] | None:
+    """A mapping merged into a mapping node (a shape, a collider) that gives
+    one of its list keys a mapping (``shape={type: compound, parts: {...}}``):
+    that key and its value, not the whole mapping's."""
+    import yaml
+
+    from .colliders import ColliderConfig
+    from .schema import group_fields
+    from .shapes import ShapeConfig
+
+    ref = re.search(r"reference_type=(\w+)", str(cause))
+    try:
+        given = yaml.safe_load(value)
+    except yaml.YAMLError:
+        return None
+    cls = next((c for c in [ShapeConfig, ColliderConfig, *group_fields()] if ref and c.__name__ == ref.group(1)),
+               None)
+    if cls is None or not isinstance(given, dict):
+        return None
+    for f in dataclasses.fields(cls):
+        if isinstance(given.get(f.name), dict) and "List" in str(f.type):
+            return f"{override_key(key)}.{f.name}", yaml.safe_dump(
+                given[f.name], default_flow_style=True, width=10**6).strip()
+    return None
+
+
+def _other_kind(key: str, cause) -> str | None:
+    """An unknown key of a group's option that another option of the group
+    takes (``integrator.newton_max`` with integrator=explicit), or of a body's
+    own material that another model takes: which option or model, and how to
+    choose it (None: no option takes the key, or the node is of no group)."""
+    from .physics import GROUPS, MATERIAL
+
+    parent, _, k = key.rpartition(".")
+    family = GROUPS.get(parent)
+    if family is not None:
+        kind = next((n for n, c in family.variants.items() if c is cause.object_type), None)
+        return family.elsewhere(parent, k, kind) if kind else None
+    if re.fullmatch(r"scene\.bodies\[\d+\]\.material", parent):
+        node = getattr(cause, "parent_node", None)
+        model = node.get("model") if node is not None and hasattr(node, "get") else None
+        if isinstance(model, str) and model in MATERIAL.variants:
+            return MATERIAL.elsewhere(parent, k, model) or (f"{MATERIAL.unused.format(kind=model)}; accepted: "
+                                                            f"{', '.join(MATERIAL.names(model))}")
+        if k == MATERIAL.key:
+            return (f"unknown key: the body has no material of its own (it takes the material group's); accepted: "
+                    f"the body's own, given whole as {override_key(parent)}={{model: <model>, ...}}, or the group's "
+                    f"option, material=<model> ({', '.join(MATERIAL.variants)})")
+        owner = [n for n in MATERIAL.variants if k in MATERIAL.names(n)]
+        if owner:
+            return (f"unknown key: the body has no material of its own (it takes the material group's); accepted: "
+                    f"the body's own, given whole as {MATERIAL.selector(parent, owner[0])}, or the group's option "
+                    f"that takes {k}, {MATERIAL.selector('material', owner[0])} material.{k}=...")
+    return None
 
 
 def describe(exc: BaseException) -> str | None:
@@ -45,6 +101,7 @@ def describe(exc: BaseException) -> str | None:
         kind = {"ListConfig": "a list", "DictConfig": "a mapping"}
         m = re.match(r"Cannot merge (\w+) with (\w+)", _first_line(exc.__cause__))
         if m:
+            key, value = _inner_list(key, value, exc.__cause__) or (key, value)
             return (f"{key}: {value} is {kind.get(m.group(1), m.group(1))}; accepted: "
                     f"{kind.get(m.group(2), m.group(2))}")
     cause = exc.__cause__ if exc.__cause__ is not None else exc
@@ -54,6 +111,9 @@ def describe(exc: BaseException) -> str | None:
         return f"{key}: cannot take this value ({_first_line(cause)}); accepted: {kind}"
     if isinstance(cause, (ConfigKeyError, ConfigAttributeError)):
         key = cause.full_key or getattr(cause, "key", "")
+        other = _other_kind(key, cause)
+        if other:
+            return f"{key}: {other}"
         accepted = _accepted_keys(cause.object_type)
         return f"{key}: unknown key" + (f"; accepted: {accepted}" if accepted else "")
     if isinstance(cause, ValidationError):

@@ -40,6 +40,7 @@ import copy
 import dataclasses
 import functools
 import math
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -244,13 +245,25 @@ def check(cls, d, key: str, ctx: Context | None = None, missing: str = "missing"
     values = {}
     for name, f in fields.items():
         if d.get(name) is None and f.metadata.get("required"):
-            raise ConfigError(f"{key}.{name}", missing)
+            raise ConfigError(f"{key}.{name}", f"{missing}; accepted: {wanted(f, tps[name], ctx)}")
         if name in d:
             values[name] = value(f"{key}.{name}", d[name], f, tps[name], ctx)
     obj = cls(**values)
     for name, message in obj.problems() if hasattr(obj, "problems") else ():
         raise ConfigError(f"{key}.{name}", message)
     return obj
+
+
+def wanted(f: dataclasses.Field, tp, ctx: Context) -> str:
+    """What a required field takes, in words: its type and its doc."""
+    text = describe_type(unwrap(tp)[1], f.metadata).replace("a list of d numbers", f"a list of {ctx.dim} numbers")
+    doc = f.metadata.get("doc")
+    return f"{text} ({doc})" if doc else text
+
+
+def override_key(key: str) -> str:
+    """A full key as the command line writes it: ``scene.bodies[0].shape`` -> ``scene.bodies.0.shape``."""
+    return re.sub(r"\[(\d+)\]", r".\1", key)
 
 
 # ------------------------------------------------------------------ families
@@ -297,9 +310,43 @@ class Family:
                 continue
             if self.flat_node and k not in every:
                 raise ConfigError(f"{key}.{k}", f"unknown key; accepted: {', '.join(sorted(every))}")
-            raise ConfigError(f"{key}.{k}", f"{self.unused.format(kind=kind)}; accepted: {', '.join(names)}")
+            raise ConfigError(f"{key}.{k}", self.elsewhere(key, k, kind, ctx.dim)
+                              or f"{self.unused.format(kind=kind)}; accepted: {', '.join(names)}")
         return check(cls, {k: v for k, v in d.items() if k in names}, key, ctx,
                      missing=self.missing.format(kind=kind))
+
+    def names(self, kind: str) -> list[str]:
+        """The keys of one kind."""
+        return [f.name for f in dataclasses.fields(self.variants[kind])]
+
+    def selector(self, key: str, kind: str) -> str:
+        """How the command line chooses ``kind`` at ``key``: a config group
+        by its option (``integrator=implicit``: the group's node then has the
+        option's keys), a mapping inside the scene given whole, with its kind
+        (``scene.bodies.0.shape={type: compound, ...}``)."""
+        if key == self.name:
+            return f"{key}={kind}"
+        return f"{override_key(key)}={{{self.key}: {kind}, ...}}"
+
+    def elsewhere(self, key: str, k: str, kind: str, dim: int | None = None) -> str | None:
+        """The message for key ``k`` that ``kind`` does not use but other
+        kinds do (those of a ``dim``-D scene): the kinds that take it and how
+        to choose one (None: no kind takes it)."""
+        others = [n for n, c in self.variants.items() if n != kind and k in self.names(n)
+                  and (dim is None or dim in getattr(c, "dims", (2, 3)))]
+        if not others:
+            return None
+        mine = ", ".join(self.names(kind))
+        if len(others) == 1:
+            which = f"{self.selector(key, others[0])} (its keys: {', '.join(self.names(others[0]))})"
+        else:
+            which = f"{self.selector(key, others[0])} (or {', '.join(others[1:])})"
+        if key == self.name:
+            return (f"{self.unused.format(kind=kind)} (its keys: {mine}); accepted: choose the option that takes "
+                    f"{k} with the group, {which}, then set {key}.{k} ({key}.{self.key}=... does not change the "
+                    f"group's keys)")
+        return (f"{self.unused.format(kind=kind)}; accepted: {mine}; or {k} with a {' or '.join(others)}, the "
+                f"whole {self.name} given as {which}")
 
     def flat(self, name: str, module: str, doc: str) -> type:
         """The one dataclass Hydra types these mappings with: every key of

@@ -177,7 +177,8 @@ class Mesh:
 
 def parts(key: str, value, ctx: Context) -> list:
     if not isinstance(value, list) or not value:
-        raise ConfigError(key, "accepted: a non-empty list of shapes")
+        raise ConfigError(key, f"{value!r}; accepted: a non-empty list of shapes, each a mapping with a type key "
+                               f"({', '.join(SHAPES.variants)}), e.g. [{{type: box, center: [...], half_size: [...]}}]")
     return [SHAPES.check(p, f"{key}[{i}]", ctx) for i, p in enumerate(value)]
 
 

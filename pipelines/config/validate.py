@@ -20,7 +20,7 @@ from mpm.integrators import Explicit
 from mpm.meshes import MeshShape, file_digest
 
 from .fields import ConfigError, check, number, plain
-from .overrides import check_literals
+from .overrides import check_kinds, check_literals
 from .particles import check_particles
 from .physics import make_detect, make_integrator, make_material, make_scheme
 from .scene import make_scene
@@ -232,12 +232,14 @@ def resolve(cfg) -> RunSpec:
 
 def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
     """Everything ``pipelines.run`` checks before a run starts: the
-    overrides' literals (:func:`pipelines.config.overrides.check_literals`),
+    overrides' literals and kinds set by key
+    (:func:`pipelines.config.overrides.check_literals`, ``check_kinds``),
     the config (:func:`resolve`), this machine's memory
     (:func:`check_memory`) and the particles
     (:func:`pipelines.config.particles.check_particles`); returns the spec
     and the warnings to print."""
     check_literals(cfg, list(overrides))
+    check_kinds(cfg, list(overrides))
     spec = resolve(cfg)
     check_memory(spec)
     return spec, check_particles(spec.scene, spec.seed) + step_warnings(spec)

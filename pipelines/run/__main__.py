@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from . import provenance
 from ..config import schema
 from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
-from ..config.overrides import check_groups, replace_inline_materials
+from ..config.overrides import check_groups, replace_inline_mappings
 from ..config.validate import ConfigError, validate
 from .warp_setup import init_warp
 
@@ -109,13 +109,18 @@ def run(cfg: DictConfig) -> dict:
 
 def unused_overrides(spec, overrides: list[str]) -> list[str]:
     """Overrides that the run cannot use, said rather than ignored: the
-    material group when every body of the scene brings its own material."""
+    material group when every body of the scene brings its own material, and
+    ``kernel.flip`` (the blend of transfer=flip) with another transfer."""
     notes = []
     if not spec.material_used:
         mine = [o for o in overrides if o.lstrip("+~").split("=")[0].split(".")[0] == "material"]
         if mine:
             notes.append(f"{', '.join(mine)} has no effect: every body of scene {spec.scene_name} brings its own "
                          f"material (override scene.bodies.<i>.material.<key> instead)")
+    flip = [o for o in overrides if o.lstrip("+~").split("=")[0] == "kernel.flip"]
+    if flip and spec.transfer != "flip":
+        notes.append(f"{', '.join(flip)} has no effect: it is the blend of kernel.transfer=flip, and this run's "
+                     f"transfer is {spec.transfer} (add kernel.transfer=flip)")
     return notes
 
 
@@ -151,7 +156,7 @@ def main() -> None:
     """Hydra's own error reports are multi-line; ask it to raise instead and
     print configuration errors on one line with exit code 2."""
     os.environ.setdefault("HYDRA_FULL_ERROR", "1")
-    sys.argv[1:] = replace_inline_materials(sys.argv[1:])
+    sys.argv[1:] = replace_inline_mappings(sys.argv[1:])
     init_warp()
     try:
         check_groups(sys.argv[1:])

@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 from helpers import CONF, ROOT
 from pipelines.config.errors import describe
 from pipelines.config.validate import ConfigError, validate
-from pipelines.config.overrides import GROUPS, check_groups, replace_inline_materials
+from pipelines.config.overrides import GROUPS, check_groups, replace_inline_mappings
 
 # configs whose keys between them cover every part of the schema
 BASES = {
@@ -66,7 +66,7 @@ def outcome(base: str, extra: list[str]) -> tuple[str, str]:
     (a traceback on the command line). Overrides of keys are applied to the
     base's composed config by Hydra's own code, as composing applies them
     (group overrides compose afresh)."""
-    overrides = replace_inline_materials(extra)
+    overrides = replace_inline_mappings(extra)
     try:
         check_groups(overrides)
         if any(o.split("=")[0].lstrip("+~") in GROUPS for o in overrides):

@@ -212,11 +212,13 @@ def test_the_flat_nodes_are_derived_from_the_kinds():
     # a key of another kind, and a key of none, in the scene's own words
     key, text = _message(["scene.bodies.0.shape.half_size=[0.1,0.1]"])
     assert text == ("scene.bodies[0].shape.half_size: not used by a sphere; accepted: type, center, radius, "
-                    "inner_radius, rotation")
+                    "inner_radius, rotation; or half_size with a box, the whole shape given as "
+                    "scene.bodies.0.shape={type: box, ...} (its keys: type, center, half_size, rotation)")
     key, text = _message(["scene.bodies.0.shape.radiuss=1"])  # refused by Hydra, typed by the flat node
     assert text.startswith("scene.bodies[0].shape.radiuss: unknown key; accepted: type, center, half_size")
     key, text = _message(["scene=yoyo", "scene.bodies.0.shape.parts.0.center=null"])
-    assert text == "scene.bodies[0].shape.parts[0].center: missing for a mesh"
+    assert text == ("scene.bodies[0].shape.parts[0].center: missing for a mesh; accepted: a list of 3 numbers "
+                    "(centre [m])")
     key, text = _message(["scene.bodies.0.shape={type: mesh, mesh: 'warp:bunny', center: [0.5, 0.5], size: 0.1}"])
     assert text == "scene.bodies[0].shape.type: mesh is 3D only; accepted in 2D: box, sphere, bowl, compound"
 

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from helpers import compose_cfg
-from pipelines.config.overrides import check_groups, replace_inline_materials
+from pipelines.config.overrides import check_groups, replace_inline_mappings
 from pipelines.config.validate import ConfigError, check_memory, resolve, validate
 
 
 def outcome(overrides: list[str]) -> tuple[list[str], ConfigError | None]:
     """(warnings, None) or ([], the error) of pipelines.run's checks."""
-    overrides = replace_inline_materials(overrides)
+    overrides = replace_inline_mappings(overrides)
     try:
         check_groups(overrides)
         return validate(compose_cfg(overrides), overrides)[1], None
@@ -142,6 +142,129 @@ def test_a_value_of_the_wrong_type_or_an_unknown_key_is_refused(overrides, key):
     assert text.startswith(f"{key}:") and "\n" not in text, text
 
 
+def refusal(overrides: list[str]) -> str:
+    """The one line pipelines.run prints for ``overrides``: a ConfigError of
+    the checks, or a composition error described by the command line."""
+    from pipelines.config.errors import describe
+
+    overrides = replace_inline_mappings(overrides)
+    try:
+        check_groups(overrides)
+        cfg = compose_cfg(overrides)
+    except ConfigError as e:
+        return str(e)
+    except Exception as e:  # noqa: BLE001 - composition errors: described in one line by the command line
+        text = describe(e)
+        assert text is not None, repr(e)
+        return text
+    try:
+        warnings = validate(cfg, overrides)[1]
+    except ConfigError as e:
+        return str(e)
+    raise AssertionError(f"accepted: {overrides} ({warnings})")
+
+
+# ------------------------------------------------------------------ keys of another option of a group
+@pytest.mark.parametrize("overrides, key, fragments", [
+    # the implicit integrator chosen by its key, or not at all: its options are not the explicit one's
+    (["integrator.name=implicit", "integrator.newton_max=5"], "integrator.newton_max",
+     ["not a parameter of explicit (its keys: name)", "with the group, integrator=implicit (its keys: name, "
+      "newton_max, newton_tol,", "then set integrator.newton_max", "integrator.name=... does not change"]),
+    (["integrator.newton_max=5"], "integrator.newton_max", ["integrator=implicit (its keys:"]),
+    (["+integrator.newton_max=5"], "integrator.newton_max", ["integrator=implicit (its keys:"]),
+    (["scheme.epsilon=0.1"], "scheme.epsilon", ["not a parameter of empm", "scheme=aulmpm (its keys: name, epsilon"]),
+    (["scheme=tlmpm", "scheme.eta=0.5"], "scheme.eta", ["not a parameter of tlmpm", "scheme=aulmpm"]),
+    (["material.K=1e5"], "material.K", ["not a parameter of fixed_corotated (its keys: model, rho, E, nu)",
+                                        "material=fluid (or viscous)", "then set material.K"]),
+    (["material=fluid", "material.E=1e5"], "material.E", ["material=fixed_corotated (or neo_hookean,"]),
+    (["material=fluid", "material.yield_stress=1e5"], "material.yield_stress",
+     ["material=von_mises (or viscoplastic)"]),
+    # a kind changed by its key keeps the keys of the one it replaces
+    (["material.model=fluid"], "material.model", ["fluid set by key keeps E, nu", "material=fluid (its keys: "
+                                                  "model, rho, K, gamma, viscosity)"]),
+    (["scheme=aulmpm", "scheme.name=empm"], "scheme.name", ["keeps epsilon, eta", "scheme=empm (its keys: name)"]),
+    (["integrator=implicit", "integrator.name=explicit"], "integrator.name", ["integrator=explicit"]),
+    # a body's own material, and a body that takes the group's
+    (["scene=column_collapse_2d", "scene.bodies.0.material.K=5"], "scene.bodies[0].material.K",
+     ["not a parameter of sand", "scene.bodies.0.material={model: fluid, ...} (or viscous)"]),
+    (["scene.bodies.0.material.K=5"], "scene.bodies[0].material.K",
+     ["no material of its own", "scene.bodies.0.material={model: fluid, ...}", "material=fluid material.K=..."]),
+])
+def test_a_key_of_another_option_names_the_option_that_takes_it(overrides, key, fragments):
+    """An option of a group's other choice (``integrator.newton_max`` with the
+    explicit integrator) was refused as ``unknown key; accepted: name``,
+    which did not say what to change."""
+    text = refusal(overrides)
+    assert text.startswith(f"{key}: ") and "; accepted: " in text and "\n" not in text, text
+    assert all(f in text for f in fragments), text
+
+
+def test_a_kind_chosen_by_its_key_alone_still_runs():
+    """Nothing of the option it replaces is kept: the explicit integrator and
+    EMPM have no keys but their names."""
+    from helpers import spec_for
+
+    assert spec_for(["integrator.name=implicit"]).integrator.name == "implicit"
+    assert spec_for(["scheme.name=aulmpm"]).scheme.name == "aulmpm"
+    assert refusal(["material.Ee=1"]) == "material.Ee: unknown key; accepted: model, rho, E, nu"  # no option has it
+
+
+# ------------------------------------------------------------------ shapes given whole
+COMPOUND = "{type: compound, parts: [{type: box, center: [0.5,0.5], half_size: [0.1,0.1]}]}"
+
+
+@pytest.mark.parametrize("overrides, check", [
+    (["scene.bodies.0.shape=" + COMPOUND],
+     lambda s: type(s.bodies[0].shape).__name__ == "Compound" and len(s.bodies[0].shape.parts) == 1),
+    (["scene=yoyo", "scene.bodies.0.shape.parts.0={type: box, center: [0.5,0.95,0.5], half_size: [0.1,0.1,0.1]}"],
+     lambda s: [type(p).__name__ for p in s.bodies[0].shape.parts] == ["Box", "Box"]),
+    (["scene=cantilever_2d", "scene.loads.0.select={type: sphere, center: [1.05,0.7], radius: 0.05}"],
+     lambda s: type(s.loads[0].select).__name__ == "Sphere"),
+    (["scene=viscous_cup", "scene.colliders.0={type: sphere, center: [0.5,0.1,0.5], radius: 0.1}"],
+     lambda s: s.colliders[0].kind == "sphere" and s.colliders[0].radius == 0.1  # the cup's keys gone:
+     and s.colliders[0].depth == 0.0 and s.colliders[0].boundary == "slip" and s.colliders[0].name == ""),
+    (["scene.bodies.0.shape={radius: 0.25}"],  # without its type: merged into the scene's
+     lambda s: s.bodies[0].shape.radius == 0.25 and tuple(s.bodies[0].shape.center) == (0.5, 0.6)),
+])
+def test_a_shape_or_collider_given_whole_replaces_the_scene_s(overrides, check):
+    """A mapping with its type replaces the shape (collider) there: it was
+    merged into the scene's, keeping the sphere's centre and radius, so that
+    a correct compound was refused with ``center: not used by a compound``."""
+    from helpers import spec_for
+
+    spec = spec_for(replace_inline_mappings(overrides))
+    assert check(spec.scene), spec.scene
+
+
+@pytest.mark.parametrize("overrides, key, fragments", [
+    (["scene.bodies.0.shape={type: compound}"], "scene.bodies[0].shape.parts",
+     ["missing for a compound", "accepted: a list (the shapes, each a mapping with a type key)"]),
+    (["scene.bodies.0.shape={type: compound, parts: []}"], "scene.bodies[0].shape.parts",
+     ["[]; accepted: a non-empty list of shapes, each a mapping with a type key (box, sphere,"]),
+    (["scene.bodies.0.shape={type: compound, parts: {type: box}}"], "scene.bodies.0.shape.parts",
+     ["{type: box} is a mapping; accepted: a list"]),
+    (["scene.bodies.0.shape={type: sphere, center: [0.5,0.5], radius: 0.1, parts: [{type: box}]}"],
+     "scene.bodies[0].shape.parts", ["not used by a sphere; accepted: type, center, radius, inner_radius, "
+                                     "rotation; or parts with a compound", "scene.bodies.0.shape={type: compound, "
+                                     "...} (its keys: type, parts, rotation)"]),
+    (["scene=elastic_ball_3d", "scene.bodies.0.shape={type: mesh, mesh: 'warp:bunny', center: [0.5,0.5,0.5], "
+      "size: 0.3, parts: [{type: box}]}"], "scene.bodies[0].shape.parts",
+     ["not used by a mesh; accepted: type, mesh, center, size, axis, rotation; or parts with a compound"]),
+    (["scene.bodies.0.shape.parts=[{type: box, center: [0.5,0.5], half_size: [0.1,0.1]}]"],
+     "scene.bodies[0].shape.parts", ["not used by a sphere", "{type: compound, ...}"]),
+    (["scene.bodies.0.shape.type=compound"], "scene.bodies[0].shape.type",
+     ["compound set by key keeps center, radius", "scene.bodies.0.shape={type: compound, ...}"]),
+    (["scene.bodies.0.shape={type: compound, parts: [{type: box, center: [0.5,0.5], size: [0.2,0.2]}]}"],
+     "scene.bodies[0].shape.parts[0].size", ["not used by a box; accepted: type, center, half_size, rotation"]),
+    (["scene=viscous_cup", "scene.colliders.0.type=sphere"], "scene.colliders[0].type",
+     ["keeps axis, depth, thickness", "scene.colliders.0={type: sphere, ...}"]),
+])
+def test_a_wrong_shape_names_its_type_and_keys(overrides, key, fragments):
+    text = refusal(overrides)
+    assert text.startswith(f"{key}: ") and "; accepted: " in text and "\n" not in text, text
+    assert all(f in text for f in fragments), text
+
+
 def test_a_new_size_is_accepted_and_chosen():
     assert outcome(["+scene.sizes.huge={resolution: 32}", "scene.size=huge"])[1] is None
 
@@ -160,7 +283,7 @@ def test_an_inline_material_replaces_the_body_s_own():
     """The documented override on a scene whose body brings its own material."""
     from helpers import spec_for
 
-    over = replace_inline_materials(["scene=column_collapse_2d", "scene.bodies.0.material={model: fluid, K: 5e4}"])
+    over = replace_inline_mappings(["scene=column_collapse_2d", "scene.bodies.0.material={model: fluid, K: 5e4}"])
     m = spec_for(over).scene.bodies[0].material
     assert m.name == "fluid" and m.K == 5e4 and m.rho == 1000.0  # the fluid's own defaults, nothing of the sand
     err = refused(["scene=column_collapse_2d", "scene.bodies.0.material={model: fluid, E: 5e4}"])
@@ -198,6 +321,32 @@ def test_the_material_point_checks_its_output_and_numbers_before_computing(tmp_p
         code, err = _call(mp.main, argv)
         assert code == 2 and err.startswith("error: ") and fragment in err and "\n" not in err, err
     assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("argv, closed_form", [
+    # the Tait fluid: p = K (J^-gamma - 1), J = exp(d s) on the isotropic path
+    (["material=fluid", "material.K=3e5", "--path", "isotropic", "--strain", "-0.05"],
+     lambda s: {"pressure": 3e5 * (np.exp(3 * s) ** -7.0 - 1.0)}),
+    # fixed corotated, 2D: F = e^s I, R = I, Cauchy = (2 mu (e^2s - e^s) + lam (J - 1) J) / J, J = e^2s
+    (["material=fixed_corotated", "material.nu=0.25", "--path", "isotropic", "--dim", "2"],
+     lambda s: {"sigma_xx": (2 * 4e4 * (np.exp(2 * s) - np.exp(s)) + 4e4 * (np.exp(2 * s) - 1) * np.exp(2 * s))
+                / np.exp(2 * s)}),
+])
+def test_the_material_point_summary_and_table_are_float64(argv, closed_form, tmp_path):
+    """The driver evaluates in float64 (mpm.material_point.MaterialPoint's
+    default): its table and summary match float64 closed forms far below
+    float32 round-off (1.2e-7), from the command line's config to the CSV."""
+    import pipelines.material_point as mp
+
+    out = tmp_path / "p.png"
+    lines = io.StringIO()
+    with contextlib.redirect_stdout(lines):
+        assert mp.main(argv + ["--steps", "20", "--out", str(out)]) == 0
+    data = np.genfromtxt(out.with_suffix(".csv"), delimiter=",", names=True)
+    for column, want in closed_form(data["strain"]).items():
+        assert np.allclose(data[column], want, rtol=1e-12, atol=1e-9 * np.abs(want).max()), column
+    summary = lines.getvalue()
+    assert f"final pressure {data['pressure'][-1]:.6g} Pa" in summary, summary
 
 
 def test_replay_and_report_refuse_an_existing_file_as_an_output_folder(tmp_path):
