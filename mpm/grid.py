@@ -19,11 +19,13 @@ conditions, evaluated at the node's current position q_i:
 
 Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
 
-The work of the conditions on a node, the positive part of J . v_bc with
-J = m_i (v_bc - v_i) their impulse, is summed into the step's status
-(``boundary_work``, mpm.status): static walls and colliders do none (J is
-normal to v_bc, or v_bc = 0; friction's is negative), moving colliders and regions do J . u,
-and mpm.stability counts it as energy put in.
+The impulse of the conditions on a node, J = m_i (v_bc - v_i), is summed
+into the step's status (``boundary_impulse``, per axis: with gravity's
+M g dt, the step's change of the bodies' momentum), and so is its work, the
+positive part of J . v_bc (``boundary_work``, mpm.status): static walls and
+colliders do none (J is normal to v_bc, or v_bc = 0; friction's is
+negative), moving colliders and regions do J . u, and mpm.stability counts
+it as energy put in.
 """
 
 import functools
@@ -241,13 +243,18 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
 
 @functools.cache
 def make_work(t: Types):
-    """``work(m, v, v_bc, status)``: add the positive part of the work
-    J . v_bc [J] of the impulse J = m (v_bc - v) that turns v into v_bc (force
-    times the distance the node moves at v_bc) to ``status.boundary_work``."""
+    """``work(m, v, v_bc, status)``: add the impulse J = m (v_bc - v) [N s]
+    that turns v into v_bc to ``status.boundary_impulse`` (per axis), and the
+    positive part of its work J . v_bc [J] (force times the distance the node
+    moves at v_bc) to ``status.boundary_work``."""
     S = t.scalar
 
     @wp.func
     def work(m: S, v: t.vec, v_bc: t.vec, status: StepStatus):
+        J = m * (v_bc - v)
+        for d in range(wp.static(t.dim)):
+            if J[d] != S(0.0):
+                wp.atomic_add(status.boundary_impulse, d, wp.float64(J[d]))
         W = m * wp.dot(v_bc - v, v_bc)
         if W > S(0.0):
             wp.atomic_add(status.boundary_work, 0, wp.float64(W))

@@ -340,10 +340,12 @@ def make_node_kernels(t: Types):
 
 @functools.cache
 def make_boundary_work(t: Types):
-    """Kernel: the work of the constraints on each node at the solution, the
-    positive part of J . v with J = m reaction their impulse (v - reaction:
-    the velocity without it), into the step's ``status.boundary_work``
-    (mpm.grid ``make_work``, mpm.stability)."""
+    """Kernel: the impulse of the constraints on each node at the solution,
+    J = m reaction (v - reaction: the velocity without it), into the step's
+    ``status.boundary_impulse``, and its work, the positive part of J . v,
+    into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stability).
+    The Coulomb friction applied after the solve (:func:`make_friction`) is
+    not part of it."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)

@@ -7,7 +7,7 @@ Warp struct of views (one array per quantity, :data:`FIELDS` and
 
 * :class:`StepStatus`, reset before every step: what the step's kernels
   accumulate (G2P's speeds, counts and bounds, P2G's elastic energy, the
-  boundary conditions' work, contact), the blow-up detection's trips, and
+  boundary conditions' work and impulse, contact), the blow-up detection's trips, and
   the diagnostics of the new state when they are measured (mpm.diagnostics);
 * :class:`StepControl`, kept from step to step: the time, the step taken
   and the next one (chosen on the device from the last step's figures,
@@ -50,6 +50,8 @@ FIELDS = (
     Field("outside", STEP, 0.0, "particles that left the domain interior"),
     Field("boundary_work", STEP, 0.0, "positive work of the boundary conditions on the grid, all grids [J]"),
     Field("load_work", STEP, 0.0, "work of the external loads over the step [J] (mpm.loads)"),
+    Field("boundary_impulse", AXIS, 0.0, "momentum the boundary conditions gave the grid in the step, "
+                                         "sum m_i (v_bc - v_i) per axis, all grids [N s] (mpm.grid)"),
     Field("kinetic", STEP, 0.0, "kinetic energy of the new state [J] (track_energy)"),
     Field("potential", STEP, 0.0, "its gravitational potential energy -sum m g . x [J] (track_energy)"),
     Field("elastic", STEP, 0.0, "elastic energy of the state the step started from [J] (P2G)"),
@@ -205,6 +207,9 @@ class StepReport:
     min_F_stretch: np.ndarray | None = None  # per body: smallest singular value of F (track_J; else inf)
     boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
     load_work: float = 0.0  # [J] work of the external loads over the step (mpm.loads)
+    # [N s] per axis: the momentum the walls, colliders and regions gave the grid in the step (all grids:
+    # the bodies receive it divided by the kernel's n_grids, as every grid carries their full mass)
+    boundary_impulse: np.ndarray | None = None
     load_position: np.ndarray | None = None  # per load: its particles' mean position at the step's start [m]
     kinetic: float = float("nan")  # [J] kinetic energy of the new state (track_energy)
     potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
@@ -246,6 +251,7 @@ class StepReport:
             min_F_stretch=np.sqrt(v["min_F_stretch2"]),
             max_F_norm=v["max_F_norm"].copy() if reach else None,
             boundary_work=float(v["boundary_work"][0]), load_work=float(v["load_work"][0]),
+            boundary_impulse=v["boundary_impulse"].copy(),
             load_position=v["load_position"].reshape(-1, dim).copy(), contact_nodes=int(v["contact_nodes"][0]),
             removed=removed.astype(np.int64) if removed.any() else None,
             kinetic=float(v["kinetic"][0]) if energy else float("nan"),

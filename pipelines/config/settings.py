@@ -86,6 +86,9 @@ class LogSettings:
     color_range: Optional[List[float]] = setting(None, "[low, high] of the colour map of log.color (speed: "
                                                        "[m/s]); null: the field's fixed default (speed: the "
                                                        "initial speed with a free fall over the scene)", size=2)
+    channels: List[str] = setting([], "extra particle entities /channels/<field>, one per field (dJ, plastic_strain, "
+                                      "speed), each coloured by it on its fixed range, hidden until shown in the "
+                                      "viewer; []: none")
     size_warning_mb: float = setting(1000.0, "warn before a run whose recording would be larger [MB]", gt=0.0)
     dJ: bool = setting(True, "the per-particle dJ field with the particles")
     fracture_every: int = setting(20, "steps between evaluations of the fracture measure (and at the end)", ge=1)
@@ -115,6 +118,10 @@ class LogSettings:
             raise ConfigError("log.color", f"{self.color!r}{why}; accepted: {', '.join(accepted)}")
         if self.color == "auto":
             self.color = "plastic_strain" if plastic else "dJ" if self.dJ else "body"
+        fields = [c for c in accepted if c not in ("auto", "body")]
+        for c in self.channels:
+            if c not in fields:
+                raise ConfigError("log.channels", f"{c!r}; accepted: a list of {', '.join(fields)}")
 
 
 @dataclass

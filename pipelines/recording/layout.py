@@ -6,7 +6,8 @@ Scenes have y up (gravity along -y). Rerun's 3D views take the up axis
 from the view coordinates logged at the root (``RIGHT_HAND_Y_UP``); its 2D
 views draw y downwards and ignore view coordinates, so 2D recordings carry a
 static transform that mirrors y (``FLIP_2D``) on the spatial entities
-(``/particles``, ``/domain``, ``/colliders``). The data themselves stay in
+(``/particles``, ``/domain``, ``/colliders``, and ``/channels`` with
+log.channels). The data themselves stay in
 the scene's coordinates (what :mod:`pipelines.recording.recordings` reads);
 the recording property ``view`` states the convention.
 """
@@ -27,6 +28,7 @@ _UNITS = {
     "mass": ("kg", "kg/m"), "kinetic_energy": ("J", "J/m"), "elastic_energy": ("J", "J/m"),
     "potential_energy": ("J", "J/m"), "total_energy": ("J", "J/m"),
     "momentum": ("kg m/s", "kg/s"), "angular_momentum": ("kg m²/s", "kg m/s"),
+    "boundary_impulse": ("N s", "N s/m"),
     "center_of_mass": ("m", "m"), "dt": ("s", "s"), "dt_fresh": ("s", "s"), "max_speed": ("m/s", "m/s"),
     "step_time_ms": ("ms", "ms"), "update_ms": ("ms", "ms"),
     "error/displacement": ("m", "m"), "error/velocity": ("m/s", "m/s"),
@@ -60,16 +62,18 @@ def label(name: str, dim: int) -> str:
         f"{words} ({u})" if u else words
 
 
-def view_coordinates(rec: rr.RecordingStream, dim: int) -> None:
-    """Declare the scene's up axis (static): y up in both 2D and 3D."""
+def view_coordinates(rec: rr.RecordingStream, dim: int, channels: bool = False) -> None:
+    """Declare the scene's up axis (static): y up in both 2D and 3D
+    (``channels``: the /channels entities too, log.channels)."""
     if dim == 3:
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
         rec.send_property("view", rr.AnyValues(up="+y", coordinates="RIGHT_HAND_Y_UP"))
     else:
-        for path in SPATIAL_2D:
+        spatial = SPATIAL_2D + (("channels",) if channels else ())
+        for path in spatial:
             rec.log(path, rr.Transform3D(scale=FLIP_2D), static=True)
         rec.send_property("view", rr.AnyValues(
-            up="+y", flip=" ".join(f"/{p}" for p in SPATIAL_2D),
+            up="+y", flip=" ".join(f"/{p}" for p in spatial),
             note="2D views draw y down: the spatial entities carry a transform scaling y by -1; "
                  "their data are in the scene's coordinates (y up)"))
 
@@ -109,19 +113,23 @@ def series_views(groups: dict, dim: int) -> list:
     return views
 
 
-def blueprint(dim: int, domain, wall: float, groups: dict):
+def blueprint(dim: int, domain, wall: float, groups: dict, channels=()):
     """The particle view (domain, floor and colliders drawn, y up) beside the
-    colour key, the time series (a tab each) and the events."""
+    colour key, the time series (a tab each) and the events; ``channels``
+    (log.channels): their entities in the particle view, hidden (the user
+    shows one in the viewer's blueprint panel)."""
     L = np.asarray(domain, float)
-    contents = ["/particles", "/domain", "/colliders/**"]
+    hidden = [f"/channels/{c}" for c in channels]
+    contents = ["/particles", "/domain", "/colliders/**"] + hidden
+    overrides = {path: rrb.EntityBehavior(visible=False) for path in hidden} or None
     if dim == 2:
         m = 0.05 * float(L.max())
-        view = rrb.Spatial2DView(name="particles", origin="/", contents=contents,
+        view = rrb.Spatial2DView(name="particles", origin="/", contents=contents, overrides=overrides,
                                  visual_bounds=rrb.VisualBounds2D(x_range=[-m, L[0] + m],
                                                                   y_range=[-L[1] - m, m]))
     else:
         view = rrb.Spatial3DView(
-            name="particles", origin="/", contents=contents, eye_controls=camera(L, wall),
+            name="particles", origin="/", contents=contents, overrides=overrides, eye_controls=camera(L, wall),
             line_grid=rrb.LineGrid3D(visible=True, plane=rr.components.Plane3D((0.0, 1.0, 0.0), wall),
                                      spacing=float(10 ** np.floor(np.log10(L.max() / 4)))))
     series = series_views(groups, dim)
@@ -143,7 +151,8 @@ def declared(path) -> dict:
     coordinates, e.g. ``RUB``: x right, y up, z back), ``flip`` (entity ->
     static scale), ``views`` (name -> class: 2D, 3D, TimeSeries, ...),
     ``timeline`` (the time panel's), ``eye`` (the 3D camera: position,
-    look_target, eye_up) and ``grid`` (the 3D line grid's plane)."""
+    look_target, eye_up), ``grid`` (the 3D line grid's plane) and ``hidden``
+    (the entities a view's overrides hide, e.g. ``/channels/speed``)."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(str(path))
@@ -157,7 +166,7 @@ def declared(path) -> dict:
     props = data.reader(index=None, contents="/__properties/**").to_arrow_table()
     up = first(props, "property:view:up")
     out = {"up": up[0] if up else None, "coordinates": None, "flip": {}, "views": {},
-           "timeline": None, "eye": {}, "grid": None}
+           "timeline": None, "eye": {}, "grid": None, "hidden": []}
     xyz = first(static, "/:ViewCoordinates:xyz")
     if xyz is not None:  # Rerun's codes: 1 up, 2 down, 3 right, 4 left, 5 forward, 6 back
         out["coordinates"] = "".join("?UDRLFB"[int(c)] for c in np.ravel(xyz))
@@ -176,6 +185,10 @@ def declared(path) -> dict:
                 out["eye"][c.rsplit(":", 1)[1]] = np.ravel(first(table, c)).tolist()
             elif c.endswith(":LineGrid3D:plane"):
                 out["grid"] = np.ravel(first(table, c)).tolist()
+            elif c.endswith(":EntityBehavior:visible") and "/ViewContents/overrides/" in c:
+                if not bool(np.ravel(first(table, c))[0]):
+                    entity = c.split("/ViewContents/overrides/", 1)[1].split(":")[0].removesuffix("/visualizers")
+                    out["hidden"].append("/" + entity)
         timeline = first(table, "/time_panel:TimePanelBlueprint:timeline")
         out["timeline"] = timeline[0] if timeline else None
     return out

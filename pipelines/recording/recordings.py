@@ -194,7 +194,11 @@ def _timings(path: Path) -> tuple[dict, dict]:
     props = data.reader(index=None, contents="/__properties/**").to_pandas()
     run = {c[len("property:run:"):]: list(props[c].iloc[0]) for c in props.columns
            if c.startswith("property:run:") and props[c].iloc[0] is not None}
-    return _series(data.reader(index="step", contents="/timings/**").to_pandas(), "/timings"), run
+    try:
+        series = _series(data.reader(index="step", contents="/timings/**").to_pandas(), "/timings")
+    except ValueError:  # no step timed (a run that took none): the file has no step index
+        series = {}
+    return series, run
 
 
 def _colliders(data) -> tuple[dict, dict]:

@@ -5,13 +5,16 @@
   --frames DIR    render the particles to PNG frames without a display (and
                   DIR/video.mp4 where ffmpeg is installed): a fixed camera on
                   the domain (y up, axes in metres), the simulated time on
-                  each frame, colliders drawn in every view, every body drawn,
+                  each frame, colliders and kinematic regions (outlined,
+                  dashed while inactive) drawn in every view, every body drawn,
                   coloured by body with a legend or (--color speed, dJ,
                   plastic_strain, ...) by a field on a colour bar whose range
                   is the run's (the recorded log.color) or else fixed for the
                   frames (grey: no value, e.g. a body without
                   plastic strain); 3D in perspective (--view 3d, --elev,
-                  --azim) or projected (--view xy|xz|zy)
+                  --azim) or projected (--view xy|xz|zy: xy seen from the
+                  front (+z), xz from above (+y, z down the picture), zy
+                  from the left (-x); the nearest particles drawn last)
   --reproduce     re-run the recorded configuration (its command-line
                   overrides, into a fresh directory reproduce-* beside the
                   recording, in its run directory) and compare the two
@@ -41,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import recordings
+from . import recordings, regions
 from ..run import provenance, runner
 
 
@@ -104,6 +107,7 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
 
     out.mkdir(parents=True, exist_ok=True)
     L = _domain(rec, rec.positions)
+    regs = regions.regions(rec)  # the kinematic regions, from the recorded config
     fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
     vmin, vmax = _recorded_range(rec, color) or _value_range([v for _, v in fields if v is not None])
     unit = (rec.properties.get("color:unit") or [""])[0] if _recorded_range(rec, color) else ""
@@ -116,16 +120,18 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
             fig = plt.figure(figsize=(size, size))
             ax = fig.add_subplot(projection="3d")
             _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim)
+            regions.draw_3d(ax, regs, rec.times[k])
             mappable = ax.collections[0] if val is not None else None
         else:
             fig, ax = plt.subplots(figsize=(size, size))
             mappable = _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift)
+            regions.draw_2d(ax, regs, rec.times[k], *(projection(view)["axes"] if rec.dim == 3 else (0, 1)))
         if mappable is not None:
             bar = fig.colorbar(mappable, ax=ax, shrink=0.7, label=f"{color}{unit and f' [{unit}]'} (grey: no value)")
             bar.ax.set_title(f"{vmin:.3g} to {vmax:.3g}", fontsize=7)
-        elif rgb is not None:
-            _body_legend(ax, rec)
-        ax.set_title(f"t = {rec.times[k]:.4f} s (step {rec.steps[k]})")
+        _legend(ax, rec, regions.legend_handles(regs, rec.times[k]), bodies=mappable is None and rgb is not None)
+        seen = f"\n{view}: seen from {projection(view)['seen']}" if rec.dim == 3 and view != "3d" else ""
+        ax.set_title(f"t = {rec.times[k]:.4f} s (step {rec.steps[k]}){seen}")
         path = out / f"frame_{len(written):05d}.png"
         fig.savefig(path, dpi=100)
         plt.close(fig)
@@ -196,15 +202,17 @@ def body_names(rec: recordings.Recording) -> list[str]:
     return names if len(names) == n else [f"body{i}" for i in range(n)]
 
 
-def _body_legend(ax, rec) -> None:
-    """One entry per body in its colour, and one per collider."""
+def _legend(ax, rec, more: list, bodies: bool = True) -> None:
+    """One entry per body in its colour (``bodies``: coloured by body), one
+    per collider and the entries ``more`` (the kinematic regions)."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     from .rerun_sink import PALETTE
 
     handles = [Line2D([], [], ls="", marker="o", color=PALETTE[i % len(PALETTE)] / 255.0, label=name)
-               for i, name in enumerate(body_names(rec))]
+               for i, name in enumerate(body_names(rec))] if bodies else []
+    handles += more
     handles += [Patch(facecolor=COLLIDER_FACE, edgecolor=COLLIDER_EDGE, label=f"collider {name}")
                 for name in (rec.colliders or {})]
     if handles:
@@ -245,12 +253,30 @@ def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
     ax.view_init(elev=elev, azim=azim)
 
 
+# the projections of a 3D recording: (across, up the picture, up the picture is -axis, seen from), right-handed
+# (across x up = towards the viewer), so that the particles nearest the viewer are drawn last
+PROJECTIONS = {"xy": (0, 1, False, "the front (+z)"), "xz": (0, 2, True, "above (+y)"),
+               "zy": (2, 1, False, "the left (-x)")}
+
+
+def projection(view: str) -> dict:
+    """How ``view`` (xy, xz, zy) draws a 3D recording: ``axes`` (across, up
+    the picture), ``down`` (the second axis points down the picture),
+    ``depth`` (the axis towards the viewer) and ``sign`` (+1: the viewer on
+    its positive side), ``seen`` (from where, in words)."""
+    a, b, down, seen = PROJECTIONS[view]
+    depth = 3 - a - b
+    e = np.eye(3)
+    sign = float(np.cross(e[a], -e[b] if down else e[b])[depth])
+    return {"axes": (a, b), "down": down, "depth": depth, "sign": sign, "seen": seen}
+
+
 def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
-    """A 2D recording, or a 3D one projected onto ``view`` (back to front)."""
-    axes = {"x": 0, "y": 1, "z": 2}
-    a, b = (0, 1) if rec.dim == 2 else (axes[view[0]], axes[view[1]])
-    depth = ({0, 1, 2} - {a, b}).pop() if rec.dim == 3 else None
-    order = np.argsort(x[:, depth]) if depth is not None else slice(None)
+    """A 2D recording, or a 3D one projected onto ``view`` (:func:`projection`:
+    far to near, the convention in the axis labels and the title)."""
+    p = projection(view) if rec.dim == 3 else {"axes": (0, 1), "down": False, "depth": None}
+    a, b = p["axes"]
+    order = np.argsort(p["sign"] * x[:, p["depth"]], kind="stable") if p["depth"] is not None else slice(None)
     sc = ax.scatter(x[order, a], x[order, b], s=_marker_area(ax, rec, L[a], L[b]), linewidths=0,
                     **_paint(None if rgb is None else rgb[order], None if val is None else val[order],
                              vmin, vmax))
@@ -271,10 +297,10 @@ def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
                 ax.add_collection(LineCollection(tri[edge_on][:, [0, 1, 2, 0]], colors=[COLLIDER_EDGE],
                                                  linewidths=1.5, zorder=0))
     ax.set_xlim(0, L[a])
-    ax.set_ylim(0, L[b])
+    ax.set_ylim((L[b], 0) if p["down"] else (0, L[b]))
     ax.set_aspect("equal")
     ax.set_xlabel(f"{'xyz'[a]} [m]")
-    ax.set_ylabel(f"{'xyz'[b]} [m]")
+    ax.set_ylabel(f"{'xyz'[b]} [m]" + (" (down the picture)" if p["down"] else ""))
     return sc if val is not None else None
 
 
@@ -334,7 +360,8 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=Path, default=None, help="render PNG frames into this directory")
     p.add_argument("--every", type=int, default=1, help="with --frames: every N-th logged step")
     p.add_argument("--view", default="3d", choices=["3d", "xy", "xz", "zy"],
-                   help="3D recordings: perspective (3d) or a projection plane")
+                   help="3D recordings: perspective (3d) or a projection: xy (seen from +z), xz (from above, "
+                        "z down the picture), zy (from -x)")
     p.add_argument("--color", default="body",
                    help="body, dJ, or a per-particle field of the recording (e.g. speed, plastic_strain)")
     p.add_argument("--elev", type=float, default=20.0, help="3d view: camera elevation [deg]")

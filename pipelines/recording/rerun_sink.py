@@ -27,6 +27,11 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
                       particles were removed at open walls, ``index`` (their
                       numbers) with the ones left; radii and ``body_index`` (body
                       per particle) are static
+  /channels/<field>   with log.channels, per field the particles again (the
+                      positions of each frame), coloured by that field on
+                      the viridis map over its fixed range (as /particles
+                      would be by log.color=<field>); hidden in the
+                      blueprint: the user shows one in the viewer
   /legend             what the colours mean: map, field and range (static)
   /domain             the domain box and the inner wall faces (static)
   /colliders/<name>   each collider's surface (3D) or outline (2D)
@@ -116,6 +121,7 @@ def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
 
 
 FRAMES_IN_FLIGHT = 2  # particle frames handed to the writer thread and not yet written
+CHANNEL_DRAW_ORDER = 31.0  # 2D: the channels over the particles (Rerun's points: 30)
 
 
 class RerunSink(Sink):
@@ -137,6 +143,7 @@ class RerunSink(Sink):
         self._labelled: set[tuple] = set()  # scalar series named (with their unit) so far
         self._dim = 2
         self._body = None
+        self._channels: dict = {}  # log.channels: field -> ((low, high), source)
         self._frames: queue.Queue | None = None  # to the writer thread (threaded)
         self._writer: threading.Thread | None = None
         self._failure: BaseException | None = None  # raised by the writer, re-raised here
@@ -161,14 +168,27 @@ class RerunSink(Sink):
         given, self._source = meta.color_range
         self._range = tuple(given) if given is not None else color_range(self._color)
         self._source = self._source or "fixed for the field"
-        layout.view_coordinates(rec, meta.dim)
+        self._channels = {}  # field -> ((low, high), where the range comes from)
+        for name, (given, source) in (meta.channels or {}).items():
+            if given is not None:
+                self._channels[name] = (tuple(given), source)
+            elif name == self._color:
+                self._channels[name] = (self._range, self._source)
+            else:
+                self._channels[name] = (color_range(name), source or "fixed for the field")
+        layout.view_coordinates(rec, meta.dim, channels=bool(self._channels))
         rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
                 rr.AnyValues(body_index=self._body.astype(np.int32)), static=True)
+        for name in self._channels:  # drawn over /particles in 2D when shown
+            rec.log(f"channels/{name}", self._points.from_fields(
+                radii=meta.particle_radius, **({"draw_order": CHANNEL_DRAW_ORDER} if meta.dim == 2 else {})),
+                static=True)
         self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
-        rec.send_blueprint(layout.blueprint(meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups))
+        rec.send_blueprint(layout.blueprint(meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups,
+                                            channels=list(self._channels)))
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
@@ -218,6 +238,14 @@ class RerunSink(Sink):
                     f"the run: {lo:.3g} (dark purple) to {hi:.3g} (yellow){unit and ' ' + unit}, clamped "
                     f"({self._source}); grey: no value (another material)."
                     "\n\nEvery per-particle field is in the recording (select a particle to read it).")
+        if self._channels:
+            text += ("\n\n**Channels** (hidden: show one in the blueprint panel, eye icon, and hide /particles "
+                     "in 3D), each field on the viridis map over a range fixed for the run:\n" + "\n".join(
+                         f"- /channels/{n}: {n}{UNITS.get(n) and f' [{UNITS[n]}]' or ''} {lo:.3g} to {hi:.3g} "
+                         f"({source})" for n, ((lo, hi), source) in self._channels.items()))
+            self.rec.send_property("channels", rr.AnyValues(
+                names=list(self._channels), low=[r[0] for r, _ in self._channels.values()],
+                high=[r[1] for r, _ in self._channels.values()], source=[s for _, s in self._channels.values()]))
         self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
         self.rec.send_property("color", rr.AnyValues(field=self._color, colormap="viridis" if self._color != "body"
                                                      else "palette", low=self._range[0], high=self._range[1],
@@ -267,6 +295,10 @@ class RerunSink(Sink):
         if dJ is not None:
             values["dJ"] = dJ
         colors = self._colors(values.get(self._color), index)
+        for name, ((lo, hi), _) in self._channels.items():
+            if values.get(name) is not None:
+                self.rec.log(f"channels/{name}", self._points.from_fields(
+                    positions=x, colors=colormap(np.asarray(values[name]), hi, lo)))
         if index is not None:
             values["index"] = index.astype(np.int32)
         parts = [self._points.from_fields(positions=x, colors=colors)]

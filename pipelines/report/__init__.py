@@ -16,7 +16,8 @@ error_vs_time.png   error against run time with the Pareto front (pareto.csv)
 convergence.png     error against grid spacing with fitted orders (convergence.csv)
 update_cost.csv     configuration-update frequency and cost, EMPM/A-ULMPM reduction
 speed.csv/.png      ms per step and particle-steps per second, kernel cost ratios
-conservation.png    momentum and angular-momentum drift over time (conservation.csv)
+conservation.png    momentum drift over time net of the gravity and boundary impulse,
+                    and angular-momentum drift (conservation.csv, momentum_net_drift.csv)
 fracture.csv/.png   fraction of neighbouring particle pairs torn apart, fragments
 
 A job's error is its analytic error (from ``metrics.json``) when the scene has

@@ -24,7 +24,7 @@ from . import run_metrics
 from .progress import Progress
 from .load_track import LoadTrack
 from .run_metrics import Drift, median, particle_fields, peak_rss_mb
-from ..recording.sinks import RunMeta, Sink
+from ..recording.sinks import RunMeta, Sink, channel_ranges
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
 
@@ -37,7 +37,7 @@ def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bo
                  "angular_momentum_y", "angular_momentum_z"])
     groups = {
         "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
-        "momentum": momentum,
+        "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
         "step": ["dt", "dt_fresh", "max_speed"],
         "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
         "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
@@ -137,6 +137,7 @@ class Recorder(mpm.Observer):
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
             color=self.spec.log.color, color_range=run_metrics.color_range(self.spec, model, self.state),
+            channels=channel_ranges(self.spec.log, scene, self.state.x.numpy(), self.state.v.numpy()),
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
@@ -263,14 +264,15 @@ class Recorder(mpm.Observer):
                 extra[name] = float(s)
         if self.solution is not None and current:
             extra.update(self.errors())
+        if report.boundary_impulse is not None:  # [N s] the walls', colliders' and regions' impulse on the bodies
+            J = report.boundary_impulse / self.model.kernel.n_grids  # (every kernel grid carries the full mass)
+            extra.update({f"boundary_impulse_{a}": float(j) for a, j in zip("xyz", J)})
         if self.solver.contact is not None:  # body nodes in contact in this step (mpm.contact)
             extra["contact_nodes"] = float(report.contact_nodes)
         if self.solver.conditions.open:
             extra["removed"] = float(self.solver.removals.removed.sum())
-        if report.newton is not None:
-            n = report.newton
-            extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg),
-                         newton_residual=n.residual)
+        if (n := report.newton) is not None:
+            extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg), newton_residual=n.residual)
         return extra
 
     def errors(self) -> dict:
@@ -292,7 +294,8 @@ class Recorder(mpm.Observer):
         # copies: on the CPU .numpy() is a view of memory the next step overwrites, and the sink may serialise later
         x = self.state.x.numpy().copy()
         dJ = self.state.dJ.numpy().copy() if self.solver.options.record_dJ else None
-        fields = particle_fields(self.model, self.state, speed=self.spec.log.color == "speed")
+        log = self.spec.log
+        fields = particle_fields(self.model, self.state, speed="speed" in (log.color, *log.channels))
         index = self.solver.removals.kept  # the particles left inside, once some were removed at open walls
         if index is not None:
             x, dJ = x[index], (dJ[index] if dJ is not None else None)

@@ -1,0 +1,93 @@
+"""log.channels: besides /particles, one entity per field, /channels/<field>,
+coloured by that field on its fixed range, hidden in the blueprint (the
+user shows it in the viewer); none by default."""
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from helpers import compose_cfg
+from pipelines.config.validate import resolve
+from pipelines.recording import layout
+from pipelines.recording.rerun_sink import PALETTE_PACKED, RerunSink, color_range, colormap
+from pipelines.recording.sinks import RunMeta, channel_ranges
+
+N = 50
+
+
+def record(path, dim: int, channels: dict, color: str = "body"):
+    """Two frames of N particles with dJ, speed and plastic_strain (NaN on half of them)."""
+    rng = np.random.default_rng(3)
+    sink = RerunSink(path, threaded=False)
+    sink.start(RunMeta(name="channels", dim=dim, domain=(1.0,) * dim, wall_cells=3, dx=0.05, body_names=["a", "b"],
+                       particle_body=np.r_[np.zeros(N // 2), np.ones(N // 2)].astype(np.int64), particle_radius=0.01,
+                       color=color, channels=channels))
+    frames = []
+    for step in (0, 5):
+        x = rng.random((N, dim)).astype(np.float32)
+        dJ = rng.random(N).astype(np.float32) * 0.2
+        fields = {"speed": rng.random(N).astype(np.float32) * 3.0,
+                  "plastic_strain": np.r_[np.full(N // 2, np.nan), rng.random(N // 2)].astype(np.float32)}
+        sink.particles(step, 0.01 * step, x, dJ, fields)
+        frames.append((x, dJ, fields))
+    sink.close()
+    return frames
+
+
+def entity_colors(path, entity: str, dim: int) -> list[np.ndarray]:
+    df = RrdReader(str(path)).stream().collect().reader(index="step", contents=entity).to_pandas()
+    col = f"{entity}:Points{dim}D:colors"
+    return [np.asarray(c, np.uint32) for c in df[col] if c is not None] if col in df.columns else []
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_each_channel_is_an_entity_coloured_on_its_range_and_hidden(tmp_path, dim):
+    path = tmp_path / "recording.rrd"
+    channels = {"speed": ((0.0, 2.5), "log.color_range"), "dJ": (None, ""), "plastic_strain": (None, "")}
+    frames = record(path, dim, channels)
+    for name, (lo, hi) in (("speed", (0.0, 2.5)), ("dJ", color_range("dJ")),
+                           ("plastic_strain", color_range("plastic_strain"))):
+        got = entity_colors(path, f"/channels/{name}", dim)
+        assert len(got) == 2, name
+        for c, (x, dJ, fields) in zip(got, frames):
+            values = dJ if name == "dJ" else fields[name]
+            assert np.array_equal(c, colormap(values, hi, lo)), name
+    # plastic_strain: grey where a particle has none
+    assert np.all(entity_colors(path, "/channels/plastic_strain", dim)[0][:N // 2] == colormap(np.array([np.nan]), 1)[0])
+    # the main entity keeps the body colours
+    main = entity_colors(path, "/particles", dim)
+    assert np.array_equal(main[0], PALETTE_PACKED[np.r_[np.zeros(N // 2), np.ones(N // 2)].astype(int)])
+    d = layout.declared(path)
+    assert sorted(d["hidden"]) == ["/channels/dJ", "/channels/plastic_strain", "/channels/speed"]
+    if dim == 2:  # y up on the screen, like the particles
+        assert d["flip"]["channels"] == layout.FLIP_2D
+    props = RrdReader(str(path)).stream().collect().reader(index=None, contents="/__properties/**").to_pandas()
+    assert list(props["property:channels:names"].iloc[0]) == ["speed", "dJ", "plastic_strain"]
+    assert list(props["property:channels:high"].iloc[0]) == [2.5, 0.1, 0.5]
+
+
+def test_no_channels_by_default(tmp_path):
+    path = tmp_path / "recording.rrd"
+    record(path, 2, {})
+    assert layout.declared(path)["hidden"] == []
+    static = RrdReader(str(path)).stream().collect().reader(index=None, contents="/**").to_arrow_table()
+    assert not any(c.startswith("/channels") for c in static.column_names)
+    assert resolve(compose_cfg([])).log.channels == []
+
+
+def test_channels_are_declared_checked_and_ranged():
+    """log.channels is a log option; a field the scene cannot record is
+    refused naming the key; the ranges: the run's for the colouring field,
+    the free-fall bound for speed, else the field's fixed default."""
+    spec = resolve(compose_cfg(["log.channels=[speed,dJ]", "log.color=dJ", "log.color_range=[0,0.2]"]))
+    assert spec.log.channels == ["speed", "dJ"]
+    with pytest.raises(ValueError, match=r"^log.channels: 'plastic_strain'; accepted: a list of dJ, speed"):
+        resolve(compose_cfg(["log.channels=[plastic_strain]"]))
+    import mpm
+
+    model, state = mpm.build(spec.scene, spec.kernel, "float32", "cpu", spec.seed)
+    r = channel_ranges(spec.log, spec.scene, state.x.numpy(), state.v.numpy())
+    assert r["dJ"] == ((0.0, 0.2), "log.color_range")
+    (lo, hi), how = r["speed"]
+    assert lo == 0.0 and hi > 0 and "free fall" in how
+    assert channel_ranges(resolve(compose_cfg([])).log, spec.scene, state.x.numpy(), state.v.numpy()) == {}
