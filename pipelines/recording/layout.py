@@ -90,9 +90,28 @@ def camera(domain, floor: float) -> rrb.EyeControls3D:
     return rrb.EyeControls3D(position=position.tolist(), look_target=target.tolist(), eye_up=[0.0, 1.0, 0.0])
 
 
-def series_views(groups: dict, dim: int) -> list:
+LEGEND_ROOM = 0.5  # a plot's y range above its data, for its legend: [min, max + LEGEND_ROOM (max - min)]
+
+
+def y_range(members: list[str], extents: dict) -> tuple[float, float] | None:
+    """The y range of a plot of ``members`` with room for its legend above
+    the data, from the series' (min, max) in ``extents``; None unless every
+    member has an extent."""
+    spans = [extents.get(m) for m in members]
+    if not spans or any(e is None for e in spans):
+        return None
+    lo, hi = min(e[0] for e in spans), max(e[1] for e in spans)
+    span = hi - lo if hi > lo else max(abs(hi), 1e-30)
+    return lo - 0.05 * span, hi + LEGEND_ROOM * span
+
+
+def series_views(groups: dict, dim: int, extents: dict | None = None) -> list:
     """One time-series view per group and unit (named with the unit), the
-    whole run in view, legends in a corner, on the simulated-time timeline."""
+    whole run in view, on the simulated-time timeline. A plot of several
+    series has a legend in its top-left corner; with the series' extents
+    (the run's (min, max) per scalar name, known once it has ended) its y
+    range leaves the legend room above the data, where Rerun would
+    otherwise draw it over the curves."""
     views = []
     for group, names in groups.items():
         by_unit: dict[str, list[str]] = {}
@@ -104,20 +123,23 @@ def series_views(groups: dict, dim: int) -> list:
                 title = label(members[0], dim).split(" [")[0].split(" (")[0]
                 title = title[:-2] if len(members) > 1 and title[-2:] in (" x", " y", " z") else title
             title = f"{title} [{u}]" if u else title
+            room = y_range(members, extents or {}) if len(members) > 1 else None
             views.append(rrb.TimeSeriesView(
                 name=title, origin="/",
                 contents=[m if m.startswith("/") else f"/scalars/{m}" for m in members],
                 axis_x=rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.infinite(),
                                                             end=rr.TimeRangeBoundary.infinite())),
-                plot_legend=rrb.PlotLegend(corner="RightBottom", visible=len(members) > 1)))
+                axis_y=rrb.ScalarAxis(range=room) if room is not None else None,
+                plot_legend=rrb.PlotLegend(corner="LeftTop", visible=len(members) > 1)))
     return views
 
 
-def blueprint(dim: int, domain, wall: float, groups: dict, channels=()):
+def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents: dict | None = None):
     """The particle view (domain, floor and colliders drawn, y up) beside the
     colour key, the time series (a tab each) and the events; ``channels``
     (log.channels): their entities in the particle view, hidden (the user
-    shows one in the viewer's blueprint panel)."""
+    shows one in the viewer's blueprint panel); ``extents``: the series'
+    (min, max), for the plots' y ranges (:func:`series_views`)."""
     L = np.asarray(domain, float)
     hidden = [f"/channels/{c}" for c in channels]
     contents = ["/particles", "/domain", "/colliders/**"] + hidden
@@ -132,7 +154,7 @@ def blueprint(dim: int, domain, wall: float, groups: dict, channels=()):
             name="particles", origin="/", contents=contents, overrides=overrides, eye_controls=camera(L, wall),
             line_grid=rrb.LineGrid3D(visible=True, plane=rr.components.Plane3D((0.0, 1.0, 0.0), wall),
                                      spacing=float(10 ** np.floor(np.log10(L.max() / 4)))))
-    series = series_views(groups, dim)
+    series = series_views(groups, dim, extents)
     return rrb.Blueprint(
         rrb.Horizontal(
             view,
@@ -151,8 +173,10 @@ def declared(path) -> dict:
     coordinates, e.g. ``RUB``: x right, y up, z back), ``flip`` (entity ->
     static scale), ``views`` (name -> class: 2D, 3D, TimeSeries, ...),
     ``timeline`` (the time panel's), ``eye`` (the 3D camera: position,
-    look_target, eye_up), ``grid`` (the 3D line grid's plane) and ``hidden``
-    (the entities a view's overrides hide, e.g. ``/channels/speed``)."""
+    look_target, eye_up), ``grid`` (the 3D line grid's plane), ``hidden``
+    (the entities a view's overrides hide, e.g. ``/channels/speed``),
+    ``y_range`` and ``legend`` (per time-series view: its y range, when
+    set, and its legend's corner), all from the last blueprint sent."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(str(path))
@@ -165,7 +189,7 @@ def declared(path) -> dict:
 
     props = data.reader(index=None, contents="/__properties/**").to_arrow_table()
     up = first(props, "property:view:up")
-    out = {"up": up[0] if up else None, "coordinates": None, "flip": {}, "views": {},
+    out = {"up": up[0] if up else None, "coordinates": None, "flip": {}, "views": {}, "y_range": {}, "legend": {},
            "timeline": None, "eye": {}, "grid": None, "hidden": []}
     xyz = first(static, "/:ViewCoordinates:xyz")
     if xyz is not None:  # Rerun's codes: 1 up, 2 down, 3 right, 4 left, 5 forward, 6 back
@@ -173,9 +197,12 @@ def declared(path) -> dict:
     for c in static.column_names:
         if c.endswith(":Transform3D:scale"):
             out["flip"][c[1:].split(":")[0]] = tuple(np.ravel(first(static, c)).tolist())
-    if reader.blueprints():
-        bp = reader.store(store=reader.blueprints()[-1]).stream().collect()
-        table = bp.reader(index="blueprint", contents="/**").to_arrow_table()
+    tables = [reader.store(store=b).stream().collect().reader(index="blueprint", contents="/**").to_arrow_table()
+              for b in reader.blueprints()]
+    if tables:
+        # the run's start sends a blueprint, its end the same one with the plots' y ranges (a superset);
+        # the reader does not keep their order, the viewer activates the last sent
+        table = max(tables, key=lambda t: len(t.column_names))
         for c in table.column_names:
             if c.endswith(":ViewBlueprint:class_identifier"):
                 view = c.split(":")[0]
@@ -183,6 +210,14 @@ def declared(path) -> dict:
                 out["views"][name[0] if name else view] = first(table, c)[0]
             elif ":EyeControls3D:" in c:
                 out["eye"][c.rsplit(":", 1)[1]] = np.ravel(first(table, c)).tolist()
+            elif c.endswith(":ScalarAxis:range") or c.endswith(":PlotLegend:corner"):
+                view = c.split("/ScalarAxis:")[0].split("/PlotLegend:")[0]
+                name = first(table, f"{view}:ViewBlueprint:display_name")
+                value = np.ravel(first(table, c)).tolist()
+                if c.endswith("corner"):
+                    out["legend"][name[0]] = rrb.components.Corner2D(int(value[0])).name
+                else:
+                    out["y_range"][name[0]] = tuple(value)
             elif c.endswith(":LineGrid3D:plane"):
                 out["grid"] = np.ravel(first(table, c)).tolist()
             elif c.endswith(":EntityBehavior:visible") and "/ViewContents/overrides/" in c:

@@ -144,6 +144,8 @@ class RerunSink(Sink):
         self._dim = 2
         self._body = None
         self._channels: dict = {}  # log.channels: field -> ((low, high), source)
+        self._layout: tuple | None = None  # the blueprint's arguments (start), re-sent with the extents at close
+        self._extents: dict[str, tuple[float, float]] = {}  # scalar name -> (min, max) over the run
         self._frames: queue.Queue | None = None  # to the writer thread (threaded)
         self._writer: threading.Thread | None = None
         self._failure: BaseException | None = None  # raised by the writer, re-raised here
@@ -187,8 +189,8 @@ class RerunSink(Sink):
         self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
-        rec.send_blueprint(layout.blueprint(meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups,
-                                            channels=list(self._channels)))
+        self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
+        rec.send_blueprint(layout.blueprint(*self._layout))
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
@@ -338,6 +340,11 @@ class RerunSink(Sink):
                     if (root, name) not in self._labelled:  # the series' name in the viewer, with its unit
                         self._labelled.add((root, name))
                         rec.log(f"{root}/{name}", rr.SeriesLines(names=layout.label(name, self._dim)), static=True)
+                    finite = np.asarray(vals, dtype=np.float64)
+                    finite = finite[np.isfinite(finite)]
+                    if root == "scalars" and len(finite):  # the series' extent, for the plots' final y ranges
+                        lo, hi = self._extents.get(name, (np.inf, -np.inf))
+                        self._extents[name] = (min(lo, float(finite.min())), max(hi, float(finite.max())))
                     rec.send_columns(
                         f"{root}/{name}",
                         indexes=[rr.TimeColumn("step", sequence=steps),
@@ -354,6 +361,8 @@ class RerunSink(Sink):
             self._drain()
             self.flush()
             self._check_writer()
+            if self._layout is not None and self._extents:  # the legends' room above the whole run's data
+                self.rec.send_blueprint(layout.blueprint(*self._layout, extents=self._extents))
         finally:
             try:  # leaving the streams (last entered first) flushes and finalises the files
                 self.clock.__exit__(None, None, None)

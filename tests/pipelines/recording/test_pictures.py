@@ -89,6 +89,23 @@ def test_a_2d_recording_is_drawn_y_up_on_the_sim_time_timeline(tmp_path):
     assert rec.positions[0][:, 1].mean() > 0.5
 
 
+def test_legends_sit_above_the_data(tmp_path):
+    """Rerun places a plot's legend in a corner, over the curves that pass
+    there: a plot of several series puts it top left, and the blueprint sent
+    when the run ends sets the y range to the run's data plus room above
+    them (layout.LEGEND_ROOM of their span); a one-series plot shows no legend."""
+    path = run(tmp_path, ["scene.resolution=16", "run.steps=40", "log.every=0"])
+    d = layout.declared(path)
+    rec = recordings.read(path)
+    energies = np.concatenate([rec.scalars[n][1] for n in
+                               ("kinetic_energy", "elastic_energy", "potential_energy", "total_energy")])
+    lo, hi = d["y_range"]["energy [J/m]"]
+    span = energies.max() - energies.min()
+    assert d["legend"]["energy [J/m]"] == "LeftTop"
+    assert lo <= energies.min() and hi >= energies.max() + 0.9 * layout.LEGEND_ROOM * span
+    assert "max speed [m/s]" not in d["y_range"]  # one series, no legend
+
+
 def test_a_3d_recording_declares_y_up_and_a_camera_above_the_floor(tmp_path):
     """View coordinates RUB (x right, y up, z back: right-handed, y up), an
     orbital camera above the floor and the bodies, looking at the domain
