@@ -259,8 +259,10 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
 
 
 def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str = "cpu",
-          seed: int = 0) -> tuple[Model, State]:
-    """Sample the bodies and allocate the model and initial state on ``device``."""
+          seed: int = 0, samples: list[BodySample] | None = None) -> tuple[Model, State]:
+    """Sample the bodies and allocate the model and initial state on ``device``.
+    ``samples``: the bodies' particles already drawn by :func:`sample_bodies`
+    for this scene and seed (a config check's), used instead of sampling again."""
     check_scene(scene, kernel)
     t = make_types(scene.dim, precision)
     d, dx, dxp = scene.dim, scene.dx, scene.particle_dx
@@ -268,7 +270,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     # material models in order of first appearance; bodies grouped by model
     models = list(dict.fromkeys(type(b.material) for b in scene.bodies))
     order = sorted(range(len(scene.bodies)), key=lambda i: models.index(type(scene.bodies[i].material)))
-    samples = sample_bodies(scene, seed)
+    samples = sample_bodies(scene, seed) if samples is None else samples
     for i, s in enumerate(samples):
         if len(s.x) == 0:
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")

@@ -33,13 +33,14 @@ def _meshes(shape) -> list[str]:
     return [m for s in inner for m in _meshes(s)]
 
 
-def check_particles(scene: mpm.Scene, seed: int, key: str = "scene") -> list[str]:
+def check_particles(scene: mpm.Scene, seed: int, key: str = "scene", samples: list | None = None) -> list[str]:
     """Raise :class:`ConfigError` for a body without particles, a region or a
-    load that selects none; return warnings (bodies overlapping at the start)."""
+    load that selects none; return warnings (bodies overlapping at the start).
+    ``samples``: the bodies already sampled for this scene and seed."""
     d, dxp = scene.dim, scene.particle_dx
     domain = _box([0.0] * d, scene.domain)
     names = [b.name or f"body{i}" for i, b in enumerate(scene.bodies)]
-    samples = sample_bodies(scene, seed)
+    samples = sample_bodies(scene, seed) if samples is None else samples
     xs = [s.x for s in samples]
     for i, (b, x) in enumerate(zip(scene.bodies, xs)):
         if len(x):

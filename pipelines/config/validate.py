@@ -18,6 +18,7 @@ from omegaconf import OmegaConf
 import mpm
 from mpm.integrators import Explicit
 from mpm.meshes import MeshShape, file_digest
+from mpm.model import sample_bodies
 
 from .fields import ConfigError, check, number, plain
 from .overrides import check_kinds, check_literals
@@ -48,6 +49,14 @@ class RunSpec:
     stability_map: MapSpec | None = None  # the job is a stability map (pipelines.sweeps.stability)
     flip: float = 0.95  # the flip transfer's blend (mpm.SolverOptions.flip)
     material_used: bool = True  # some body takes the material group (else every body brings its own)
+    # the particles the check sampled (mpm.model.sample_bodies), handed to mpm.build once (take_samples)
+    samples: list | None = field(default=None, repr=False, compare=False)
+
+    def take_samples(self) -> list | None:
+        """The checked particles for ``mpm.build(..., samples=)``, released
+        from the spec (build keeps its own arrays; a second build samples)."""
+        samples, self.samples = self.samples, None
+        return samples
 
     @property
     def meshes(self) -> dict[str, str]:
@@ -242,7 +251,8 @@ def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
     check_kinds(cfg, list(overrides))
     spec = resolve(cfg)
     check_memory(spec)
-    return spec, check_particles(spec.scene, spec.seed) + step_warnings(spec)
+    spec.samples = sample_bodies(spec.scene, spec.seed)
+    return spec, check_particles(spec.scene, spec.seed, samples=spec.samples) + step_warnings(spec)
 
 
 def step_warnings(spec: RunSpec) -> list[str]:

@@ -89,8 +89,9 @@ class Recorder(mpm.Observer):
               graph: bool | None = None) -> None:
         """The model, the state, the solver (compiled) and the driver (reading
         back every ``sync_every`` steps; ``graph``: as a CUDA graph)."""
-        spec, run, log = self.spec, self.spec.run, self.spec.log
-        self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed)
+        spec, run, log = self.spec, self.spec.run, self.spec.log  # (the checked particles: not sampled again)
+        self.model, self.state = mpm.build(spec.scene, spec.kernel, run.precision, run.device, spec.seed,
+                                           samples=spec.take_samples())
         self.solver = mpm.Solver(self.model, spec.scheme, options)
         self.implicit = self.solver.implicit is not None
         self.scheme = self.solver.scheme  # defaults resolved
@@ -347,11 +348,10 @@ class Recorder(mpm.Observer):
         for b in report.updated:
             name = self.spec.scene.bodies[b].name
             frac = report.marked[b] / counts[b]
-            self.sink.event(
-                self.step, self.t,
-                f"configuration update of {name}: {100 * frac:.1f}% of its particles have "
-                f"dJ >= {self.scheme.epsilon:g}",
-                body=name, marked_fraction=float(frac), update_step=self.step, update_time=self.t)
+            self.sink.event(self.step, self.t,
+                            f"configuration update of {name}: {100 * frac:.1f}% of its particles have "
+                            f"dJ >= {self.scheme.epsilon:g}",
+                            body=name, marked_fraction=float(frac), update_step=self.step, update_time=self.t)
 
     def announce_scheme(self) -> None:
         s = self.scheme

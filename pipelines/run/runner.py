@@ -83,7 +83,8 @@ def step_policy(spec: RunSpec) -> mpm.StepPolicy:
 def plan(spec: RunSpec) -> str:
     """``run.plan=true``: the stages of a step and the kernels they launch,
     the run's size, and what it logs; nothing is compiled or run."""
-    model, state = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
+    model, state = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed,
+                             samples=spec.take_samples())
     solver = mpm.Solver(model, spec.scheme, solver_options(spec))
     driver = mpm.Driver(solver, state, step_policy(spec), spec.detect, sync_every=sync_every(spec),
                         graph=spec.run.graph, measure=spec.log.scalars)

@@ -383,3 +383,23 @@ def test_a_sweep_over_a_group_names_options(sweep, bad):
         check_groups([sweep])
     assert str(e.value).startswith(f"{sweep.split('=')[0]}: '{sweep.split('=', 1)[1]}' is not an option's name; "
                                    f"accepted: ")
+
+
+def test_the_checked_particles_are_the_run_s(monkeypatch):
+    """The particle check samples the bodies (mpm.model.sample_bodies) and
+    hands them to mpm.build once, which then samples nothing: the same
+    particles as a build that samples itself, and sampled once per run."""
+    import mpm
+    import mpm.model
+
+    spec, _ = validate(compose_cfg(["scene=two_disks", "scene.jitter=0.5"]))
+    assert spec.samples is not None and len(spec.samples) == 2
+    calls = []
+    original = mpm.model.sample_bodies
+    monkeypatch.setattr(mpm.model, "sample_bodies", lambda *a: calls.append(a) or original(*a))
+    model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu", spec.seed, samples=spec.take_samples())
+    assert calls == [] and spec.samples is None  # taken once
+    fresh, fresh_state = mpm.build(spec.scene, spec.kernel, "float64", "cpu", spec.seed)
+    assert len(calls) == 1
+    np.testing.assert_array_equal(state.x.numpy(), fresh_state.x.numpy())
+    np.testing.assert_array_equal(model.mass.numpy(), fresh.mass.numpy())
