@@ -82,6 +82,16 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
     node_body = make_node_body(t)
     outward = make_outward(t)
     occupancy = make_occupancy(t)
+    n_points = 2**t.dim if gather else 1  # the lattice nodes a body node is put on
+
+    @wp.func
+    def lattice_point(q: t.vec, k: int, inv_dx: S, cells: t.ivec, strides: t.ivec):
+        """The k-th lattice node of a body node at q and its weight: corner k
+        of q's cell with its linear weight (gather), or the nearest node."""
+        if wp.static(gather):
+            base, frac = cell_of(q, inv_dx)
+            return corner(base, frac, k, cells, strides)
+        return S(1.0), nearest(q, inv_dx, cells, strides)
 
     @warp_kernel
     def splat(
@@ -108,16 +118,10 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
             return
         b = node_body(i, offset, n_bodies, n_grids)
         m = m / S(n_grids)  # every kernel grid carries the body's full mass
-        if wp.static(gather):
-            base, frac = cell_of(grid_q[i], inv_dx)
-            for k in range(wp.static(2**t.dim)):
-                w, g = corner(base, frac, k, cells, strides)
-                wp.atomic_add(M, b * n_global + g, w * m)
-                wp.atomic_add(P, b * n_global + g, (w * m) * grid_v[i])
-        else:
-            g = nearest(grid_q[i], inv_dx, cells, strides)
-            wp.atomic_add(M, b * n_global + g, m)
-            wp.atomic_add(P, b * n_global + g, m * grid_v[i])
+        for k in range(wp.static(n_points)):
+            w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
+            wp.atomic_add(M, b * n_global + g, w * m)
+            wp.atomic_add(P, b * n_global + g, (w * m) * grid_v[i])
 
     @wp.func
     def correction(b: int, g: int, n_bodies: int, cells: t.ivec, strides: t.ivec, n_global: int,
@@ -191,17 +195,11 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
         b = node_body(i, offset, n_bodies, n_grids)
         dv = vec()
         touching = False
-        if wp.static(gather):
-            # the corrections of the 2^d lattice nodes around q_i, with the weights it was spread with
-            base, frac = cell_of(grid_q[i], inv_dx)
-            for k in range(wp.static(2**t.dim)):
-                w, g = corner(base, frac, k, cells, strides)
-                dv_g, hit_g = bin_dv(b, g, n_bodies, cells, strides, n_global, rest_mass, fill, M, P)
-                dv += w * dv_g
-                touching = touching or hit_g
-        else:
-            g = nearest(grid_q[i], inv_dx, cells, strides)
-            dv, touching = bin_dv(b, g, n_bodies, cells, strides, n_global, rest_mass, fill, M, P)
+        for k in range(wp.static(n_points)):  # the corrections, with the weights the node was spread with
+            w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
+            dv_g, hit_g = bin_dv(b, g, n_bodies, cells, strides, n_global, rest_mass, fill, M, P)
+            dv += w * dv_g
+            touching = touching or hit_g
         if touching and count != 0:
             wp.atomic_add(status.contact_nodes, 0, wp.float64(1.0))
         grid_v[i] = grid_v[i] + dv
@@ -228,14 +226,8 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
         if grid_m[i] <= S(0.0):
             return
         b = node_body(i, offset, n_bodies, n_grids)
-        if wp.static(gather):
-            base, frac = cell_of(grid_q[i], inv_dx)
-            for k in range(wp.static(2**t.dim)):
-                _w, g = corner(base, frac, k, cells, strides)
-                M[b * n_global + g] = S(0.0)
-                P[b * n_global + g] = vec()
-        else:
-            g = nearest(grid_q[i], inv_dx, cells, strides)
+        for k in range(wp.static(n_points)):
+            _w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
             M[b * n_global + g] = S(0.0)
             P[b * n_global + g] = vec()
 

@@ -172,12 +172,8 @@ class RerunSink(Sink):
         self._source = self._source or "fixed for the field"
         self._channels = {}  # field -> ((low, high), where the range comes from)
         for name, (given, source) in (meta.channels or {}).items():
-            if given is not None:
-                self._channels[name] = (tuple(given), source)
-            elif name == self._color:
-                self._channels[name] = (self._range, self._source)
-            else:
-                self._channels[name] = (color_range(name), source or "fixed for the field")
+            self._channels[name] = ((tuple(given), source) if given is not None
+                                    else (color_range(name), "fixed for the field"))
         layout.view_coordinates(rec, meta.dim, channels=bool(self._channels))
         rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),

@@ -70,24 +70,3 @@ class Sink:
 
     def close(self) -> None:
         pass
-
-
-def channel_ranges(log, scene, x: np.ndarray, v: np.ndarray) -> dict:
-    """``RunMeta.channels`` of the settings ``log`` (``log.channels``): per
-    field its colour map's fixed range and where it comes from - the run's
-    (``log.color_range``) for the field that colours the particles, for
-    speed the bound before the run (:func:`pipelines.run.run_metrics.speed_range`,
-    from the initial positions ``x`` and velocities ``v``), else None (the
-    field's fixed default, ``rerun_sink.COLOR_RANGES``)."""
-    out = {}
-    for name in getattr(log, "channels", None) or ():
-        if name == log.color and log.color_range is not None:
-            out[name] = ((float(log.color_range[0]), float(log.color_range[1])), "log.color_range")
-        elif name == "speed":
-            from ..run.run_metrics import speed_range
-
-            top, how = speed_range(scene, np.asarray(x, np.float64), np.asarray(v, np.float64))
-            out[name] = ((0.0, top), how)
-        else:
-            out[name] = (None, "")
-    return out

@@ -24,7 +24,7 @@ from . import run_metrics
 from .progress import Progress
 from .load_track import LoadTrack
 from .run_metrics import Drift, median, particle_fields, peak_rss_mb
-from ..recording.sinks import RunMeta, Sink, channel_ranges
+from ..recording.sinks import RunMeta, Sink
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
 
@@ -138,7 +138,7 @@ class Recorder(mpm.Observer):
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
             color=self.spec.log.color, color_range=run_metrics.color_range(self.spec, model, self.state),
-            channels=channel_ranges(self.spec.log, scene, self.state.x.numpy(), self.state.v.numpy()),
+            channels=run_metrics.channel_ranges(self.spec.log, scene, self.state.x.numpy(), self.state.v.numpy()),
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])

@@ -123,17 +123,29 @@ def speed_range(scene, x: np.ndarray, v: np.ndarray) -> tuple[float, str]:
     return (top, how) if top > 0 else (1.0, "nothing moves at the start: 1 m/s")
 
 
-def color_range(spec, model, state) -> tuple[tuple[float, float] | None, str]:
-    """The colour map's fixed (low, high) of ``log.color`` and where it comes
-    from: ``log.color_range``, for speed a bound before the run
-    (:func:`speed_range`), else None (the sink's default for the field)."""
-    log = spec.log
-    if log.color_range is not None:
+def field_range(name: str, log, scene, x: np.ndarray, v: np.ndarray) -> tuple[tuple[float, float] | None, str]:
+    """The colour map's fixed (low, high) of the particle field ``name`` and
+    where it comes from: ``log.color_range`` for the field that colours the
+    particles (``log.color``), for speed a bound before the run
+    (:func:`speed_range`, from the initial positions ``x`` and velocities
+    ``v``), else None (the sink's default for the field)."""
+    if name == log.color and log.color_range is not None:
         return (float(log.color_range[0]), float(log.color_range[1])), "log.color_range"
-    if log.color == "speed":
-        top, how = speed_range(model.scene, state.x.numpy().astype(np.float64), state.v.numpy().astype(np.float64))
+    if name == "speed":
+        top, how = speed_range(scene, np.asarray(x, np.float64), np.asarray(v, np.float64))
         return (0.0, top), how
     return None, ""
+
+
+def color_range(spec, model, state) -> tuple[tuple[float, float] | None, str]:
+    """:func:`field_range` of ``log.color``."""
+    return field_range(spec.log.color, spec.log, model.scene, state.x.numpy(), state.v.numpy())
+
+
+def channel_ranges(log, scene, x: np.ndarray, v: np.ndarray) -> dict:
+    """``RunMeta.channels``: :func:`field_range` of each field of
+    ``log.channels``."""
+    return {name: field_range(name, log, scene, x, v) for name in log.channels}
 
 
 def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[float, int, int]:

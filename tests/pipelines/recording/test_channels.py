@@ -10,7 +10,8 @@ from helpers import compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import layout
 from pipelines.recording.rerun_sink import PALETTE_PACKED, RerunSink, color_range, colormap
-from pipelines.recording.sinks import RunMeta, channel_ranges
+from pipelines.recording.sinks import RunMeta
+from pipelines.run.run_metrics import channel_ranges
 
 N = 50
 
