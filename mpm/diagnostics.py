@@ -145,13 +145,74 @@ def make_measure(t: Types, per_particle_K: bool, batched: bool = False):
     return measure
 
 
-def spilled_fraction(x: np.ndarray, bowl) -> float:
+def nearest_points(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    """Index into ``points`` (n, d) of the nearest point to each query (m, d)
+    [m]. Points are hashed into cells of width r and each query's 3^d cells
+    searched: a point found within r is the nearest (any nearer one lies in
+    those cells). Queries with none within r are searched again with r
+    doubled, from ``radius`` until r spans the points, and the few left (far
+    from every point) against all points."""
+    queries, points = np.asarray(queries, np.float64), np.asarray(points, np.float64)
+    best = np.full(len(queries), -1, np.int64)
+    if not len(points):
+        return best
+    best_d2 = np.full(len(queries), np.inf)
+    lo, extent = points.min(0), float(np.ptp(points, 0).max())
+    todo, r = np.arange(len(queries)), max(radius, 1e-12)
+    while len(todo) and r <= 4.0 * extent:
+        _cell_search(queries[todo], points, lo, r, todo, best, best_d2)
+        todo = todo[best_d2[todo] > r * r]
+        r *= 2.0
+    for chunk in np.array_split(todo, max(1, len(todo) * len(points) // 4_000_000)):  # far from all: every point
+        if len(chunk):
+            best[chunk] = ((queries[chunk, None, :] - points[None, :, :]) ** 2).sum(-1).argmin(1)
+    return best
+
+
+def _cell_search(q: np.ndarray, points: np.ndarray, lo: np.ndarray, r: float, rows: np.ndarray,
+                 best: np.ndarray, best_d2: np.ndarray) -> None:
+    """Update ``best``/``best_d2`` at ``rows`` (the queries ``q``) with the
+    points in the 3^d cells of width ``r`` around each query."""
+    dim = points.shape[1]
+    cell = np.floor((points - lo) / r).astype(np.int64)
+    shape = cell.max(0) + 3  # one empty cell around every side
+    key = np.ravel_multi_index((cell + 1).T, shape)
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    qcell = np.floor((q - lo) / r).astype(np.int64) + 1
+    for offset in np.ndindex(*(3,) * dim):
+        c = qcell + np.asarray(offset) - 1
+        ok = np.all((c >= 0) & (c < shape), axis=1)
+        qk = np.where(ok, np.ravel_multi_index(np.clip(c, 0, shape - 1).T, shape), -1)
+        start = np.searchsorted(sorted_key, qk, "left")
+        count = np.where(ok, np.searchsorted(sorted_key, qk, "right") - start, 0)
+        for j in range(int(count.max(initial=0))):
+            has = np.flatnonzero(count > j)
+            idx = order[start[has] + j]
+            d2 = ((points[idx] - q[has]) ** 2).sum(1)
+            better = d2 < best_d2[rows[has]]
+            best[rows[has[better]]], best_d2[rows[has[better]]] = idx[better], d2[better]
+
+
+def spilled_fraction(x: np.ndarray, bowl, x_bowl: np.ndarray | None = None, X_bowl: np.ndarray | None = None,
+                     spacing: float = 0.0) -> float:
     """Fraction of the points ``x`` [m] (a fluid's particles) that lie below
     the rim plane of ``bowl`` (an mpm.scene.Bowl, its initial geometry) and
     outside its outer sphere: fluid that has left the bowl and run down its
-    outside (A-ULMPM paper, Fig. 11: the leaking EMPM bowl)."""
+    outside (A-ULMPM paper, Fig. 11: the leaking EMPM bowl).
+    With the bowl's particles now (``x_bowl``) and at the start (``X_bowl``),
+    each point is first carried into the bowl's initial shape by its nearest
+    bowl particle b, X = X_b + (x - x_b), so that a bowl which has moved,
+    settled or squashed is judged in its own frame (the bowl in the scene
+    starts above the floor and flattens under the water: judged against its
+    initial place, water resting on its lowered floor counted as outside).
+    ``spacing`` [m]: the bowl particles' spacing, the nearest-search cell."""
     if len(x) == 0:
         return 0.0
+    x = np.asarray(x, np.float64)
+    if x_bowl is not None and X_bowl is not None and len(x_bowl):
+        b = nearest_points(x, x_bowl, radius=max(2.0 * spacing, 1e-9))
+        x = np.asarray(X_bowl, np.float64)[b] + (x - np.asarray(x_bowl, np.float64)[b])
     d = x - np.asarray(bowl.center)
     below = d[:, bowl.axis] < bowl.rim
     outside = np.linalg.norm(d, axis=1) > bowl.radius + bowl.thickness

@@ -475,7 +475,7 @@ class Recorder(mpm.Observer):
         if self.inside_max is not None:  # particles more than a cell deep in a collider
             m["inside_colliders"] = {n: {"final": int(a), "max": int(b)} for n, a, b in
                                      zip(self.collider_names(), self.inside_last, self.inside_max)}
-        spilled = run_metrics.spilled(self.model, self.state)
+        spilled = run_metrics.spilled(self.model, self.state, self.X0)
         if spilled:
             m["spilled"] = spilled
         if self.loads is not None:

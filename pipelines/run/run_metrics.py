@@ -194,17 +194,22 @@ def implicit_summary(integrator, newton: list[tuple], halvings: int) -> dict:
     return out
 
 
-def spilled(model, state) -> dict:
+def spilled(model, state, X0: np.ndarray) -> dict:
     """Per fluid body and bowl-shaped body, the fraction of the fluid below
-    the bowl's rim plane outside it (mpm.diagnostics.spilled_fraction)."""
+    the bowl's rim plane outside it, judged in the bowl's initial shape
+    (mpm.diagnostics.spilled_fraction; ``X0`` the initial positions [m])."""
     bodies = model.scene.bodies
-    bowls = [b for b in bodies if isinstance(b.shape, mpm.scene.Bowl)]
+    bowls = [(k, b) for k, b in enumerate(bodies) if isinstance(b.shape, mpm.scene.Bowl)]
     fluids = [(i, b) for i, b in enumerate(bodies) if b.material.fluid]
     if not bowls or not fluids:
         return {}
     x, body = state.x.numpy().astype(np.float64), model.body.numpy()
-    return {f"{b.name}/{bowl.name}": spilled_fraction(x[body == i], bowl.shape)
-            for i, b in fluids for bowl in bowls}
+    def spacing(b) -> float:  # the bowl particles' spacing [m]
+        return model.dx / max(b.ppc or model.scene.ppc, 1) ** (1.0 / model.dim)
+
+    return {f"{b.name}/{bowl.name}": spilled_fraction(x[body == i], bowl.shape, x[body == k], X0[body == k],
+                                                      spacing(bowl))
+            for i, b in fluids for k, bowl in bowls}
 
 
 def reference_errors(path: str, state, X0: np.ndarray, t: float) -> dict:
