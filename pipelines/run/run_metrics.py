@@ -151,7 +151,8 @@ def channel_ranges(log, scene, x: np.ndarray, v: np.ndarray) -> dict:
 def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[float, int, int]:
     """Estimated size of the recording [MB], its particle frames and steps,
     from the first step ``dt`` [s] (an adaptive step may shrink later);
-    ``n_scalars``: the diagnostics logged per step."""
+    ``n_scalars``: the diagnostics logged per step; each of log.channels
+    logs the particles again with their colours."""
     log, (steps_end, duration) = spec.log, spec.end
     steps = steps_end if steps_end is not None else math.ceil(duration / dt)
     t_end = duration if duration is not None else steps * dt
@@ -162,6 +163,7 @@ def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[f
     else:
         frames = min(steps, math.ceil(t_end * log.fps)) + 2
     per_particle = 4 * model.dim + 3 + 4 * (log.dJ + len(plastic_fields(model, state)))
+    per_particle += len(log.channels) * (4 * model.dim + 4 + 4)  # /channels/<field>: positions, colours, its values
     scalars = 24 * (n_scalars + 12) if log.scalars else 0  # value, step and time per scalar
     return (frames * model.n_particles * per_particle + (steps + 1) * scalars) / 1e6, frames, steps
 

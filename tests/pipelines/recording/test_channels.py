@@ -92,3 +92,22 @@ def test_channels_are_declared_checked_and_ranged():
     (lo, hi), how = r["speed"]
     assert lo == 0.0 and hi > 0 and "free fall" in how
     assert channel_ranges(resolve(compose_cfg([])).log, spec.scene, state.x.numpy(), state.v.numpy()) == {}
+
+
+def test_the_size_estimate_counts_the_channels(tmp_path):
+    """The recording-size estimate (log.size_warning_mb) grows with the
+    channel entities by at least what they add to the file, and stays above
+    the file's size (the default 2D scene, 20 steps, a frame every 2; the
+    estimate leaves out Rerun's compression: measured 2.2x the file over 100
+    steps, with or without channels)."""
+    from pipelines.run.runner import execute
+
+    sizes = {}
+    for name, channels in (("none", "[]"), ("two", "[speed,dJ]")):
+        spec = resolve(compose_cfg(["run.steps=20", "log.every=2", f"log.channels={channels}", "log.progress=false"]))
+        m = execute(spec, tmp_path / name)
+        assert m["status"] == "completed", m.get("reason")
+        sizes[name] = (m["recording_estimate_mb"], (tmp_path / name / "recording.rrd").stat().st_size / 1e6)
+    (est0, file0), (est2, file2) = sizes["none"], sizes["two"]
+    assert file2 <= est2 and file0 <= est0
+    assert file2 - file0 <= est2 - est0 <= 4.0 * (file2 - file0)
