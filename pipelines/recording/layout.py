@@ -19,7 +19,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 FLIP_2D = (1.0, -1.0, 1.0)  # scale of the 2D spatial entities: y up on the screen
-SPATIAL_2D = ("particles", "domain", "colliders")  # the entities that carry the flip
+SPATIAL_2D = ("particles", "domain", "colliders", "regions")  # the entities that carry the flip
 ELEVATION, AZIMUTH = 25.0, 35.0  # the initial 3D camera: above the floor, in front and to the right [deg]
 TIMELINE = "sim_time"  # the timeline the viewer opens on
 
@@ -142,7 +142,7 @@ def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents:
     (min, max), for the plots' y ranges (:func:`series_views`)."""
     L = np.asarray(domain, float)
     hidden = [f"/channels/{c}" for c in channels]
-    contents = ["/particles", "/domain", "/colliders/**"] + hidden
+    contents = ["/particles", "/domain", "/colliders/**", "/regions/**"] + hidden
     overrides = {path: rrb.EntityBehavior(visible=False) for path in hidden} or None
     if dim == 2:
         m = 0.05 * float(L.max())

@@ -1,7 +1,9 @@
 """Kinematic regions (the scene's ``regions``, mpm.scene.KinematicRegion) in
-the replay's frames: each region's selection outlined where its particles
-are at the frame's time, read from the recorded config (property
-``config:yaml``), so recordings made before this module show them too.
+the replay's frames and the Rerun recording (/regions/<name>, logged with
+each particle frame by pipelines.recording.rerun_sink): each region's
+selection outlined where its particles are at the frame's time, read from
+the recorded config (property ``config:yaml``), so recordings made before
+this module show them in the frames too.
 
 A region moves its particles rigidly (or with its prescribed homogeneous
 stretch) while ``start <= t < end``: a point r from the region's centre c
@@ -22,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 EDGE = (0.85, 0.0, 0.85)  # the outlines' colour (magenta: apart from the bodies' palette and the colliders' grey)
+EDGE_RGBA = (217, 0, 217, 255)  # ... in the Rerun recording while the region acts
+EDGE_IDLE_RGBA = (217, 0, 217, 90)  # ... before and after (Rerun draws no dashes: faint instead)
 N_AROUND = 48  # segments of a circle
 
 
@@ -139,10 +143,21 @@ def _config(rec) -> dict:
 
 def regions(rec) -> list[Region]:
     """The kinematic regions of a recording's scene (those it cannot read are left out)."""
+    return of_config(_config(rec), rec.dim)
+
+
+def of_yaml(text: str, dim: int | None = None) -> list[Region]:
+    """The kinematic regions of a run's config document (the run's ``config.yaml``)."""
+    return of_config(_config(type("Config", (), {"properties": {"config:yaml": [text]}})()), dim)
+
+
+def of_config(config: dict, dim: int | None = None) -> list[Region]:
+    """The kinematic regions of a composed config (a dict); ``dim``: the
+    scene's, else the config's."""
     from mpm.scene import skew
 
-    scene = _config(rec).get("scene") or {}
-    dim = rec.dim or int(scene.get("dim") or 2)
+    scene = config.get("scene") or {}
+    dim = dim or int(scene.get("dim") or 2)
     out = []
     for i, r in enumerate(scene.get("regions") or []):
         try:

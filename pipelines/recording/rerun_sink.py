@@ -35,6 +35,10 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
   /legend             what the colours mean: map, field and range (static)
   /domain             the domain box and the inner wall faces (static)
   /colliders/<name>   each collider's surface (3D) or outline (2D)
+  /regions/<name>     each kinematic region's selection outlined where its
+                      particles are, at every particle frame (LineStrips;
+                      solid magenta while it acts, faint before and after:
+                      pipelines.recording.regions)
   /scalars/<name>     one Scalars series per physics scalar, sent in batches
                       with ``send_columns``, named with its unit (SeriesLines)
   /events             TextLog lines with machine-readable values beside them
@@ -58,7 +62,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from . import layout, surfaces
+from . import layout, regions, surfaces
 from .sinks import RunMeta, Sink, timings_path
 
 APP_ID = "aulmpm"
@@ -137,6 +141,7 @@ class RerunSink(Sink):
         self._timings: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._points = None
         self._moving = []
+        self._regions = []  # pipelines.recording.regions.Region, drawn with each particle frame
         self._color = "body"
         self._range = DEFAULT_RANGE  # the colour map's (low, high), fixed for the run
         self._source = ""  # where the range comes from
@@ -185,6 +190,7 @@ class RerunSink(Sink):
         self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
+        self._regions = regions.of_yaml(((meta.properties or {}).get("config") or {}).get("yaml") or "", meta.dim)
         self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
         rec.send_blueprint(layout.blueprint(*self._layout))
 
@@ -289,6 +295,11 @@ class RerunSink(Sink):
                 self.rec.log(path, rr.Transform3D(translation=shift))
             else:
                 self.rec.log(path, rr.Transform3D(translation=[*shift, 0.0]))
+        for reg in self._regions:
+            strips = [line.astype(np.float32) for line in reg.outline(t, len(reg.center))]
+            color = regions.EDGE_RGBA if reg.active(t) else regions.EDGE_IDLE_RGBA
+            kind = rr.LineStrips3D if len(reg.center) == 3 else rr.LineStrips2D
+            self.rec.log(f"regions/{reg.name}", kind(strips, colors=[color]))
         values = dict(fields or {})
         if dJ is not None:
             values["dJ"] = dJ

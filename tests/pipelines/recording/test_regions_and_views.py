@@ -156,3 +156,39 @@ def test_the_layer_nearest_the_viewer_is_drawn_over_the_other(tmp_path, view, ne
     img = pixels(render_frames(rec, tmp_path / view, view=view)[0])
     seen_far, seen_near = mask(img, PALETTE[0]).sum(), mask(img, PALETTE[1]).sum()
     assert seen_near > 5000 and seen_far < 0.05 * seen_near, (seen_near, seen_far)
+
+
+def test_the_rerun_recording_outlines_each_region_at_every_frame(tmp_path):
+    """/regions/<name> in the Rerun recording: at each particle frame the
+    region's outline where its particles are (a box moving at 0.1 m/s until
+    t = 1 s), opaque magenta while it acts and faint after; in the 2D view's
+    y-flip with the other spatial entities."""
+    from rerun.chunk import RrdReader
+
+    from pipelines.recording import layout
+    from pipelines.recording.rerun_sink import RerunSink
+    from pipelines.recording.sinks import RunMeta
+
+    region = dict(CLAMP, velocity=[0.1, 0.0], end=1.0)
+    config = {"scene": {"dim": 2, "domain": [1.2, 0.9], "regions": [region]}}
+    path = tmp_path / "recording.rrd"
+    sink = RerunSink(path, threaded=False)
+    x = slab((0.15, 0.65), (0.3, 0.75)).astype(np.float32)
+    sink.start(RunMeta(name="regions", dim=2, domain=(1.2, 0.9), wall_cells=3, dx=0.05, body_names=["beam"],
+                       particle_body=np.zeros(len(x), np.int64), particle_radius=0.005,
+                       properties={"config": {"yaml": yaml.safe_dump(config)}}))
+    times = (0.0, 0.5, 1.5)
+    for step, t in enumerate(times):
+        sink.particles(step, t, x, None)
+    sink.close()
+    df = RrdReader(str(path)).stream().collect().reader(index="step", contents="/regions/**").to_pandas()
+    strips = df["/regions/clamp:LineStrips2D:strips"].tolist()
+    colors = df["/regions/clamp:LineStrips2D:colors"].tolist()
+    reg, = regions.of_config(config)
+    for t, got, color in zip(times, strips, colors):
+        want = reg.outline(t, 2)[0]
+        assert np.allclose(np.stack(got[0]), want, atol=1e-6)
+        alpha = int(color[0]) & 0xFF
+        assert alpha == (255 if t < 1.0 else regions.EDGE_IDLE_RGBA[3])
+    assert np.allclose(np.stack(strips[-1][0]).min(0), [0.15 + 0.1, 0.64], atol=1e-6)  # stopped at its end
+    assert "regions" in layout.declared(path)["flip"]
