@@ -187,10 +187,10 @@ class RerunSink(Sink):
             rec.log(f"channels/{name}", self._points.from_fields(
                 radii=meta.particle_radius, **({"draw_order": CHANNEL_DRAW_ORDER} if meta.dim == 2 else {})),
                 static=True)
+        self._regions = regions.of_yaml(((meta.properties or {}).get("config") or {}).get("yaml") or "", meta.dim)
         self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
-        self._regions = regions.of_yaml(((meta.properties or {}).get("config") or {}).get("yaml") or "", meta.dim)
         self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
         rec.send_blueprint(layout.blueprint(*self._layout))
 
@@ -242,6 +242,10 @@ class RerunSink(Sink):
                     f"the run: {lo:.3g} (dark purple) to {hi:.3g} (yellow){unit and ' ' + unit}, clamped "
                     f"({self._source}); grey: no value (another material)."
                     "\n\nEvery per-particle field is in the recording (select a particle to read it).")
+        if self._regions:
+            text += "\n\n**Kinematic regions** (magenta outlines, faint while not acting): " + ", ".join(
+                f"{r.name} ({r.start:g} s to {r.end:g} s)" if np.isfinite(r.end) else f"{r.name} (from {r.start:g} s)"
+                for r in self._regions)
         if self._channels:
             text += ("\n\n**Channels** (hidden: show one in the blueprint panel, eye icon, and hide /particles "
                      "in 3D), each field on the viridis map over a range fixed for the run:\n" + "\n".join(
