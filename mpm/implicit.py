@@ -272,7 +272,7 @@ class ImplicitSolve:
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
-                s.grid.v])
+                s.grid.v, s.buffer.status])
 
     # ------------------------------------------------------------ solve
     def _classify(self, rep: NewtonReport, R: float, R_before: float, goal: float) -> None:

@@ -344,8 +344,8 @@ def make_boundary_work(t: Types):
     J = m reaction (v - reaction: the velocity without it), into the step's
     ``status.boundary_impulse``, and its work, the positive part of J . v,
     into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stability).
-    The Coulomb friction applied after the solve (:func:`make_friction`) is
-    not part of it."""
+    The Coulomb friction applied after the solve (:func:`make_friction`)
+    adds its own."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
@@ -362,14 +362,17 @@ def make_boundary_work(t: Types):
 
 @functools.cache
 def make_friction(t: Types):
-    """Kernel: Coulomb friction after the solve (ImplicitSolve.finish)."""
+    """Kernel: Coulomb friction after the solve (ImplicitSolve.finish); its
+    impulse and work go into ``status`` as the constraints' do
+    (:func:`make_boundary_work`)."""
     S = t.scalar
     vec = t.vec
+    work = make_work(t)
 
     @warp_kernel
     def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
                  mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
-                 v: wp.array(dtype=vec)):
+                 v: wp.array(dtype=vec), status: StepStatus):
         i = wp.tid()
         if m[i] <= S(0.0) or mu[i] <= S(0.0):
             return
@@ -380,6 +383,8 @@ def make_friction(t: Types):
         vt = free[i] * vr
         lt = wp.length(vt)
         if lt > S(0.0):
-            v[i] = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt)
+            v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt)
+            work(m[i], v[i], v_new, status)
+            v[i] = v_new
 
     return friction

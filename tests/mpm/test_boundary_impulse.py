@@ -25,7 +25,7 @@ CASES = {
     "sticky walls": (lambda: ball(walls=("sticky",) * 4), {}),
     # the floor a collider above the wall band (the walls open: only the collider acts)
     "collider": (lambda: ball(walls=("slip", "slip", "open", "slip"), colliders=[
-        mpm.Collider("half_space", boundary="sticky", point=(0.5, 0.15), normal=(0.0, -1.0))]), {}),
+        mpm.Collider("half_space", boundary="sticky", point=(0.5, 0.15), normal=(0.0, 1.0))]), {}),
     # the ball's top held by a kinematic region moving up: it pulls against gravity and the floor
     "region": (lambda: ball(regions=[mpm.KinematicRegion(body=0, select=mpm.Box((0.5, 0.38), (0.04, 0.03)),
                                                          velocity=(0.0, 0.5))]), {}),
@@ -33,6 +33,10 @@ CASES = {
     # default newton_tol 1e-4 leaves 2e-4 kg m/s over the bounce, 1e-8 leaves 1.5e-8)
     "implicit": (lambda: ball(), {"integrator": Implicit(newton_tol=1e-12, cg_tol=1e-14, newton_max=50,
                                                          cg_max=5000)}),
+    # Coulomb friction on the solved velocities (a rough floor collider): its tangential impulse too
+    "implicit friction": (lambda: ball(walls=("slip", "slip", "open", "slip"), colliders=[
+        mpm.Collider("half_space", boundary="slip", friction=0.5, point=(0.5, 0.15), normal=(0.0, 1.0))]),
+        {"integrator": Implicit(newton_tol=1e-12, cg_tol=1e-14, newton_max=50, cg_max=5000)}),
 }
 
 
@@ -72,3 +76,5 @@ def test_momentum_change_is_gravity_plus_boundary_impulse(case, device):
     # not trivially true: the boundary gave an impulse of the order of the ball's momentum
     assert impulse[1] > 0.3 * mass * 2.0, impulse
     assert np.abs(momentum() - p0 - gravity).max() > 1e6 * worst
+    if "friction" in case:  # the rough floor slowed the ball's sliding (0.4 m/s): an x impulse
+        assert impulse[0] < -0.05 * mass * 0.4, impulse
