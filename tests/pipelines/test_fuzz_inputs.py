@@ -257,7 +257,7 @@ POSITIONAL = {  # bad positional arguments
     "pipelines.material_point": ["scene.resolution=8", "material.E=nan", "material=steel", "material.nope=1"],
     "pipelines.bench": ["no_such_case"],
     "pipelines.granular": ["{file}", "{missing}", "{dir}"],
-    "pipelines.cfl_bound": ["extra"],
+    "pipelines.cfl_bound": ["extra", "scene=nope", "scene=water_bunny", "scene.resolution=abc"],
 }
 
 
