@@ -182,11 +182,8 @@ def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: fl
 
 def scene_bounds(overrides: list[str]) -> list[tuple[str, float, float]]:
     """:func:`body_bound` of the first body of the scene the config
-    ``overrides`` compose (2D), for the quadratic and cubic B-splines:
-    (kernel, k*, |lambda| at k = 1.2), its slip walls' bands fixing the
-    normal velocity. (The linear kernel is left out: on the stability ball
-    the model gives k* = 0.93 while the solver completes k = 1.5; what of
-    the solver's linear-kernel step the model misses was not found.)"""
+    ``overrides`` compose (2D), for each B-spline: (kernel, k*, |lambda|
+    at k = 1.2), its slip walls' bands fixing the normal velocity."""
     from hydra import compose, initialize_config_dir
 
     import mpm
@@ -207,7 +204,7 @@ def scene_bounds(overrides: list[str]) -> list[tuple[str, float, float]]:
     band = scene.wall_cells * model.dx
     walls = tuple(a for a in range(2) if "slip" in tuple(scene.walls)[2 * a:2 * a + 2])
     return [(k, *body_bound(x, volume, k, model.dx, walls=walls, lo=band, hi=np.asarray(scene.domain, float) - band))
-            for k in ("quadratic", "cubic")]
+            for k in ("linear", "quadratic", "cubic")]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -219,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nu", type=float, default=0.3)
     parser.add_argument("overrides", nargs="*",
                         help="a 2D scene (scene=stability_ball_2d scene.resolution=32 ...): the bound of its first "
-                             "body's particles with their surface and walls, quadratic and cubic (body_bound)")
+                             "body's particles with their surface and walls, for each B-spline (body_bound)")
     args = parser.parse_args(argv)
     if not 1 <= args.per_axis <= 8:
         parser.error(f"--per-axis: {args.per_axis}; accepted: an integer from 1 to 8")

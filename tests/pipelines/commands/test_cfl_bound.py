@@ -26,15 +26,15 @@ def test_the_body_bound_predicts_the_stiff_balls_growth():
     nodes, the APIC round trip), against the solver itself: the model's
     critical step lies between the maps' last stable and first unstable k
     (1.1 and 1.2, quadratic), and at k = 1.2 the solver's period-2 mode grows
-    by the model's largest |eigenvalue| per step (measured 1.1875 over steps
-    60-90 against 1.1880), float64 EMPM, E = 1e12 Pa (c >> the throw, the
+    by the model's largest |eigenvalue| per step (measured 1.1877 over steps
+    15-45 against 1.1880), float64 EMPM, E = 1e12 Pa (c >> the throw, the
     linear regime)."""
     import mpm
     from helpers import spec_for
     from pipelines.cfl_bound import body_bound
     from pipelines.sweeps.stability import cfl_limit, point_spec
 
-    spec = point_spec(spec_for(["scene=stability_ball_2d", "run.precision=float64"]), 1e12, 1.2, 100)
+    spec = point_spec(spec_for(["scene=stability_ball_2d", "run.precision=float64"]), 1e12, 1.2, 60)
     model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu", spec.seed, samples=spec.take_samples())
     x, volume = state.x.numpy(), model.volume.numpy().astype(float)
     band = spec.scene.wall_cells * model.dx
@@ -44,12 +44,13 @@ def test_the_body_bound_predicts_the_stiff_balls_growth():
     solver = mpm.Solver(model, spec.scheme, mpm.SolverOptions(integrator=mpm.Explicit()))
     solver.prepare(state)
     v = []
-    for _ in range(100):
+    for _ in range(60):
         report = solver.advance(state, spec.run.dt)
         assert report.reason is None, report.reason
         v.append(state.v.numpy().astype(np.float64))
     v = np.asarray(v)
     period2 = np.linalg.norm(v[2:] - 2 * v[1:-1] + v[:-2], axis=2).max(axis=1)  # the alternating mode's size
-    # the impact's other modes fade by step ~50; it saturates (large deformation) after ~110
-    measured = (period2[90] / period2[60]) ** (1 / 30)
+    # seeded by the ball's initial strain and the impact, it dominates from step ~10 and
+    # saturates (large deformation) after ~50
+    measured = (period2[45] / period2[15]) ** (1 / 30)
     assert measured == pytest.approx(growth, rel=2e-3), (measured, growth)
