@@ -130,7 +130,7 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
             "([impact.csv](impact.csv)).", ""] + md_table(headers, rows) + [""]
     if plot_energy(out / "impact_energy.png", curves):
         add_image(lines, "impact_energy.png", "energy against time: every job's total; the best job's kinetic, "
-                                              "elastic and total, as Sulsky, Chen and Schreyer plot them")
+                                              "elastic and total")
     return lines
 
 
