@@ -71,7 +71,7 @@ def run(cfg: DictConfig) -> dict:
     overrides = list(hc.overrides.task)
     for note in unused_overrides(spec, overrides):
         print(f"note: {note}", file=sys.stderr)
-    choices = {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")}
+    choices = effective_choices(cfg, {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")})
     identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
                                                       provenance.code_hash(), files=spec.meshes)}
     if spec.meshes:
@@ -145,6 +145,23 @@ def _remove_if_empty(run_dir: Path) -> None:
     """Drop the run directory Hydra made for a run that never started."""
     if run_dir.is_dir() and all(p.name in (".hydra", "run.log") for p in run_dir.iterdir()):
         shutil.rmtree(run_dir, ignore_errors=True)
+
+
+NAMED_GROUPS = ("scene", "scheme", "kernel", "integrator")  # groups whose option is its ``name``
+
+
+def effective_choices(cfg, choices: dict) -> dict:
+    """Hydra's group choices with the option a ``<group>.name=...`` override
+    switched to (it runs that option with its defaults, but Hydra records the
+    group's choice): the record says what ran, and a note says so."""
+    out = dict(choices)
+    for group in NAMED_GROUPS:
+        name = OmegaConf.select(cfg, f"{group}.name", default=None)
+        if group in out and name is not None and str(name) != str(out[group]):
+            print(f"note: {group}.name={name} set by key in the {group} option {out[group]}: the run and its "
+                  f"record use {name} with its defaults ({group}={name} chooses it as the group)", file=sys.stderr)
+            out[group] = str(name)
+    return out
 
 
 @hydra.main(version_base="1.3", config_path="../../conf", config_name="config")

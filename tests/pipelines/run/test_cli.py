@@ -413,3 +413,18 @@ def test_the_plan_names_the_stages_a_scene_needs_and_runs_nothing(tmp_path):
     four = run_cli(["run.plan=true", "kernel=compact", f"hydra.run.dir={tmp_path / 'd'}"], cwd=ROOT, timeout=120)
     assert four.returncode == 0, four.stderr  # the compact kernel keeps its cache and its update pass
     assert "stencils from the cache" in four.stdout and "configuration update: every step; the host" in four.stdout
+
+
+def test_a_group_option_switched_by_its_name_is_recorded_as_run(tmp_path):
+    """``scheme.name=aulmpm`` in the default scheme option runs A-ULMPM with
+    its defaults; Hydra records the group's choice (empm), so the run says
+    so, and its directory and recorded choices name what ran."""
+    from pipelines.recording import recordings
+
+    p = run_cli(["scheme.name=aulmpm", "run.steps=1", "log.progress=false"], cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "note: scheme.name=aulmpm set by key in the scheme option empm" in p.stderr
+    run, = (tmp_path / "outputs").glob("*/*")
+    assert run.name.endswith("_elastic_ball_2d_aulmpm")
+    choices = recordings.read(run / "recording.rrd").properties["config:choices"]
+    assert "scheme=aulmpm" in choices and "scheme=empm" not in choices
