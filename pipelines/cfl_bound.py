@@ -23,7 +23,6 @@ K(x) = 1 - |x| + sin(2 pi |x|) / (2 pi) on two grids shifted by -1/4, +1/4.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -58,14 +57,49 @@ KERNELS = {"linear": [(0.0, bspline(1))], "quadratic": [(0.0, bspline(2))], "cub
            "compact": [(-0.25, compact), (0.25, compact)]}
 
 
+def lame(nu: float) -> tuple[float, float, float]:
+    """lambda, mu and the P-wave speed c of a material with E = 1, rho = 1."""
+    lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))
+    return lam, mu, float(np.sqrt(lam + 2 * mu))
+
+
+def weights(fn, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The weights (n,) and their gradients with respect to the particle's
+    position (n, d) of the 1-D kernel ``fn`` at offsets ``r`` (n, d) = node -
+    particle, lattice units."""
+    wd = np.array([[fn(x) for x in row] for row in r])  # (n, d, 2): w and dw/dr per axis
+    w = np.prod(wd[..., 0], axis=1)
+    grad = np.stack([-wd[:, a, 1] * np.prod(np.delete(wd[..., 0], a, axis=1), axis=1)
+                     for a in range(r.shape[1])], -1)
+    return w, grad
+
+
+def particle_stiffness(g: np.ndarray, lam: float, mu: float) -> np.ndarray:
+    """A particle's linear-elastic stiffness per unit volume on its nodes,
+    (n d, n d) in :func:`dofs` order: with dL/dv_i = e_a (x) g_i (``g``
+    (n, d)), the stress rate lambda tr(eps) I + 2 mu eps of eps = sym L."""
+    dim = g.shape[1]
+    B = np.zeros((len(g) * dim, dim, dim))
+    for t, gi in enumerate(g):
+        for a in range(dim):
+            B[t * dim + a, a] = gi
+    eps = 0.5 * (B + B.transpose(0, 2, 1))
+    sigma = lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(dim) + 2 * mu * eps
+    return np.einsum("iab,jab->ij", B, sigma)
+
+
+def dofs(nodes: np.ndarray, dim: int) -> np.ndarray:
+    """The rows of the nodes' velocity components (node-major)."""
+    return (np.asarray(nodes)[:, None] * dim + np.arange(dim)).ravel()
+
+
 def bound(kernel: str, mls: bool = True, dim: int = 2, per_axis: int = 2, nu: float = 0.3, cells: int = 12) -> float:
     """k* = dt_crit c / dx of ``kernel`` (MLS weights, or the kernel's
     gradient), ``per_axis`` particles per cell and axis, Poisson's ratio
     ``nu``, on a periodic lattice of ``cells`` per axis."""
     grids = KERNELS[kernel]
     G, N = len(grids), cells
-    lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))  # E = 1, rho = 1
-    c = np.sqrt(lam + 2 * mu)
+    lam, mu, c = lame(nu)
     sub = (np.arange(per_axis) + 0.5) / per_axis
     axes = np.meshgrid(*([np.arange(N)] * dim), *([sub] * dim), indexing="ij")
     points = np.stack([axes[a] + axes[dim + a] for a in range(dim)], -1).reshape(-1, dim)
@@ -78,10 +112,7 @@ def bound(kernel: str, mls: bool = True, dim: int = 2, per_axis: int = 2, nu: fl
         w_all, r_all, g_all = np.zeros(n_nodes), np.zeros((n_nodes, dim)), np.zeros((n_nodes, dim))
         for k, (shift, fn) in enumerate(grids):
             r = (nodes + shift - p + N / 2) % N - N / 2  # periodic
-            wd = np.array([[fn(x) for x in row] for row in r])  # (nodes, dim, 2)
-            w = np.prod(wd[..., 0], axis=1)
-            grad = np.stack([-wd[:, a, 1] * np.prod(np.delete(wd[..., 0], a, axis=1), axis=1)
-                             for a in range(dim)], -1)
+            w, grad = weights(fn, r)
             sl = slice(k * len(nodes), (k + 1) * len(nodes))
             w_all[sl], r_all[sl], g_all[sl] = w, r, grad
         mass += volume * w_all
@@ -90,14 +121,8 @@ def bound(kernel: str, mls: bool = True, dim: int = 2, per_axis: int = 2, nu: fl
             g_all = (w_all[:, None] * r_all) @ np.linalg.inv(D).T
         idx = np.nonzero(np.any(g_all != 0, axis=1))[0]
         g = g_all[idx] / G  # dL / dv_i = e_a (x) g_i / G
-        B = np.zeros((len(idx) * dim, dim, dim))
-        for t, gi in enumerate(g):
-            for a in range(dim):
-                B[t * dim + a, a] = gi
-        eps = 0.5 * (B + B.transpose(0, 2, 1))
-        sigma = lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(dim) + 2 * mu * eps
-        rows = (idx[:, None] * dim + np.arange(dim)).ravel()
-        K[np.ix_(rows, rows)] += volume * G * np.einsum("iab,jab->ij", B, sigma)
+        rows = dofs(idx, dim)
+        K[np.ix_(rows, rows)] += volume * G * particle_stiffness(g, lam, mu)
     omega2 = np.max(np.real(np.linalg.eigvals(K / np.repeat(mass, dim)[:, None])))
     return float(2.0 / np.sqrt(omega2) * c)
 
@@ -122,8 +147,7 @@ def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: fl
     degree = {"linear": 1, "quadratic": 2, "cubic": 3}[kernel]
     w = bspline(degree)
     dim = 2
-    lam, mu = nu / ((1 + nu) * (1 - 2 * nu)), 1 / (2 * (1 + nu))
-    c = np.sqrt(lam + 2 * mu)
+    lam, mu, c = lame(nu)
     node_of: dict = {}
     per_particle = []
     reach = (degree + 1) / 2
@@ -131,9 +155,7 @@ def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: fl
         base = np.floor(p - reach).astype(int)
         ij = np.stack(np.meshgrid(*[np.arange(b, b + degree + 3) for b in base], indexing="ij"), -1).reshape(-1, dim)
         r = ij - p
-        wd = np.array([[w(v) for v in row] for row in r])
-        wt = np.prod(wd[..., 0], axis=1)
-        grad = np.stack([-wd[:, a, 1] * np.prod(np.delete(wd[..., 0], a, axis=1), axis=1) for a in range(dim)], -1)
+        wt, grad = weights(w, r)
         keep = wt > 0
         ij, r, wt, grad = ij[keep], r[keep], wt[keep], grad[keep]
         ks = np.array([node_of.setdefault(tuple(n), len(node_of)) for n in ij])
@@ -142,21 +164,11 @@ def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: fl
     mass, T, K = np.zeros(n), np.zeros((n, n)), np.zeros((dim * n, dim * n))
     for (ks, wt, r, grad), V in zip(per_particle, volume / dx**dim):
         mass[ks] += V * wt
-        if degree == 1:  # the linear kernel's affine term and force from its gradient (mpm.kernels gradient_affine)
-            g = grad
-            T[np.ix_(ks, ks)] += V * wt[:, None] * (wt[None, :] + r @ g.T)  # C_p = sum_j v_j g_j^T
-        else:
-            Dinv = np.linalg.inv(np.einsum("k,ka,kb->ab", wt, r, r))
-            g = (wt[:, None] * r) @ Dinv.T  # dL / dv_i = e_a (x) g_i
-            T[np.ix_(ks, ks)] += V * wt[:, None] * (wt[None, :] + r @ g.T)
-        B = np.zeros((len(ks) * dim, dim, dim))
-        for t, gi in enumerate(g):
-            for a in range(dim):
-                B[t * dim + a, a] = gi
-        eps = 0.5 * (B + B.transpose(0, 2, 1))
-        sigma = lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(dim) + 2 * mu * eps
-        rows = (ks[:, None] * dim + np.arange(dim)).ravel()
-        K[np.ix_(rows, rows)] += V * np.einsum("iab,jab->ij", B, sigma)
+        # dL / dv_i = e_a (x) g_i: the MLS weight, or the linear kernel's gradient (mpm.kernels gradient_affine)
+        g = grad if degree == 1 else (wt[:, None] * r) @ np.linalg.inv(np.einsum("k,ka,kb->ab", wt, r, r)).T
+        T[np.ix_(ks, ks)] += V * wt[:, None] * (wt[None, :] + r @ g.T)  # C_p = sum_j v_j g_j^T
+        rows = dofs(ks, dim)
+        K[np.ix_(rows, rows)] += V * particle_stiffness(g, lam, mu)
     T2 = np.kron(T / mass[:, None], np.eye(dim))
     free = np.ones(dim * n)
     top = np.broadcast_to(np.asarray(hi, float), (dim,))
@@ -164,14 +176,14 @@ def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: fl
         for a in walls:
             if not lo / dx <= ij[a] <= top[a] / dx:
                 free[k * dim + a] = 0.0
-    P, Minv = np.diag(free), np.repeat(1.0 / mass, dim)
+    A = free[:, None] * T2  # P T
+    PMinv = np.diag(free / np.repeat(mass, dim))  # P M^-1
+    keep_f = np.hstack([np.zeros_like(K), np.eye(len(K))])
 
     def radius(k: float) -> float:
         dt = k / c  # lattice units: dx = 1
-        A, Bf = P @ T2, dt * P * Minv[None, :]
-        top = np.hstack([A, Bf])
-        return float(np.abs(np.linalg.eigvals(np.vstack([top, -dt * K @ top + np.hstack(
-            [np.zeros_like(K), np.eye(len(K))])]))).max())
+        g_row = np.hstack([A, dt * PMinv])  # g' from (g, f)
+        return float(np.abs(np.linalg.eigvals(np.vstack([g_row, keep_f - dt * K @ g_row]))).max())
 
     a, b = 0.1, 3.0
     for _ in range(24):  # the rigid and zero-stress modes sit at |lambda| = 1 (to ~1e-8: defective)
@@ -184,17 +196,11 @@ def scene_bounds(overrides: list[str]) -> list[tuple[str, float, float]]:
     """:func:`body_bound` of the first body of the scene the config
     ``overrides`` compose (2D), for each B-spline: (kernel, k*, |lambda|
     at k = 1.2), its slip walls' bands fixing the normal velocity."""
-    from hydra import compose, initialize_config_dir
-
     import mpm
 
-    from .config import schema
-    from .config.validate import resolve
+    from .config.validate import compose_spec
 
-    schema.register()
-    conf = Path(__file__).resolve().parents[1] / "conf"
-    with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
-        spec = resolve(compose(config_name="config", overrides=list(overrides)))
+    spec = compose_spec(overrides)
     scene = spec.scene
     if scene.dim != 2:
         raise ValueError(f"scene.dim: {scene.dim}; accepted: 2 (the body bound is 2D)")

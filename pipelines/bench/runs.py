@@ -7,20 +7,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
-
 from ..run.runner import execute
-from ..config.validate import resolve
+from ..config.validate import compose_spec
 
-CONF = Path(__file__).resolve().parents[2] / "conf"
 QUIET = ["log.every=0", "log.scalars=false", "log.progress=false"]  # step only
 REPEATS = 5  # timed runs of each configuration; the fastest median is reported
 WARM = ["run.steps=3"]  # a warm-up run compiles (or loads) the kernels first
 
 
-def spec_for(overrides: list[str]):
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return resolve(compose(config_name="config", overrides=overrides))
+spec_for = compose_spec  # a run's spec from its overrides
 
 
 def step_ms(m: dict) -> float:

@@ -239,6 +239,19 @@ def resolve(cfg) -> RunSpec:
                    material_used=any(b.material is None for b in sc.bodies))
 
 
+def compose_spec(overrides: list[str]) -> RunSpec:
+    """The spec of config ``overrides`` composed as the command line composes
+    them (conf/, Hydra's compose API), resolved; for tools outside
+    ``pipelines.run``."""
+    from hydra import compose, initialize_config_dir
+
+    from . import schema
+
+    schema.register()
+    with initialize_config_dir(config_dir=str(schema.CONF), version_base="1.3"):
+        return resolve(compose(config_name="config", overrides=list(overrides)))
+
+
 def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
     """Everything ``pipelines.run`` checks before a run starts: the
     overrides' literals and kinds set by key

@@ -42,6 +42,11 @@ class Region:
     def active(self, t: float) -> bool:
         return self.start <= t < self.end
 
+    @property
+    def still(self) -> bool:
+        """Acting from the start, for ever, without moving: one outline, one style."""
+        return self.start <= 0.0 and math.isinf(self.end) and not self.velocity.any() and not self.gradient.any()
+
     def outline(self, t: float, dim: int) -> list[np.ndarray]:
         """Polylines, each (n, dim) [m], of the selection at time ``t`` [s]."""
         tau = min(max(t, self.start), self.end) - self.start
@@ -123,9 +128,8 @@ def _lines(shape: dict, dim: int) -> list[np.ndarray]:
     return lines
 
 
-def _config(rec) -> dict:
-    """The recorded config, interpolations resolved where they can be ({} without one)."""
-    text = (rec.properties.get("config:yaml") or [""])[0]
+def _config(text: str) -> dict:
+    """A config document, interpolations resolved where they can be ({} without one)."""
     if not text:
         return {}
     try:
@@ -143,12 +147,12 @@ def _config(rec) -> dict:
 
 def regions(rec) -> list[Region]:
     """The kinematic regions of a recording's scene (those it cannot read are left out)."""
-    return of_config(_config(rec), rec.dim)
+    return of_yaml((rec.properties.get("config:yaml") or [""])[0], rec.dim)
 
 
 def of_yaml(text: str, dim: int | None = None) -> list[Region]:
     """The kinematic regions of a run's config document (the run's ``config.yaml``)."""
-    return of_config(_config(type("Config", (), {"properties": {"config:yaml": [text]}})()), dim)
+    return of_config(_config(text), dim)
 
 
 def of_config(config: dict, dim: int | None = None) -> list[Region]:

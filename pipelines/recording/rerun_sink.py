@@ -38,7 +38,8 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
   /regions/<name>     each kinematic region's selection outlined where its
                       particles are, at every particle frame (LineStrips;
                       solid magenta while it acts, faint before and after:
-                      pipelines.recording.regions)
+                      pipelines.recording.regions); static for a region
+                      that neither moves nor lets go
   /scalars/<name>     one Scalars series per physics scalar, sent in batches
                       with ``send_columns``, named with its unit (SeriesLines)
   /events             TextLog lines with machine-readable values beside them
@@ -191,6 +192,9 @@ class RerunSink(Sink):
         self._legend()
         self._log_domain(meta)
         self._log_colliders(meta)
+        for reg in self._regions:  # a region that never moves nor lets go: static
+            if reg.still:
+                self._log_region(reg, 0.0, static=True)
         self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
         rec.send_blueprint(layout.blueprint(*self._layout))
 
@@ -210,6 +214,13 @@ class RerunSink(Sink):
                                                    colors=[color]), static=True)
             if c.velocity is not None:
                 self._moving.append((path, c))
+
+    def _log_region(self, reg, t: float, static: bool = False) -> None:
+        """A kinematic region's outline where its particles are at ``t`` [s]."""
+        strips = [line.astype(np.float32) for line in reg.outline(t, len(reg.center))]
+        color = regions.EDGE_RGBA if reg.active(t) else regions.EDGE_IDLE_RGBA
+        kind = rr.LineStrips3D if len(reg.center) == 3 else rr.LineStrips2D
+        self.rec.log(f"regions/{reg.name}", kind(strips, colors=[color]), static=static)
 
     def _log_domain(self, meta: RunMeta) -> None:
         L = np.asarray(meta.domain)
@@ -300,10 +311,8 @@ class RerunSink(Sink):
             else:
                 self.rec.log(path, rr.Transform3D(translation=[*shift, 0.0]))
         for reg in self._regions:
-            strips = [line.astype(np.float32) for line in reg.outline(t, len(reg.center))]
-            color = regions.EDGE_RGBA if reg.active(t) else regions.EDGE_IDLE_RGBA
-            kind = rr.LineStrips3D if len(reg.center) == 3 else rr.LineStrips2D
-            self.rec.log(f"regions/{reg.name}", kind(strips, colors=[color]))
+            if not reg.still:
+                self._log_region(reg, t)
         values = dict(fields or {})
         if dJ is not None:
             values["dJ"] = dJ

@@ -6,6 +6,7 @@ the disks' particles came, and the momentum drift (impact.csv)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -105,16 +106,16 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
     rows, curves = [], []
     for j in sorted(have, key=lambda j: (j.scheme, contact_of(j), j.kernel, transfer_of(j), j.resolution or 0)):
         rec = read(j.data_file("recording.rrd"))  # (two small disks: their frames are small)
-        scalars = rec.scalars
-        if contact_of(j) == "shared" and j.kernel in KERNELS and j.dx:
+        scalars, contact, transfer = rec.scalars, contact_of(j), transfer_of(j)
+        if contact == "shared" and j.kernel in KERNELS and j.dx:
             # one grid: the disks interact while their stencils share a node (support x dx apart per axis)
             scalars = dict(scalars, contact_nodes=stencil_contact(rec.steps, rec.positions, rec.body,
                                                                   KERNELS[j.kernel].support * j.dx))
         f = impact_figures(scalars, rec.clock)
         closest = closest_approach(rec.positions, rec.body)
-        curves.append((f"{j.scheme} {contact_of(j)} {j.kernel} {transfer_of(j)} {j.resolution}",
-                       f["energy_kept"] if j.completed else None, energy_curves(rec.scalars, rec.clock)))
-        rows.append([j.scheme, contact_of(j), j.kernel, transfer_of(j), j.resolution, j.status, j.metrics.get("steps"), fmt(f["contact_start"], 3),
+        curves.append(Curves(f"{j.scheme} {contact} {j.kernel} {transfer} {j.resolution}", j.transfer, contact,
+                             f["energy_kept"] if j.completed else None, energy_curves(rec.scalars, rec.clock)))
+        rows.append([j.scheme, contact, j.kernel, transfer, j.resolution, j.status, j.metrics.get("steps"), fmt(f["contact_start"], 3),
                      fmt(f["contact_end"], 3), {None: "", True: "yes", False: "no"}[f["separated"]],
                      fmt(f["energy_kept"], 3), fmt(closest, 3), fmt(j.metrics.get("momentum_drift"), 2)])
     write_csv(out / "impact.csv", headers, rows)
@@ -147,36 +148,44 @@ def energy_curves(scalars: dict, clock: tuple) -> dict:
     return curves
 
 
-def plot_energy(path: Path, curves: list) -> bool:
+class Curves(NamedTuple):
+    """One job's energy curves for :func:`plot_energy`."""
+
+    label: str
+    transfer: str
+    contact: str
+    kept: float | None  # energy kept, None unless the job completed
+    energy: dict  # energy_curves
+
+
+def plot_energy(path: Path, curves: list[Curves]) -> bool:
     """Left: every job's total energy over its initial against time; right:
     the kinetic, elastic and total energy of the completed job that kept the
-    most (``curves``: (label, energy kept or None, energy_curves)).
-    False (no file) without a total energy."""
-    curves = [c for c in curves if "total" in c[2] and len(c[2]["total"][1])]
+    most. False (no file) without a total energy."""
+    curves = [c for c in curves if "total" in c.energy and len(c.energy["total"][1])]
     if not curves:
         return False
     plt = pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     # many jobs: coloured by transfer, dashed on one shared grid, one legend entry each
-    kinds = sorted({label.split()[3] for label, _, _ in curves}) if len(curves) > 12 else None
+    kinds = sorted({c.transfer for c in curves}) if len(curves) > 12 else None
     seen = set()
-    for label, _, c in curves:
-        t, e = c["total"]
+    for c in curves:
+        t, e = c.energy["total"]
         if kinds is None:
-            left.plot(t, e / e[0], lw=0.8, label=label)
+            left.plot(t, e / e[0], lw=0.8, label=c.label)
             continue
-        words = label.split()
-        key = (words[3], words[1])
-        left.plot(t, e / e[0], lw=0.8, color=f"C{kinds.index(words[3])}", ls="--" if words[1] == "shared" else "-",
-                  label=None if key in seen else f"{words[3]}, {words[1]}")
+        key = (c.transfer, c.contact)
+        left.plot(t, e / e[0], lw=0.8, color=f"C{kinds.index(c.transfer)}", ls="--" if c.contact == "shared" else "-",
+                  label=None if key in seen else f"{c.transfer}, {c.contact}")
         seen.add(key)
     left.set(xlabel="time [s]", ylabel="total energy / initial", title="every job", ylim=(0, 1.1))
     left.legend(fontsize=6, loc="lower left")
-    label, kept, c = max(curves, key=lambda c: -1.0 if c[1] is None else c[1])
+    best = max(curves, key=lambda c: -1.0 if c.kept is None else c.kept)
     for key in ("kinetic", "elastic", "total"):
-        if key in c:
-            right.plot(*c[key], label=key)
-    right.set(xlabel="time [s]", ylabel="energy [J]", title=f"{label} (kept {fmt(kept, 3)})")
+        if key in best.energy:
+            right.plot(*best.energy[key], label=key)
+    right.set(xlabel="time [s]", ylabel="energy [J]", title=f"{best.label} (kept {fmt(best.kept, 3)})")
     right.legend(loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=120)

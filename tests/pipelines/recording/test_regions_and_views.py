@@ -161,8 +161,9 @@ def test_the_layer_nearest_the_viewer_is_drawn_over_the_other(tmp_path, view, ne
 def test_the_rerun_recording_outlines_each_region_at_every_frame(tmp_path):
     """/regions/<name> in the Rerun recording: at each particle frame the
     region's outline where its particles are (a box moving at 0.1 m/s until
-    t = 1 s), opaque magenta while it acts and faint after; in the 2D view's
-    y-flip with the other spatial entities."""
+    t = 1 s), opaque magenta while it acts and faint after; a region that
+    never moves, once and static; in the 2D view's y-flip with the other
+    spatial entities."""
     from rerun.chunk import RrdReader
 
     from pipelines.recording import layout
@@ -170,7 +171,8 @@ def test_the_rerun_recording_outlines_each_region_at_every_frame(tmp_path):
     from pipelines.recording.sinks import RunMeta
 
     region = dict(CLAMP, velocity=[0.1, 0.0], end=1.0)
-    config = {"scene": {"dim": 2, "domain": [1.2, 0.9], "regions": [region]}}
+    still = dict(CLAMP, name="anchor")  # never moves nor lets go: logged once, static
+    config = {"scene": {"dim": 2, "domain": [1.2, 0.9], "regions": [region, still]}}
     path = tmp_path / "recording.rrd"
     sink = RerunSink(path, threaded=False)
     x = slab((0.15, 0.65), (0.3, 0.75)).astype(np.float32)
@@ -184,7 +186,11 @@ def test_the_rerun_recording_outlines_each_region_at_every_frame(tmp_path):
     df = RrdReader(str(path)).stream().collect().reader(index="step", contents="/regions/**").to_pandas()
     strips = df["/regions/clamp:LineStrips2D:strips"].tolist()
     colors = df["/regions/clamp:LineStrips2D:colors"].tolist()
-    reg, = regions.of_config(config)
+    reg, anchor = regions.of_config(config)
+    assert anchor.still and not reg.still
+    static = RrdReader(str(path)).stream().collect().reader(index=None, contents="/regions/**").to_pandas()
+    assert not any(c.startswith("/regions/clamp") for c in static.columns)  # the moving one: per frame
+    assert np.allclose(np.stack(static["/regions/anchor:LineStrips2D:strips"].iloc[0][0]), anchor.outline(0.0, 2)[0])
     for t, got, color in zip(times, strips, colors):
         want = reg.outline(t, 2)[0]
         assert np.allclose(np.stack(got[0]), want, atol=1e-6)
