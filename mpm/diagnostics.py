@@ -34,7 +34,7 @@ import numpy as np
 import warp as wp
 
 from .launch import warp_kernel
-from .status import StepControl, StepStatus
+from .stepping.status import StepControl, StepStatus
 from .types import Types
 
 
@@ -85,7 +85,7 @@ def make_measure(t: Types, per_particle_K: bool, batched: bool = False):
     step's ``status.diagnostics`` (the angular momentum scale about
     ``control.center``); ``per_particle_K``: the kernel's moment D_p = K_p^-1
     varies per particle; ``batched``: nothing in a step the driver skips or
-    whose configuration update waits for the host (mpm.driver)."""
+    whose configuration update waits for the host (mpm.stepping.driver)."""
     S = t.scalar
     vec = t.vec
     dim = t.dim
@@ -222,7 +222,7 @@ def spilled_fraction(x: np.ndarray, bowl, x_bowl: np.ndarray | None = None, X_bo
 class Diagnostics:
     """The scalars of :func:`diagnostic_names` for one model's states, but the
     elastic energy (P2G evaluates it: mpm.solver.Solver.measure), summed on
-    the device into the step buffer (mpm.status); the centre of the angular
+    the device into the step buffer (mpm.stepping.status); the centre of the angular
     momentum scale is the last measurement's centre of mass, kept in
     ``control.center``."""
 

@@ -4,17 +4,17 @@ eq. 28, 30, 31; notation: mpm.transfer):
     FLIP: v_p <- v_p^PIC + beta (v_p^n - 1/G sum_g sum_i W_ip p0_i / m_i) (the blend beta),
     x_p += dt v_p,   F^{sn} += dt grad v,   dJ_p = |det F^{sn} - 1|,
 grad v = C_p for MLS, 1/G sum v_i grad_ip^T for APIC and PIC. On the way,
-the step's stability figures (mpm.status).
+the step's stability figures (mpm.stepping.status).
 """
 
 import functools
 
 import warp as wp
 
-from .configuration import make_committed, make_moment_at
+from .reference_update import make_committed, make_moment_at
 from .kernels import Kernel
 from .launch import warp_kernel
-from .status import StepControl, StepStatus
+from .stepping.status import StepControl, StepStatus
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
@@ -48,7 +48,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
              bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False,
              loads: bool = False):
     """G2P for all particles, for the step ``control.dt`` (``batched``: nothing
-    in a step the driver skips, mpm.driver).
+    in a step the driver skips, mpm.stepping.driver).
 
     ``removal`` (a domain with open faces): a particle that crosses the
     interior's bound on an open face (``open_lo``/``open_hi`` 1 per axis) is
@@ -59,7 +59,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``fused``: stencils located from the reference positions (mpm.stencil.fuse);
     ``commit`` (with it: the Eulerian scheme, whose reference follows the
     particles every step): G2P also does the configuration update
-    (mpm.configuration) that would otherwise be a pass of its own: X <- x,
+    (mpm.reference_update) that would otherwise be a pass of its own: X <- x,
     F^0s <- project(F^sn F^0s) (``project``: the bodies' common projection
     factory, or None), F^sn <- I (the Eulerian scheme keeps C as it is), and
     K_p at the new position where the kernel's moment varies: the same
@@ -77,16 +77,16 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     ``track_compression``: a material stiffens under compression (a fluid);
     ``track_energy``: sum the new state's kinetic energy 1/2 m |v|^2 and
     potential energy -m g . x [J], and each body's largest |v_p|^2
-    (mpm.stability; no extra pass);
+    (mpm.stepping.detection; no extra pass);
     ``loads``: the external loads' work over the step (mpm.loads), the
     trapezoidal dt m_p b_p . (v_p + v_p') / 2 with the step's body force b_p
     and the particle's velocities before and after, into ``status.load_work``
     (exact for a free particle, and no work under a load held still);
     ``track_inversion``: the smallest J and the smallest stretch of F (its
     smallest singular value, squared; in 3D a lower bound, see
-    :func:`make_min_stretch2`) per body (mpm.stability).
+    :func:`make_min_stretch2`) per body (mpm.stepping.detection).
 
-    ``status`` (mpm.status.StepStatus) accumulates the largest |v_p|^2, the
+    ``status`` (mpm.stepping.status.StepStatus) accumulates the largest |v_p|^2, the
     non-finite and outside counts, then per body the marked count
     (``count_marked``: dJ_p >= epsilon), the largest dJ_p, the smallest J = det F^{0n} (for the time step of materials
     that stiffen under compression), the smallest stretch of F^sn (a

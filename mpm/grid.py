@@ -22,9 +22,9 @@ Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
 The impulse of the conditions on a node, J = m_i (v_bc - v_i), is summed
 into the step's status (``boundary_impulse``, per axis: with gravity's
 M g dt, the step's change of the bodies' momentum), and so is its work, the
-positive part of J . v_bc (``boundary_work``, mpm.status): static walls and
+positive part of J . v_bc (``boundary_work``, mpm.stepping.status): static walls and
 colliders do none (J is normal to v_bc, or v_bc = 0; friction's is
-negative), moving colliders and regions do J . u, and mpm.stability counts
+negative), moving colliders and regions do J . u, and mpm.stepping.detection counts
 it as energy put in.
 """
 
@@ -33,7 +33,7 @@ import functools
 import warp as wp
 
 from .launch import warp_kernel
-from .status import StepControl, StepStatus
+from .stepping.status import StepControl, StepStatus
 
 from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
@@ -274,7 +274,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     positions of the layout (mpm.stencil.make_node_position); with
     ``control.positions`` 0, P2G summed none, since no condition can reach a
     node in this step, and the conditions are skipped. ``batched``: nothing
-    in a step the driver skips (mpm.driver)."""
+    in a step the driver skips (mpm.stepping.driver)."""
     S = t.scalar
     node_position = make_node_position(t, n_grids)
     Gv = wp.types.vector(n_grids, S)

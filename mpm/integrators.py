@@ -1,7 +1,7 @@
 """Time integrators of the grid velocities: what a step solves for.
 
 * ``Explicit``: forward Euler (A-ULMPM paper eq. 23), the stress of the state
-  the step starts from; the step is bounded by the wave speed (mpm.timestep).
+  the step starts from; the step is bounded by the wave speed (mpm.stepping.timestep).
 * ``Implicit``: backward Euler, the stress of the state the step ends in
   (paper eq. 24-27), solved as the minimisation of the incremental potential
   by Newton's method (mpm.implicit). ``newton_max = 1`` is the paper's

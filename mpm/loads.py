@@ -30,8 +30,8 @@ predicted velocity, like gravity). The profile s_l(t) is 0 outside
 The loads' work over the step, sum_p dt f_p . (v_p + v_p') / 2 with the
 particle's velocities before and after it (G2P sums it: exact for a free
 particle, none under a load held still), goes to the step's ``load_work``
-(mpm.status), which the blow-up detection counts as energy put in
-(mpm.stability).
+(mpm.stepping.status), which the blow-up detection counts as energy put in
+(mpm.stepping.detection).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ import numpy as np
 import warp as wp
 
 from .launch import warp_kernel
-from .status import StepControl, StepStatus
+from .stepping.status import StepControl, StepStatus
 from .types import Types
 
 LOAD_KINDS = ("point", "traction", "body")
@@ -177,7 +177,7 @@ class LoadTable:
     def acceleration(self, body_masses) -> float:
         """The largest acceleration [m/s^2] a load can give the bodies it acts
         on as a whole: its total force at its largest profile factor over
-        their mass (the blow-up detection's speed allowance, mpm.stability)."""
+        their mass (the blow-up detection's speed allowance, mpm.stepping.detection)."""
         out = 0.0
         for i, load in enumerate(self.loads):
             peak = float(np.abs(load.rows()[:, 1]).max())

@@ -112,7 +112,7 @@ class State:
     F0s keeps the elastic part, F_E = Fsn F0s, and ``history`` the plastic
     variables (mpm.materials.plastic). The stencil cache
     (first node, local coordinate, weights) belongs to the reference
-    configuration and is recomputed with it (mpm.configuration).
+    configuration and is recomputed with it (mpm.reference_update).
     """
 
     x: wp.array  # current positions [m]
@@ -136,7 +136,7 @@ class State:
 # (det F <= 0) or nearly degenerate start has no elastic state that a model
 # recovers from (fixed corotated, defined for det F < 0, collapses such a
 # ball to a point and turns non-finite; RESULTS.md, the extreme suite), and
-# the blow-up detection's inversion criterion (mpm.stability) stops models
+# the blow-up detection's inversion criterion (mpm.stepping.detection) stops models
 # that cannot invert at a stretch of 1e-3.
 MIN_INITIAL_STRETCH = 1e-3
 

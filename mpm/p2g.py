@@ -23,7 +23,7 @@ import warp as wp
 from .kernels import Kernel
 from .launch import warp_kernel
 from .materials.plastic import make_plastic_update
-from .status import StepControl, StepStatus
+from .stepping.status import StepControl, StepStatus
 from .stencil import make_cached, make_node, make_node_gradient, make_stencil_cache
 from .types import Types
 
@@ -62,8 +62,8 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     The step is ``control.dt`` (0 when not ``write``: the stored energy of a
     state between steps); ``control.positions`` 0 leaves the node positions
     out in a step where no boundary condition can reach the body
-    (mpm.criterion); ``batched``: nothing happens in a step the driver
-    skips (``control.skip``, mpm.driver)."""
+    (mpm.stepping.criterion); ``batched``: nothing happens in a step the driver
+    skips (``control.skip``, mpm.stepping.driver)."""
     f64 = wp.float64
     S = t.scalar
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids

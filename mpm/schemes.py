@@ -20,7 +20,7 @@ per-particle criterion dJ_p = |det F^sn_p - 1| (paper eq. 33):
   few dozen steps and its reference cell tangles (det F^sn < 0), which blows
   up a run at a fixed EMPM-sized step.
   The adaptive step avoids the blow-up by shrinking with s (a reference cell
-  is s dx wide now; mpm.timestep), so under the paper's criterion the step
+  is s dx wide now; mpm.stepping.timestep), so under the paper's criterion the step
   collapses instead. s is also exactly the factor the step loses to the
   reference, so ``stretch_min`` is a bound on that loss: dt >= stretch_min x
   the step a fresh reference would allow, whenever the wave term binds.

@@ -1,20 +1,20 @@
 """The MPM step, as a short list of named stages.
 
 One formulation serves every scheme (mpm.schemes): each body has its own
-reference grid (mpm.layout); a step rasterises the particles to it (mpm.p2g),
+reference grid (mpm.reference_grids); a step rasterises the particles to it (mpm.p2g),
 updates the nodal velocities - forward Euler, or backward Euler by Newton's
 method (mpm.integrators, mpm.implicit) - applies contact (mpm.contact) and
 the boundary conditions (mpm.conditions), interpolates back (mpm.g2p), and
-the criterion (mpm.criterion) decides the configuration updates
-(mpm.configuration) on the device.
+the criterion (mpm.stepping.criterion) decides the configuration updates
+(mpm.reference_update) on the device.
 
 Every stage reads the step and the time from the device's control block
-(mpm.status), so a step needs nothing from the host: :class:`mpm.Driver`
+(mpm.stepping.status), so a step needs nothing from the host: :class:`mpm.Driver`
 runs k steps and reads back once. :meth:`Solver.advance` is the host's
 single step (the time and step given, the figures read back), for scripts
 and tests that step by hand.
 
-The solver compiles only what the model uses (mpm.plan lists it): one P2G
+The solver compiles only what the model uses (mpm.stepping.plan lists it): one P2G
 per material model present, one configuration update per body's
 projection, one G2P, grid update and diagnostics kernel for the dimension
 and precision; contact, separate boundary passes and the implicit
@@ -27,21 +27,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .conditions import Conditions, Removals
-from .configuration import References
-from .contact import Contact
-from .criterion import Criterion
+from .reference_update import References
+from .contact.passes import Contact
+from .stepping.criterion import Criterion
 from .diagnostics import Diagnostics, diagnostic_names
 from .fracture import FractureMeasure
-from .implicit import ImplicitSolve, NewtonReport
+from .implicit.solve import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
 from .launch import Launches, load
-from .layout import GridArrays, GridLayout
+from .reference_grids import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
 from .schemes import AULMPM, EMPM, scene_kind
-from .status import StepBuffer, StepReport
+from .stepping.status import StepBuffer, StepReport
 from .stencil import fuse
-from .timestep import StepRule
+from .stepping.timestep import StepRule
 from .transfer import AFFINE_FREE, TRANSFERS, GridConstants, Transfers
 
 
@@ -58,10 +58,10 @@ class SolverOptions:
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
     track_J: bool = False
     """report every body's smallest det F and smallest singular value of F
-    (for inversion detection, mpm.stability)"""
+    (for inversion detection, mpm.stepping.detection)"""
     track_energy: bool = False
     """report the new state's kinetic and potential energy and each body's
-    fastest particle every step (mpm.stability)"""
+    fastest particle every step (mpm.stepping.detection)"""
     fuse: bool | None = None
     """the explicit Eulerian scheme locates stencils in P2G and G2P instead
     of caching them, and (when its bodies share one projection) G2P does
@@ -87,7 +87,7 @@ class SolverOptions:
 
 class Solver:
     """Advances a :class:`State` of a :class:`Model` with a scheme. Its parts are public: ``layout``,
-    ``grid``, ``const``, ``buffer`` (mpm.status), ``transfers``, ``conditions``, ``contact`` (or None),
+    ``grid``, ``const``, ``buffer`` (mpm.stepping.status), ``transfers``, ``conditions``, ``contact`` (or None),
     ``references``, ``criterion``, ``implicit`` (or None), ``timestep`` (the host's step rule),
     ``removals``, ``fracture``, ``diagnostics``. :meth:`prepare` a state before stepping it."""
 
@@ -118,7 +118,7 @@ class Solver:
         self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
                                      separate=self.contact is not None or implicit, batched=batched)
         # a moving grid needs node positions only where a condition can reach a node: with walls
-        # alone, P2G sums them only in steps where a body comes near a closed face (mpm.criterion)
+        # alone, P2G sums them only in steps where a body comes near a closed face (mpm.stepping.criterion)
         self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact
                                 or implicit)
         projections = {b.material.project for b in scene.bodies}
@@ -203,7 +203,7 @@ class Solver:
         self.transfers.interpolate(state, self.grid, self.layout, self.const)
 
     def decide(self) -> None:
-        """The criterion: configuration updates, alive counts, positions (mpm.criterion)."""
+        """The criterion: configuration updates, alive counts, positions (mpm.stepping.criterion)."""
         self.criterion.decide()
 
     def move(self, state: State) -> None:

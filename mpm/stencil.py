@@ -1,7 +1,7 @@
 """Locating a particle in its body's reference grids and walking its stencil.
 
 A kernel has one grid (B-splines) or two staggered ones (the compact kernel);
-grid g of body b is box ``b * G + g`` of the layout (mpm.layout). ``origin``
+grid g of body b is box ``b * G + g`` of the layout (mpm.reference_grids). ``origin``
 computes once per particle what all grids share (grid 0's coordinate and the
 compact kernel's sines); ``locate`` (used when a configuration is updated)
 gives from it, on one grid, the flat index of
@@ -101,7 +101,7 @@ def make_weigh(t: Types, kernel: Kernel, with_gradients: bool, clamped: bool):
     """``weigh(u0, P, shift, g, lo, shape) -> (first, fx, W, dW)``: grid g's
     stencil as :func:`make_locate` finds it, without a box's flat index:
     its first node (lattice index), ``clamped`` to the box (lo, shape) or
-    not (lo and shape unused; mpm.configuration computes K_p at a position
+    not (lo and shape unused; mpm.reference_update computes K_p at a position
     this way)."""
     S = t.scalar
     Wm = weight_matrix_type(t, kernel)

@@ -1,5 +1,5 @@
 """Stress against strain of one material at one material point, without a
-grid (mpm.material_point): ``python -m pipelines.material_point``.
+grid (mpm.materials.point_driver): ``python -m pipelines.material_point``.
 
     python -m pipelines.material_point material=von_mises --path uniaxial --strain 0.03
     python -m pipelines.material_point material=sand material.friction_angle=35 --path oedometer
@@ -36,8 +36,8 @@ def strain_history(strain: float, steps: int, cycle: bool) -> np.ndarray:
 
 
 def drive(material, path: str, strain: float, steps: int, rate: float, dim: int, cycle: bool):
-    """(loading parameter per step, mpm.material_point.PathResult)."""
-    from mpm.material_point import MaterialPoint, deformation_path
+    """(loading parameter per step, mpm.materials.point_driver.PathResult)."""
+    from mpm.materials.point_driver import MaterialPoint, deformation_path
 
     s = strain_history(strain, steps, cycle)
     dt = abs(strain) / steps / rate if strain else 1.0 / steps

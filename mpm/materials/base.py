@@ -63,7 +63,7 @@ class Material:
     plastic: ClassVar[bool] = False  # a return mapping runs every step (mpm.materials.plastic)
     needs_velocity_gradient: ClassVar[bool] = False  # does the stress read L?
     stiffens: ClassVar[bool] = False  # does wave_speed(J) grow under compression?
-    invertible: ClassVar[bool] = False  # is the energy defined at det F <= 0 (mpm.stability)?
+    invertible: ClassVar[bool] = False  # is the energy defined at det F <= 0 (mpm.stepping.detection)?
     flows: ClassVar[bool] = False
     """does the material flow without bound (fluids, plastic solids)? A-ULMPM
     then takes its defaults for flowing bodies (mpm.schemes)"""
@@ -91,7 +91,7 @@ class Material:
 
     def wave_speed_law(self) -> tuple[float, float, float, float]:
         """(c0, a, b, rho) of :meth:`wave_speed` for the device's step rule
-        (mpm.timestep): c(J) = c0 when b == 0, else sqrt(a J^b / rho) (a
+        (mpm.stepping.timestep): c(J) = c0 when b == 0, else sqrt(a J^b / rho) (a
         weakly compressible fluid's speed grows under compression)."""
         return self.wave_speed(), 0.0, 0.0, self.rho
 

@@ -8,7 +8,7 @@ eta the dynamic viscosity [Pa s] and L = C (F^sn)^-1 the velocity gradient in
 current coordinates [1/s]: the viscous stress is a rate, not an elastic
 stress of a one-step deformation, so its effect does not depend on dt (a
 shear wave decays at the rate eta k^2 / rho: tested). The explicit step obeys
-dt <= cfl dx^2 / (2 d eta / rho) (mpm.timestep).
+dt <= cfl dx^2 / (2 d eta / rho) (mpm.stepping.timestep).
 
 The deformation gradient keeps only its volume change: on every update of the
 reference configuration F <- J^(1/d) I, so shear never accumulates.

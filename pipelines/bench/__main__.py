@@ -43,7 +43,7 @@ Everything runs through the same code path as ``pipelines.run``
    quadratic MLS and PIC, compact MLS and PIC (``run.fuse`` null picks the
    fused path for the quadratic and cubic kernels).
 8. sync: the 2D ball and the 3D sphere with the host reading back every step
-   and every 10 steps (mpm.driver; with the CUDA graph on CUDA): ms per
+   and every 10 steps (mpm.stepping.driver; with the CUDA graph on CUDA): ms per
    step, read-backs and kernel launches per step, the ratio to k = 1.
 9. stages: the 2D ball with one optional stage added at a time, and the
    launches per step; profile: where a step's time goes, per kernel and
@@ -213,7 +213,7 @@ def bench_fused(workdir: Path, steps: int) -> list[dict]:
             for name in FUSED_CASES]
 
 
-SYNC_EVERY = (1, 10)  # read-backs every k steps (mpm.driver): the CPU's default and CUDA's
+SYNC_EVERY = (1, 10)  # read-backs every k steps (mpm.stepping.driver): the CPU's default and CUDA's
 SYNC_ROUNDS = 3
 
 

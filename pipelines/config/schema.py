@@ -44,7 +44,7 @@ class Config:
     scene: SceneConfig = setting(MISSING, "the domain, bodies, regions and colliders (conf/scene)")
     run: RunSettings = setting(RunSettings(), "how long and how to step")
     log: LogSettings = setting(LogSettings(), "what goes into the recording")
-    detect: mpm.Detection = setting(mpm.Detection(), "blow-up detection (mpm.stability)")
+    detect: mpm.Detection = setting(mpm.Detection(), "blow-up detection (mpm.stepping.detection)")
     seed: int = setting(0, "seeds the random particle sampling and random shape rotations", ge=0)
     scale: Any = setting(None, "sizes of the named experiments (conf/scale), read by conf/experiment")
     stability_map: Optional[MapSpec] = setting(None, "the job is a stability map (pipelines.sweeps.stability)")

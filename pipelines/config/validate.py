@@ -45,7 +45,7 @@ class RunSpec:
     log: LogSettings
     seed: int
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
-    detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stability)
+    detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stepping.detection)
     stability_map: MapSpec | None = None  # the job is a stability map (pipelines.sweeps.stability)
     flip: float = 0.95  # the flip transfer's blend (mpm.SolverOptions.flip)
     material_used: bool = True  # some body takes the material group (else every body brings its own)
@@ -270,11 +270,11 @@ def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
 
 def step_warnings(spec: RunSpec) -> list[str]:
     """A fixed explicit ``run.dt`` above the step limit of a body at rest
-    (mpm.timestep, CFL 1: the wave speed and the initial speed), said before
+    (mpm.stepping.timestep, CFL 1: the wave speed and the initial speed), said before
     the run whatever the material (a hardening one only stiffens from there)."""
     if spec.run.dt is None or spec.integrator.name != "explicit":
         return []
-    from mpm.timestep import cfl_dt
+    from mpm.stepping.timestep import cfl_dt
 
     scene = spec.scene
     limits = []

@@ -1,4 +1,4 @@
-"""The pipeline's observer of a run (mpm.driver): what a step leaves in the
+"""The pipeline's observer of a run (mpm.stepping.driver): what a step leaves in the
 recording (scalars, particle frames, events, the fracture measure) and in
 ``metrics.json``.
 

@@ -1,7 +1,7 @@
 """Run one validated configuration: build, compile, step, log, report.
 
 Hydra-free: ``pipelines.run`` composes the config and calls :func:`execute`,
-which steps the scene with ``mpm``'s driver (mpm.driver: the stable step,
+which steps the scene with ``mpm``'s driver (mpm.stepping.driver: the stable step,
 collapse and blow-up detection) and records what it reports through a
 :class:`pipelines.run.recorder.Recorder`. Whatever happens (completion,
 instability, Ctrl-C, SIGTERM, an exception), the recording is finalised and
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import mpm
-from mpm.plan import plan as step_plan
+from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
 from ..config.validate import RunSpec
@@ -50,14 +50,14 @@ def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
 
 
 def sync_every(spec: RunSpec) -> int:
-    """Steps between two read-backs (mpm.driver): run.sync_every, else 10 on
+    """Steps between two read-backs (mpm.stepping.driver): run.sync_every, else 10 on
     CUDA and 1 on the CPU; 1 under the implicit integrator (its Newton loop
     reads back) and with a closed-form solution (its body force is set on
     the host, its errors are measured every step)."""
     host_steps = spec.integrator.name == "implicit" or spec.scene.solution is not None
     k = spec.run.sync_every
     if k is None:
-        k = mpm.driver.SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
+        k = mpm.stepping.driver.SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
     return 1 if host_steps else int(k)
 
 
@@ -73,7 +73,7 @@ def solver_options(spec: RunSpec) -> mpm.SolverOptions:
 
 
 def step_policy(spec: RunSpec) -> mpm.StepPolicy:
-    """How the run's steps are chosen and when it ends (mpm.driver)."""
+    """How the run's steps are chosen and when it ends (mpm.stepping.driver)."""
     run = spec.run
     steps, duration = spec.end
     return mpm.StepPolicy(steps=steps, duration=duration, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max,

@@ -10,7 +10,7 @@ Young's modulus (a fluid's bulk modulus) set to E, the fixed step
 
 the explicit limit at CFL number 1 (c the body's P-wave speed at rest, v0
 the fastest initial particle, bounded by |u| + |omega| r_max), for
-``steps`` steps with the blow-up detection of mpm.stability on. A point is
+``steps`` steps with the blow-up detection of mpm.stepping.detection on. A point is
 stable when it completes its steps; otherwise it keeps its failure step,
 criterion and reason (a point that fails with an error is kept as
 ``failed``). The job's metrics.json holds the whole map

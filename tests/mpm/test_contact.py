@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mpm
-from mpm import contact
+from mpm.contact import passes as contact
 from test_conservation import colliding_scene
 
 DEVICE = "cpu"

@@ -76,7 +76,7 @@ from mpm.colliders import KINDS, Collider
 from mpm.kernels import Kernel
 from mpm.loads import Load
 from mpm.launch import kernel_name
-from mpm.material_point import MaterialPoint
+from mpm.materials.point_driver import MaterialPoint
 from mpm.meshes import MeshShape
 from mpm.transfer import TRANSFERS
 from mpm.types import PRECISIONS, Types, make_types
@@ -177,7 +177,7 @@ class Case:
     track_J: bool = False
     forcing: bool = False
     loads: bool = False  # a point load, a traction and a body force (mpm.loads)
-    batched: bool = False  # the driver runs 10 steps between read-backs (mpm.driver)
+    batched: bool = False  # the driver runs 10 steps between read-backs (mpm.stepping.driver)
     detect: str | None = None  # the driver's blow-up detection: stop | warn | off (None: stop
     # with the step's energies, which the detection needs; off without them)
     measure: bool = False  # the driver measures the diagnostics every step

@@ -1,8 +1,8 @@
-"""The driver (mpm.driver) and its policy on the device (mpm.policy,
-mpm.criterion): batches of k steps give the run of k = 1 bit for bit on the
+"""The driver (mpm.stepping.driver) and its policy on the device (mpm.stepping.policy,
+mpm.stepping.criterion): batches of k steps give the run of k = 1 bit for bit on the
 CPU, read back about once per k steps, stop a blow-up at the same step
 before any value is non-finite, and choose the step the host's rule
-(mpm.timestep.StepRule) and blow-up detection (mpm.stability.Detector)
+(mpm.stepping.timestep.StepRule) and blow-up detection (mpm.stepping.detection.Detector)
 choose from the same figures."""
 
 import math
@@ -13,7 +13,7 @@ import pytest
 import mpm
 from mpm.launch import Counter
 from mpm.materials import MATERIALS
-from mpm.status import REGRID
+from mpm.stepping.status import REGRID
 
 pytestmark = pytest.mark.bitwise
 
@@ -164,9 +164,9 @@ def test_a_batch_ends_where_an_observer_wants_the_state(device):
 
 def test_the_device_chooses_the_hosts_step(device):
     """The step the device chose after every step equals the host's rule on
-    that step's figures (mpm.timestep.StepRule: wave speed at the most
+    that step's figures (mpm.stepping.timestep.StepRule: wave speed at the most
     compressed particle, stretch, viscosity, strain rate; dt_max; landing),
-    and its detection the host's (mpm.stability.Detector) - two
+    and its detection the host's (mpm.stepping.detection.Detector) - two
     implementations of one rule, on a viscous fluid (c grows with
     compression; in A-ULMPM the viscous term shrinks with the reference
     cell) and an A-ULMPM solid."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mpm
-from mpm.criterion import Criterion
+from mpm.stepping.criterion import Criterion
 from helpers import DEVICE, compose_cfg, spec_for
 from pipelines.recording import recordings
 from pipelines.run.runner import execute
@@ -340,7 +340,7 @@ def test_aulmpm_compact_droplet_is_stable(tmp_path):
 def test_node_positions_summed_only_near_a_wall(scheme):
     """A moving grid needs its node positions only for the boundary
     conditions: with walls alone, P2G sums them only in steps where a body's
-    nodes may reach the wall band (mpm.criterion). A ball falling
+    nodes may reach the wall band (mpm.stepping.criterion). A ball falling
     onto the floor skips them in free flight and sums them in contact, and
     the run equals, bit for bit, one that sums them every step (the walls
     act on no node that the bound leaves out)."""

@@ -1,4 +1,4 @@
-"""The per-body reference grids (mpm.layout): every box covers the stencils
+"""The per-body reference grids (mpm.reference_grids): every box covers the stencils
 of its body's positions, the device tables follow the host's, and a commit
 that changes nothing uploads nothing."""
 
@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 
 import mpm
-from mpm.layout import GridLayout
+from mpm.reference_grids import GridLayout
 from mpm.types import make_types
 
 

@@ -144,7 +144,7 @@ def test_momentum_gained_is_the_loads_impulse(scheme, integrator, transfer):
 
 def test_detection_counts_the_loads_work():
     """A constant force on a free body puts in kinetic energy F^2 t^2 / 2M;
-    the blow-up detection counts the loads' work (mpm.stability), so a
+    the blow-up detection counts the loads' work (mpm.stepping.detection), so a
     run gaining many times its initial energy is not stopped, and the work
     it counted matches the kinetic energy F^2 t^2 / 2M to 1e-3."""
     scene = bar_scene([Load("body", (200.0, 0.0))])

@@ -9,7 +9,7 @@ import pytest
 
 import mpm
 from helpers import DEVICE, spec_for
-from mpm.material_point import MaterialPoint, velocity_path
+from mpm.materials.point_driver import MaterialPoint, velocity_path
 from reference_mpm import plastic_step
 from test_reference import EPS64, assert_no_contact, round_off
 

@@ -1,4 +1,4 @@
-"""Return mappings at one material point (mpm.material_point, float64)
+"""Return mappings at one material point (mpm.materials.point_driver, float64)
 against their closed forms: yield where the model says, stay on the yield
 surface, projections idempotent, elastic states untouched."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import mpm
-from mpm.material_point import MaterialPoint, deformation_path, velocity_path
+from mpm.materials.point_driver import MaterialPoint, deformation_path, velocity_path
 
 EPS = np.finfo(np.float64).eps
 PLASTIC = [mpm.materials.Snow(), mpm.materials.Sand(), mpm.materials.VonMises(),

@@ -205,7 +205,7 @@ def test_fused_by_default_where_it_pays():
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_affine_matrix_over_an_update(dim):
-    """At a configuration update (mpm.configuration.make_update) C becomes
+    """At a configuration update (mpm.reference_update.make_update) C becomes
     C (F^sn)^-1 (transform), C R^T with F^sn = R U its polar decomposition
     (rotate: |C R^T| = |C|, never amplified), or stays (keep); checked
     against NumPy's polar decomposition (via the SVD) on a random stretched

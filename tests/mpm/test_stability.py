@@ -1,4 +1,4 @@
-"""Early detection of blow-ups (mpm.stability): an unstable step is caught
+"""Early detection of blow-ups (mpm.stepping.detection): an unstable step is caught
 before any value is non-finite, stable runs never trip it, the work of
 gravity and of kinematic regions is not mistaken for a blow-up, inversion
 of a model that cannot invert is named, and ``warn`` lets the run go on."""
@@ -164,7 +164,7 @@ def test_initial_deformation_and_lattice_offset(tmp_path):
 
 
 def test_detector_criteria_on_synthetic_reports():
-    """mpm.stability.Detector alone: the speed limit is speed_factor (c_b +
+    """mpm.stepping.detection.Detector alone: the speed limit is speed_factor (c_b +
     u_boundary + sqrt(v0^2 + 2 |g| H)); a degenerate F (a singular value
     below min_stretch) or det F <= min_J trips inversion only for a model
     that cannot invert; each criterion is reported once; the energy
@@ -200,7 +200,7 @@ def test_a_crushed_reference_is_named_as_the_lagrangian_limit(tmp_path):
     """The soft ball (E = 1e3 Pa) hitting the floor: EMPM completes, while
     TLMPM's reference cells are crushed and its step collapses at step 125;
     the reason says it is the reference (its narrowest cell below
-    mpm.driver.CRUSHED of its width) and, for TLMPM, that this is the
+    mpm.stepping.driver.CRUSHED of its width) and, for TLMPM, that this is the
     method's limit, not a runaway flow."""
     over = ["scene=stability_ball_2d", "material.E=1e3", "run.duration=0.5", "log.every=0", "log.progress=false"]
     empm = execute(spec_for(over + ["scheme=empm"]), tmp_path / "empm", sink=Sink())

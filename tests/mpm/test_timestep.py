@@ -1,4 +1,4 @@
-"""The explicit step limit, term by term (mpm.timestep), and the strain rate
+"""The explicit step limit, term by term (mpm.stepping.timestep), and the strain rate
 the solver reports for it."""
 
 import functools
@@ -9,7 +9,7 @@ import pytest
 
 import mpm
 from helpers import DEVICE
-from mpm.timestep import STRAIN_STEP, step_limits
+from mpm.stepping.timestep import STRAIN_STEP, step_limits
 
 EPS = np.finfo(np.float64).eps
 
@@ -73,7 +73,7 @@ def _report(n_bodies, **fields):
 
 def _independent_limits(material, dx, dim, cfl, J, s, stiffening, rate, speed):
     """The step limit's terms from the material parameters alone (module
-    docstring of mpm.timestep): the P-wave speed sqrt((lambda + 2 mu) / rho)
+    docstring of mpm.stepping.timestep): the P-wave speed sqrt((lambda + 2 mu) / rho)
     with the Lame parameters of E, nu (3D / plane strain, also in 2D:
     mpm.materials.base.lame), the fluid's c^2 = dp/drho = K gamma
     (rho / rho0)^(gamma - 1) / rho0 of p = K ((rho / rho0)^gamma - 1) at the

@@ -3,7 +3,7 @@ over time read from the recordings (conservation.png, momentum_net_drift.csv).
 
 A recording holds the bodies' momentum P, their mass, the simulated time and,
 per step, the impulse the walls, colliders and kinematic regions gave them
-(``boundary_impulse_x/_y/_z`` [N s], mpm.status). The linear momentum's
+(``boundary_impulse_x/_y/_z`` [N s], mpm.stepping.status). The linear momentum's
 drift is drawn for every run net of what acts from outside,
     P(t) - P(0) - sum M g dt - sum J_boundary
 (:func:`net_momentum`), which leaves the numerical drift where nothing else

@@ -23,7 +23,7 @@ def section_extreme(jobs: list, out: Path) -> list[str]:
     lines = [f"## {title}", "",
              "Per case (conf/extreme/) and scheme: the outcome (unstable: the criterion and step), "
              "steps, simulated time, the energy change beyond the boundaries' work relative to the energy "
-             "scale (the largest kinetic plus elastic energy, mpm.stability; metrics.json energy_change), "
+             "scale (the largest kinetic plus elastic energy, mpm.stepping.detection; metrics.json energy_change), "
              "the largest energy growth beyond the "
              "boundaries' work in the same unit, and the fraction of broken neighbour pairs "
              "([extreme.csv](extreme.csv)).", ""]

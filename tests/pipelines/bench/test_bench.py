@@ -17,8 +17,8 @@ def test_a_step_launches_only_the_stages_the_scene_needs():
     """One body, explicit EMPM: P2G, grid update, G2P (which does the
     configuration update with the quadratic kernel; the compact kernel's is a
     launch of its own), the criterion and the driver's policy (one thread
-    each, mpm.criterion, mpm.policy). Two bodies with contact add splat,
-    correct, clear and the boundary pass (mpm.plan). At k = 1 the host reads
+    each, mpm.stepping.criterion, mpm.stepping.policy). Two bodies with contact add splat,
+    correct, clear and the boundary pass (mpm.stepping.plan). At k = 1 the host reads
     the step's history row once and nothing else; at k = 10 once per batch."""
     launches, _, reads = bench_scale.launches_per_step(spec_for(SMALL), steps=3)
     assert launches == 3 + 2 and reads == 1

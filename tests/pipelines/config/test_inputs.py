@@ -333,7 +333,7 @@ def test_the_material_point_checks_its_output_and_numbers_before_computing(tmp_p
                 / np.exp(2 * s)}),
 ])
 def test_the_material_point_summary_and_table_are_float64(argv, closed_form, tmp_path):
-    """The driver evaluates in float64 (mpm.material_point.MaterialPoint's
+    """The driver evaluates in float64 (mpm.materials.point_driver.MaterialPoint's
     default): its table and summary match float64 closed forms far below
     float32 round-off (1.2e-7), from the command line's config to the CSV."""
     import pipelines.material_point as mp

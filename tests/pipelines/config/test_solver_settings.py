@@ -1,5 +1,5 @@
 """One-line errors for the solver's settings in the config: the blow-up
-detection (mpm.stability), the closed-form solutions (mpm.analytic) and the
+detection (mpm.stepping.detection), the closed-form solutions (mpm.analytic) and the
 reference run."""
 
 import pytest

@@ -306,7 +306,7 @@ def test_unstable_run_stops_cleanly(tmp_path):
     assert metrics["status"] == "unstable"
     assert metrics["reason"].startswith(f"step {metrics['unstable_step']} (t = ")
     assert metrics["steps"] == metrics["unstable_step"] < 500
-    # caught by the blow-up detection (mpm.stability), or at the latest when values turn non-finite
+    # caught by the blow-up detection (mpm.stepping.detection), or at the latest when values turn non-finite
     assert metrics["unstable_criterion"] in ("energy", "speed", "nonfinite", "outside")
     assert metrics["reason"] in p.stderr
     verify(tmp_path / "recording.rrd")

@@ -10,15 +10,15 @@ import functools
 
 import warp as wp
 
-from .grid import make_work
-from .kernels import Kernel
-from .launch import warp_kernel
-from .status import StepStatus
-from .materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
+from ..grid import make_work
+from ..kernels import Kernel
+from ..launch import warp_kernel
+from ..stepping.status import StepStatus
+from ..materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
-from .stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
+from ..stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
                       weight_matrix_type)
-from .types import Types
+from ..types import Types
 
 ENERGY, RESIDUAL2, DOT_A, DOT_B, MOMENTUM2, STIFFNESS2 = range(6)  # slots of the float64 accumulator
 
@@ -343,7 +343,7 @@ def make_boundary_work(t: Types):
     """Kernel: the impulse of the constraints on each node at the solution,
     J = m reaction (v - reaction: the velocity without it), into the step's
     ``status.boundary_impulse``, and its work, the positive part of J . v,
-    into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stability).
+    into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stepping.detection).
     The Coulomb friction applied after the solve (:func:`make_friction`)
     adds its own."""
     S = t.scalar

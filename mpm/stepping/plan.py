@@ -3,7 +3,7 @@ launches: what a scene compiles (an absent stage is work it does not need)."""
 
 from __future__ import annotations
 
-from .launch import kernel_name
+from ..launch import kernel_name
 
 
 def plan(solver, driver=None) -> list[tuple[str, list[str]]]:

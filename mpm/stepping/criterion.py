@@ -1,6 +1,6 @@
 """After G2P, on the device: what the step's figures decide for the solver.
 
-One thread (:func:`make_criterion`) reads the step's figures (mpm.status)
+One thread (:func:`make_criterion`) reads the step's figures (mpm.stepping.status)
 and writes into the control block, so that no host decision is needed
 before the next step:
 
@@ -13,7 +13,7 @@ before the next step:
 * whether the new reference lies inside the body's grids (the layout's
   boxes): if not (``regrid``), the host refits the grids and does the update
   before the next step (``host_update``; the host also does every update
-  when the driver reads back after every step, mpm.driver);
+  when the driver reads back after every step, mpm.stepping.driver);
 * with walls alone, whether the next P2G must sum node positions
   (``positions``): a condition acts on a node closer than the wall band to
   a closed face, and every node of body b lies in its particles' box grown
@@ -26,12 +26,12 @@ import functools
 import numpy as np
 import warp as wp
 
-from .kernels import Kernel
-from .launch import warp_kernel
-from .layout import FIT_SLACK
-from .schemes import RuleParams, make_update_rule, rule_kind, rule_params
+from ..kernels import Kernel
+from ..launch import warp_kernel
+from ..reference_grids import FIT_SLACK
+from ..schemes import RuleParams, make_update_rule, rule_kind, rule_params
 from .status import StepControl, StepStatus
-from .types import Types
+from ..types import Types
 
 
 @functools.cache
@@ -53,7 +53,7 @@ def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flig
     @wp.func
     def first_node(x: f64, inv_dx: f64, shift: f64, last: int):
         """The first stencil node of coordinate x along an axis, with the
-        layout's slack (mpm.layout.GridLayout.fit, FIT_SLACK)."""
+        layout's slack (mpm.reference_grids.GridLayout.fit, FIT_SLACK)."""
         return wp.clamp(int(wp.floor(x * inv_dx - shift)), 0, last)
 
     @wp.func

@@ -1,6 +1,6 @@
-"""The driver's step policy on the device (mpm.driver): after every step, one
-thread advances the clock, applies the blow-up detection (mpm.stability),
-chooses the next step (mpm.timestep) and decides whether the steps may go
+"""The driver's step policy on the device (mpm.stepping.driver): after every step, one
+thread advances the clock, applies the blow-up detection (mpm.stepping.detection),
+chooses the next step (mpm.stepping.timestep) and decides whether the steps may go
 on without the host, so that k steps run with one read-back.
 
 Per step, in order (:func:`make_policy`), mirroring the host's rules with
@@ -18,12 +18,12 @@ the same float64 arithmetic:
    displacement limit times the halvings' factor, or a fixed step - and
    lands on the end; a step below ``dt_collapse`` of the first, or one that
    is not a positive finite number, halts (``COLLAPSE``); a configuration
-   update the device cannot do (mpm.criterion) halts for the host
+   update the device cannot do (mpm.stepping.criterion) halts for the host
    (``REGRID``); an observer's request (a particle frame, say) pauses
    (``PAUSE``);
 5. the centre of the angular momentum scale follows the state's centre of
    mass when the diagnostics were measured;
-6. the whole step buffer (mpm.status) is written into row (step - 1) mod k of
+6. the whole step buffer (mpm.stepping.status) is written into row (step - 1) mod k of
    the history, and the following steps of the batch are skipped once a
    halt is set.
 """
@@ -35,9 +35,9 @@ import math
 import numpy as np
 import warp as wp
 
-from .diagnostics import diagnostic_names
-from .launch import warp_kernel
-from .stability import DetectParams, detect_params, make_detection
+from ..diagnostics import diagnostic_names
+from ..launch import warp_kernel
+from .detection import DetectParams, detect_params, make_detection
 from .status import (CONTROL, COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, PAUSE, REGRID, StepControl,
                      StepStatus)
 from .timestep import BINDINGS, BodyLaws, body_laws, make_step_rule, pymax, pymin, wave_speed
@@ -227,9 +227,9 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
 
 
 class Policy:
-    """The step policy of one driver (mpm.driver) on the device: its
+    """The step policy of one driver (mpm.stepping.driver) on the device: its
     constants, the history of ``rows`` steps, and the kernels.
-    ``detection``: mpm.stability.Detection (its action off: none)."""
+    ``detection``: mpm.stepping.detection.Detection (its action off: none)."""
 
     def __init__(self, solver, step_policy, detection, rows: int, measured: bool, batched: bool):
         m = solver.model
@@ -258,7 +258,7 @@ class Policy:
 
     def start(self, v0: float, detector=None) -> None:
         """The first step, from the fastest initial particle ``v0`` [m/s], and
-        the detection's constants (``detector``: mpm.stability.Detector)."""
+        the detection's constants (``detector``: mpm.stepping.detection.Detector)."""
         m, b = self.solver.model, self.buffer
         b.set(**{f.name: b.initial[b.slices[f.name]] for f in CONTROL  # a new run's clock and detection
                  if f.name not in ("alive", "positions", "center", "kinetic_last", "potential_last")})

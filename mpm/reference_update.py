@@ -24,7 +24,7 @@ import warp as wp
 
 from .kernels import Kernel
 from .launch import warp_kernel
-from .status import StepControl
+from .stepping.status import StepControl
 from .stencil import make_locate, make_origin, make_stencil_cache, make_weigh, weight_matrix_type
 from .materials.decompositions import make_rotation
 from .types import Types
@@ -119,7 +119,7 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
     transfers locate the stencils themselves (mpm.stencil.fuse): only K_p is
     cached; ``moment``: the transfer uses K_p (not PIC), built when the
     kernel's moment varies per particle; ``gated``: only when the criterion
-    asked for it (``control.update`` of the body, mpm.criterion), so that the
+    asked for it (``control.update`` of the body, mpm.stepping.criterion), so that the
     driver can launch it every step without the host."""
     S = t.scalar
     dim, G = t.dim, kernel.n_grids
@@ -201,7 +201,7 @@ class References:
     """The bodies' reference configurations on the device: their grids (the
     boxes of ``layout``, whose nodal fields ``grid`` grows to fit) and the
     update of their particles (one kernel per body, for its material's
-    projection; a gated twin for the driver, mpm.driver). ``affine``: C
+    projection; a gated twin for the driver, mpm.stepping.driver). ``affine``: C
     over an update (mpm.schemes.AFFINE); ``gradients``, ``fused``, ``moment``:
     what the stencil cache holds (:func:`make_update`)."""
 

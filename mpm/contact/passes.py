@@ -1,7 +1,7 @@
 """Contact between bodies through a global Eulerian grid (multi-velocity
 field, frictionless, separation free).
 
-Every body has its own reference grid (mpm.layout), so bodies do not see each
+Every body has its own reference grid (mpm.reference_grids), so bodies do not see each
 other in the transfers. After the grid update, each body node i (mass m_i,
 velocity v_i, current position q_i) is put on the global lattice (spacing
 dx), one field per body b. A node of the Eulerian scheme sits on a lattice
@@ -39,19 +39,19 @@ correction is taken off every body present. Each lattice node hands exactly
 that momentum to its nodes.
 
 Under the implicit integrator contact is also a constraint of the system
-(mpm.contact_constraint); the lattice reads shared by both are in
-mpm.contact_lattice.
+(mpm.contact.constraint); the lattice reads shared by both are in
+mpm.contact.lattice.
 """
 
 import functools
 
 import warp as wp
 
-from .contact_constraint import make_contact_constraint
-from .contact_lattice import make_corners, make_nearest, make_node_body, make_occupancy, make_outward
-from .launch import warp_kernel
-from .status import StepControl, StepStatus
-from .types import Types
+from .constraint import make_contact_constraint
+from .lattice import make_corners, make_nearest, make_node_body, make_occupancy, make_outward
+from ..launch import warp_kernel
+from ..stepping.status import StepControl, StepStatus
+from ..types import Types
 
 # Passes of the Lagrangian (spread) contact per step. Each pass is the
 # correction above, momentum-exact; a second takes off what the first left at

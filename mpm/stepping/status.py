@@ -11,13 +11,13 @@ Warp struct of views (one array per quantity, :data:`FIELDS` and
   the diagnostics of the new state when they are measured (mpm.diagnostics);
 * :class:`StepControl`, kept from step to step: the time, the step taken
   and the next one (chosen on the device from the last step's figures,
-  mpm.timestep), the step count, why the run must stop or wait for the host
+  mpm.stepping.timestep), the step count, why the run must stop or wait for the host
   (``halt``, :data:`HALTS`), the configuration updates the criterion asked
-  for (mpm.criterion), and the detection's running state (mpm.stability).
+  for (mpm.stepping.criterion), and the detection's running state (mpm.stepping.detection).
 
 Resetting the status is one copy; reading everything back is one copy; a
 step's whole buffer is one row of the history the host reads every k steps
-(mpm.driver). :class:`StepReport` is the host's typed reading of a row.
+(mpm.stepping.driver). :class:`StepReport` is the host's typed reading of a row.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 import warp as wp
 
 STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD = "step", "body", "box", "trip", "diag", "axis", "load"
-TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stability)
+TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stepping.detection)
 
 # why the steps stopped: the host acts, then (PAUSE, REGRID) the run goes on
 HALTS = ("running", "done", "pause", "regrid", "nonfinite", "outside", "detection", "collapse")
@@ -71,7 +71,7 @@ FIELDS = (
     Field("box_lo", BOX, math.inf, "bounding box of the new positions, lower corner [m]"),
     Field("box_hi", BOX, -math.inf, "upper corner [m]"),
     Field("load_position", LOAD, 0.0, "mean position of each load's particles at the step's start [m] (mpm.loads)"),
-    Field("trip", TRIP, 0.0, "the trips' records (TRIP_SIZE values each, mpm.stability)"),
+    Field("trip", TRIP, 0.0, "the trips' records (TRIP_SIZE values each, mpm.stepping.detection)"),
     Field("diagnostics", DIAG, 0.0, "the new state's diagnostics as summed (mpm.diagnostics)"),
 )
 
@@ -82,7 +82,7 @@ CONTROL = (
     Field("halt", STEP, 0.0, "0: the next step runs; else why not (HALTS)"),
     Field("skip", STEP, 0.0, "1: the kernels of this step do nothing (the steps halted before it)"),
     Field("positions", STEP, 1.0, "1: P2G sums the node positions in the next step"),
-    Field("host_update", STEP, 0.0, "1: a body's configuration update waits for the host (mpm.criterion)"),
+    Field("host_update", STEP, 0.0, "1: a body's configuration update waits for the host (mpm.stepping.criterion)"),
     Field("dt_step", STEP, 0.0, "the step just taken [s]"),
     Field("fresh_step", STEP, math.nan, "the step a fresh reference would have allowed it [s]"),
     Field("factor_step", STEP, 1.0, "its reference factor, dt / fresh of the binding body"),
@@ -91,7 +91,7 @@ CONTROL = (
     Field("dt_request", STEP, math.inf, "the next step after landing on the end, before any halving [s]"),
     Field("dt_fresh", STEP, math.nan, "the step a fresh reference would allow [s]"),
     Field("factor", STEP, 1.0, "the next step's reference factor"),
-    Field("binding", STEP, -1.0, "the term that bound the next step (mpm.timestep.BINDINGS)"),
+    Field("binding", STEP, -1.0, "the term that bound the next step (mpm.stepping.timestep.BINDINGS)"),
     Field("dt0", STEP, 0.0, "the first adaptive step [s]"),
     Field("dt0_set", STEP, 0.0, "1 once dt0 is taken"),
     Field("scale", STEP, 1.0, "the implicit step's factor after halvings"),
@@ -104,7 +104,7 @@ CONTROL = (
     Field("growth", STEP, -math.inf, "detection: the largest relative growth seen"),
     Field("kinetic_last", STEP, 0.0, "detection: kinetic energy of the last state [J]"),
     Field("potential_last", STEP, 0.0, "detection: its potential energy [J]"),
-    Field("fired", STEP, 0.0, "detection: criteria reported so far (bits of mpm.stability.CRITERIA)"),
+    Field("fired", STEP, 0.0, "detection: criteria reported so far (bits of mpm.stepping.detection.CRITERIA)"),
     Field("alive", BODY, 0.0, "particles not removed"),
     Field("update", BODY, 0.0, "1: the body's reference configuration moves after this step"),
     Field("regrid", BODY, 0.0, "1: it must, but its grid does not cover it: the host refits"),
@@ -217,13 +217,13 @@ class StepReport:
     max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (walls-only Lagrangian scenes)
     contact_nodes: int = 0  # body nodes whose bin was in contact in this step (mpm.contact)
     positioned: bool = True  # the node positions were available (False: not summed)
-    regrid: list[int] = field(default_factory=list)  # bodies whose grids the host refits (mpm.criterion)
+    regrid: list[int] = field(default_factory=list)  # bodies whose grids the host refits (mpm.stepping.criterion)
     host_update: bool = False  # the host moves a reference configuration (its diagnostics wait for it)
     step: int = 0  # steps completed after this one (0: a step the host took by hand)
     time: float = 0.0  # [s] the time after it (0: a step the host took by hand)
-    halt: int = 0  # why the steps stopped after it (mpm.status.HALTS)
+    halt: int = 0  # why the steps stopped after it (mpm.stepping.status.HALTS)
     diagnostics: np.ndarray | None = None  # the new state's diagnostics as summed (when measured)
-    trips: np.ndarray | None = None  # the detection's new trips (TRIP_SIZE values each, mpm.stability)
+    trips: np.ndarray | None = None  # the detection's new trips (TRIP_SIZE values each, mpm.stepping.detection)
     elastic: float = float("nan")  # [J] elastic energy of the state the step started from (its P2G)
     dt_fresh: float = float("nan")  # [s] the step a freshly updated reference would have allowed
     wall_time: float = 0.0  # [s] host time the step took

@@ -1,4 +1,4 @@
-"""What the contact passes (mpm.contact, mpm.contact_constraint) read from
+"""What the contact passes (mpm.contact, mpm.contact.constraint) read from
 the global lattice (spacing dx, ``cells`` + 1 nodes per axis, flat index by
 ``strides``): the nearest lattice node, a cell's corners and their linear
 weights, a flat node's body, a body's outward normal and a lattice node's
@@ -8,8 +8,8 @@ import functools
 
 import warp as wp
 
-from .stencil import make_node_box
-from .types import Types
+from ..stencil import make_node_box
+from ..types import Types
 
 
 @functools.cache

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .launch import warp_kernel
-from .materials import Material
-from .materials.plastic import make_plastic_update
-from .types import Types, make_types
+from ..launch import warp_kernel
+from . import Material
+from .plastic import make_plastic_update
+from ..types import Types, make_types
 
 
 @functools.cache

@@ -51,9 +51,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .implicit_system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, make_apply,
+from .system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, make_apply,
                               make_boundary_work, make_evaluate, make_friction, make_node_kernels)
-from .materials.differential import make_tangent_type
+from ..materials.differential import make_tangent_type
 
 ARMIJO = 1.0e-4  # sufficient decrease of E along the Newton direction
 BACKTRACKS = 12  # halvings of the Newton step before the line search gives up
@@ -233,7 +233,7 @@ class ImplicitSolve:
 
     def _project(self, mode: int, x, z=None) -> None:
         """Project x onto the contact constraints
-        (mpm.contact_constraint, modes 0-2)."""
+        (mpm.contact.constraint, modes 0-2)."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
         sums, project = self._contact[1:]

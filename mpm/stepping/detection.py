@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .params import param, violations
+from ..params import param, violations
 
 DETECTION_ACTIONS = ("stop", "warn", "off")
 CRITERIA = ("energy", "speed", "inversion")
@@ -215,7 +215,7 @@ class Detector:
                     f"({model}) cannot invert")
 
     def sync(self, values: dict) -> None:
-        """The running state from the device's control block (mpm.status values)."""
+        """The running state from the device's control block (mpm.stepping.status values)."""
         self.E0 = float(values["e0"][0]) if values["e0_set"][0] else None
         self.work, self.scale = float(values["work"][0]), float(values["escale"][0])
         self.growth = float(values["growth"][0])
@@ -261,7 +261,7 @@ def make_detection(energy_on: bool):
     """``energy(control, status, params) -> tripped`` and ``step(control,
     status, laws, params, n_bodies) -> tripped``: :meth:`Detector.energy` and
     :meth:`Detector.step` on the device, the same float64 arithmetic, their
-    running state in the control block (mpm.status) and every new trip
+    running state in the control block (mpm.stepping.status) and every new trip
     recorded in the step's status (TRIP_SIZE values: the criterion's code -
     0 energy, 1 speed, 2 inversion by det F, 3 by a singular value - the
     body, the value, the limit, the energy scale, the boundaries' work) for

@@ -82,7 +82,7 @@ def step_limits(dx: float, stretch: float, wave_speed: float, max_speed: float, 
 
 class StepRule:
     """The step limits of one model's bodies after a step (the terms above,
-    from a step's figures, mpm.status.StepReport); ``collider_speed`` [m/s]
+    from a step's figures, mpm.stepping.status.StepReport); ``collider_speed`` [m/s]
     the fastest collider, which every particle may have to follow."""
 
     def __init__(self, model, collider_speed: float):
@@ -124,7 +124,7 @@ class StepRule:
 
 
 # ---------------------------------------------------------------- on the device
-BINDINGS = TERMS + ("dt_max", "fixed", "displacement")  # what bound a step: mpm.status ``binding``
+BINDINGS = TERMS + ("dt_max", "fixed", "displacement")  # what bound a step: mpm.stepping.status ``binding``
 
 
 @wp.struct

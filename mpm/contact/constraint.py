@@ -24,9 +24,9 @@ import functools
 
 import warp as wp
 
-from .contact_lattice import make_nearest, make_node_body, make_outward
-from .launch import warp_kernel
-from .types import Types
+from .lattice import make_nearest, make_node_body, make_outward
+from ..launch import warp_kernel
+from ..types import Types
 
 
 @functools.cache

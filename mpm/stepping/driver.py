@@ -5,7 +5,7 @@ steps or a simulated time (:class:`StepPolicy`), choosing every step's size
 and stopping a run that goes unstable:
 
 * the step: the explicit stable step of every body from the last step's
-  figures (mpm.timestep: wave speed at the most compressed particle, the
+  figures (mpm.stepping.timestep: wave speed at the most compressed particle, the
   narrowest reference cell, viscosity, strain rate), capped by ``dt_max``;
   under the implicit integrator a displacement limit, halved after a failed
   (or narrowly missed) Newton solve and recovering by 2 per step; or a fixed ``dt``; the last
@@ -13,10 +13,10 @@ and stopping a run that goes unstable:
 * the run stops ``unstable`` when the adaptive step collapses below
   ``dt_collapse`` of the first one, when a particle's position, velocity or
   F^sn is not finite or a particle leaves the domain, when a Newton solve
-  fails after its halvings, or when the blow-up detection (mpm.stability)
+  fails after its halvings, or when the blow-up detection (mpm.stepping.detection)
   fires with action ``stop`` (``warn``: an event, the run goes on).
 
-The policy runs on the device (mpm.policy), after every step, from the
+The policy runs on the device (mpm.stepping.policy), after every step, from the
 step's own figures: the host reads back once every ``sync_every`` = k steps
 (a history of k rows, one per step), and the steps after a halt in a batch
 change no state, so the detection stops a blow-up at the same step as when
@@ -44,10 +44,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from .launch import load
-from .params import param
+from ..launch import load
+from ..params import param
 from .policy import Policy
-from .stability import Detection, Detector
+from .detection import Detection, Detector
 from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, TRIP_SIZE, StepReport
 from .timestep import BINDINGS
 
@@ -127,7 +127,7 @@ class Observer:
 class Driver:
     """Steps ``solver`` on ``state`` under ``policy``.
 
-    ``detection`` (None: mpm.stability's defaults) needs the solver's
+    ``detection`` (None: mpm.stepping.detection's defaults) needs the solver's
     ``track_energy`` (and ``track_J`` for models that cannot invert) unless
     its action is off. ``sync_every``: the host reads back every k steps
     (None: 10 on CUDA for a batched solver, else 1; k > 1 needs
@@ -207,7 +207,7 @@ class Driver:
         """Prepare the solver, measure the initial state, check it, choose the
         first step, and tell the observers."""
         s, state, p = self.solver, self.state, self.policy
-        s.time = 0.0  # a run's clock starts at 0 (the device's too: mpm.policy.Policy.start)
+        s.time = 0.0  # a run's clock starts at 0 (the device's too: mpm.stepping.policy.Policy.start)
         if self.k > 1:  # room for k steps of at most cfl cells each (a fixed step: one; the device checks)
             s.pad = math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) * s.model.dx
         s.prepare(state)
@@ -376,7 +376,7 @@ class Driver:
 
     # ------------------------------------------------------------ the step rule's choices
     def _chosen(self, v: dict) -> None:
-        """The next step the device chose (mpm.policy), counted by its binding term."""
+        """The next step the device chose (mpm.stepping.policy), counted by its binding term."""
         self.dt, self.dt_fresh = float(v["dt"][0]), float(v["dt_fresh"][0])
         self.binding[BINDINGS[int(v["binding"][0])]] += 1
         if v["dt0_set"][0]:

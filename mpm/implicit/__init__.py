@@ -1,0 +1,3 @@
+"""The implicit integrator: backward Euler on the grid velocities solved by
+Newton's method (:mod:`.solve`) and the kernels of its system
+(:mod:`.system`)."""
