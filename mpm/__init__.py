@@ -1,30 +1,49 @@
 """Material Point Method solvers on NVIDIA Warp (no Hydra, no Rerun here).
 
-Build a :class:`Scene`, turn it into a :class:`Model` and initial
-:class:`State` with :func:`build`, and advance it with :class:`Solver`:
+Build a :class:`Scene` (bodies of a shape and a material, walls, kinematic
+regions, colliders, loads), turn it into a :class:`Model` and initial
+:class:`State` with :func:`build`, and advance it with a :class:`Solver`:
 step by step, or under the project's stability policy with a
-:class:`Driver` (mpm.stepping.driver), which reports to :class:`Observer` objects.
+:class:`Driver`, which reports to :class:`Observer` objects. SI units
+throughout (m, s, kg, Pa). :data:`__all__` is the public API; docs/library.md
+is its guide and docs/extending.md says how to add a material or a kernel.
 """
 
 from . import analytic
+from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
+from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
-from .stepping.driver import Driver, Event, Observer, Outcome, StepPolicy
 from .integrators import INTEGRATORS, Explicit, Implicit
-from .kernels import KERNELS, Kernel
-from .materials import MATERIALS, Fluid, FixedCorotated, Material, NeoHookean
+from .kernels import COMPACT, CUBIC, KERNELS, LINEAR, QUADRATIC, Kernel
+from .loads import LOAD_KINDS, Load
+from .materials import (MATERIALS, NACC, FixedCorotated, Fluid, Material, NeoHookean, Plastic, Sand, Snow,
+                        Viscoplastic, Viscous, VonMises)
+from .meshes import MeshShape
 from .model import Model, SceneError, State, build
-from .scene import WALL_TYPES, Body, Box, Compound, Cylinder, KinematicRegion, Scene, Sphere
+from .scene import CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, Cylinder, KinematicRegion, Scene, Sphere
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
 from .solver import Solver, SolverOptions
-from .stepping.status import StepReport
 from .stepping.detection import DETECTION_ACTIONS, Detection, Detector
+from .stepping.driver import Driver, Event, Observer, Outcome, StepPolicy
+from .stepping.plan import plan
+from .stepping.status import StepReport
 from .stepping.timestep import cfl_dt
+from .transfer import TRANSFERS
 
 __all__ = [
-    "analytic", "Collider", "INTEGRATORS", "Explicit", "Implicit", "KERNELS", "Kernel", "MATERIALS", "Fluid", "FixedCorotated", "Material", "NeoHookean",
-    "Model", "SceneError", "State", "build", "WALL_TYPES", "Body", "Box", "Compound", "Cylinder",
-    "KinematicRegion",
-    "Scene", "Sphere", "AULMPM", "EMPM", "TLMPM", "SCHEMES", "Solver", "SolverOptions",
-    "StepReport", "cfl_dt", "DETECTION_ACTIONS", "Detection", "Detector", "Driver", "Event", "Observer",
-    "Outcome", "StepPolicy",
+    # scenes
+    "Scene", "Body", "Box", "Sphere", "Cylinder", "Bowl", "Compound", "MeshShape", "KinematicRegion",
+    "Collider", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES", "CONTACT_TYPES",
+    # materials
+    "Material", "MATERIALS", "FixedCorotated", "NeoHookean", "Fluid", "Viscous", "Plastic", "Snow", "Sand",
+    "VonMises", "NACC", "Viscoplastic",
+    # kernels, transfers, schemes, integrators
+    "Kernel", "KERNELS", "LINEAR", "QUADRATIC", "CUBIC", "COMPACT", "TRANSFERS",
+    "EMPM", "TLMPM", "AULMPM", "SCHEMES", "Explicit", "Implicit", "INTEGRATORS",
+    # building and stepping
+    "build", "Model", "State", "SceneError", "Solver", "SolverOptions", "plan",
+    "Driver", "StepPolicy", "Detection", "Detector", "DETECTION_ACTIONS", "Observer", "Event", "Outcome",
+    "StepReport", "cfl_dt",
+    # closed-form solutions
+    "analytic",
 ]

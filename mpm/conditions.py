@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .colliders import INSIDE_DEPTH, build_meshes, kinds_of, make_inside_count, pack
+from .collider_device import build_meshes, kinds_of, make_inside_count, pack
+from .colliders import INSIDE_DEPTH
 from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
 from .scene import WALL_TYPES
 

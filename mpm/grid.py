@@ -35,7 +35,7 @@ import warp as wp
 from .launch import warp_kernel
 from .stepping.status import StepControl, StepStatus
 
-from .colliders import make_collide, make_collider_data, make_constrain, make_remove_direction
+from .collider_device import make_collide, make_collider_data, make_constrain, make_remove_direction
 from .scene import WALL_TYPES
 from .stencil import make_node_position
 from .types import Types

@@ -18,6 +18,7 @@ class Explicit:
     """Forward Euler on the grid velocities."""
 
     name: str = "explicit"
+    """the integrator's name (the key of INTEGRATORS)"""
 
     def problems(self) -> list[tuple[str, str]]:
         return []
@@ -30,6 +31,7 @@ class Implicit:
     (mpm.implicit)."""
 
     name: str = "implicit"
+    """the integrator's name (the key of INTEGRATORS)"""
     newton_max: int = param(20, "Newton iterations per step at most (1: the paper's "
                                 "semi-implicit update) [-]", ge=1)
     newton_tol: float = param(1.0e-4, "converged when |residual| <= newton_tol |initial residual| [-]",
@@ -51,3 +53,4 @@ class Implicit:
 
 
 INTEGRATORS = {"explicit": Explicit, "implicit": Implicit}
+"""name -> integrator options class"""

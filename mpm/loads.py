@@ -53,6 +53,9 @@ LOAD_KINDS = ("point", "traction", "body")
 face; body: force per volume [N/m^3] on a region."""
 
 FACE_TOLERANCE = 1e-6  # of the sampling spacing: the face layer's lower edge, open
+POINT_REACH = 2.0
+"""a point load's ``at`` must lie within this many cells of a particle of its
+body(ies): farther, it would silently load whatever particles are nearest"""
 
 
 @dataclass
@@ -73,6 +76,7 @@ class Load:
     a linear ramp from 0 to 1 over ``ramp`` [s], or 1."""
 
     kind: str
+    """point, traction or body (LOAD_KINDS)"""
     force: Sequence[float]
     select: object | None = None
     body: int | None = None
@@ -80,10 +84,13 @@ class Load:
     count: int = 1
     normal: Sequence[float] | None = None
     start: float = 0.0
+    """[s]"""
     end: float = math.inf
+    """[s]"""
     ramp: float = 0.0
     table: Sequence[Sequence[float]] | None = None
     name: str = ""
+    """a name for reports and the recording (default: load<index>)"""
     area: float | None = None
 
     def rows(self) -> np.ndarray:
@@ -100,6 +107,25 @@ class Load:
             return 0.0
         rows = self.rows()
         return float(np.interp(t - self.start, rows[:, 0], rows[:, 1]))
+
+    @classmethod
+    def point(cls, force, at=None, count: int = 1, select=None, **keys) -> "Load":
+        """A total force ``force`` [N; 2D: N/m] shared by the ``count``
+        particles nearest to ``at`` [m] (or those inside ``select``) in
+        proportion to their volumes."""
+        return cls("point", tuple(force), at=None if at is None else tuple(at), count=count, select=select, **keys)
+
+    @classmethod
+    def traction(cls, force, select, normal, area: float | None = None, **keys) -> "Load":
+        """A force per area ``force`` [Pa] on the face of ``select``'s particles
+        facing the outward ``normal`` (scaled to ``area`` [m^2; 2D: m] when given)."""
+        return cls("traction", tuple(force), select=select, normal=tuple(normal), area=area, **keys)
+
+    @classmethod
+    def body_force(cls, force, select=None, **keys) -> "Load":
+        """A force per volume ``force`` [N/m^3] on the particles inside
+        ``select`` (None: the whole body, or every body)."""
+        return cls("body", tuple(force), select=select, **keys)
 
     def problems(self, dim: int, n_bodies: int) -> list[tuple[str, str]]:
         """(field, message) for every inconsistency, before anything is sampled."""
@@ -161,11 +187,16 @@ class LoadTable:
     factor 1 [N]; per load a summary (``summary``: kind, particles, the
     face's area or region's volume, the total force at factor 1)."""
 
-    particles: np.ndarray  # int32, the loaded particles
-    offsets: np.ndarray  # int32, entries of particle j: offsets[j]:offsets[j + 1]
-    entry_load: np.ndarray  # int32
-    entry_force: np.ndarray  # (entries, d) [N] at factor 1
-    entry_weight: np.ndarray  # 1 / (the load's particles): its mean position's weight
+    particles: np.ndarray
+    """int32, the loaded particles"""
+    offsets: np.ndarray
+    """int32, entries of particle j: offsets[j]:offsets[j + 1]"""
+    entry_load: np.ndarray
+    """int32"""
+    entry_force: np.ndarray
+    """(entries, d) [N] at factor 1"""
+    entry_weight: np.ndarray
+    """1 / (the load's particles): its mean position's weight"""
     loads: list[Load]
     summary: list[dict] = field(default_factory=list)
 
@@ -193,11 +224,13 @@ class LoadTable:
 
 
 def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarray, body_ranges,
-            spacing) -> LoadTable:
+            spacing, dx: float) -> LoadTable:
     """The loads on the particles at positions ``x`` [m] with volumes ``volume``
     [m^d] and bodies ``body``; ``body_ranges[b]`` (start, count) of body b,
-    ``spacing[b]`` [m] its sampling spacing (dx^d / ppc)^(1/d). Raises
-    :class:`LoadError` for a load that selects no particle."""
+    ``spacing[b]`` [m] its sampling spacing (dx^d / ppc)^(1/d), ``dx`` [m]
+    the grid's cell. Raises :class:`LoadError` for a load that selects no
+    particle, or a point load whose ``at`` lies farther than
+    :data:`POINT_REACH` cells from every particle of its body."""
     entries = []  # (particle indices, load index, forces)
     summary = []
     for i, load in enumerate(loads):
@@ -208,6 +241,11 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
         measure = {}  # the face's area or the region's volume
         if load.kind == "point" and load.at is not None:
             dist = np.linalg.norm(x[idx] - np.asarray(load.at, float), axis=1)
+            if dist.min() > POINT_REACH * dx:
+                whose = "of any body" if load.body is None else f"of body {load.body}"
+                raise LoadError(i, "at", f"{list(load.at)} is {dist.min():.4g} m from the nearest particle {whose}; "
+                                         f"accepted: a point within {POINT_REACH:g} cells ({POINT_REACH * dx:.4g} m) "
+                                         "of the loaded body")
             keep = np.argsort(dist, kind="stable")[:int(load.count)]
         else:
             keep = (np.flatnonzero(load.select.contains(x[idx])) if load.select is not None

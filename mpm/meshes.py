@@ -130,6 +130,7 @@ class MeshShape:
     ``up`` optionally rotates the mesh's +y axis onto another axis (0, 1, 2)."""
 
     source: str
+    """a mesh file (OBJ, PLY, STL, OFF, glTF, USD) or a packaged asset ("warp:bunny")"""
     center: tuple[float, ...]
     size: float
     up: int = 1

@@ -46,22 +46,39 @@ class Model:
     per-body material parameters."""
 
     scene: Scene
+    """what was built"""
     types: Types
+    """the Warp types of its dimension and precision"""
     kernel: Kernel
+    """the interpolation kernel"""
     device: str
+    """the Warp device ("cpu", "cuda:0")"""
     dx: float
-    cells: tuple[int, ...]  # cells per axis; nodes = cells + 1
+    """the grid's cell [m]"""
+    cells: tuple[int, ...]
+    """cells per axis; nodes = cells + 1"""
     n_particles: int
-    mass: wp.array  # m_p [kg]
-    volume: wp.array  # V_p^0 [m^3]
-    body: wp.array  # body index per particle (int32)
-    region: wp.array  # kinematic region per particle: 0 none, r + 1 for scene.regions[r]
-    body_params: wp.array  # packed material parameters per body
+    """particles of every body"""
+    mass: wp.array
+    """m_p [kg]"""
+    volume: wp.array
+    """V_p^0 [m^3]"""
+    body: wp.array
+    """body index per particle (int32)"""
+    region: wp.array
+    """kinematic region per particle: 0 none, r + 1 for scene.regions[r]"""
+    body_params: wp.array
+    """packed material parameters per body"""
     groups: list[MaterialGroup]
-    body_ranges: list[tuple[int, int]]  # (start, count) per body
-    body_volumes: list[dict]  # per body: the particles' volume [m^d], the shape's, the cells', and which was used
-    wall_codes: tuple[tuple[int, ...], tuple[int, ...]]  # (lo, hi) per axis
-    loads: LoadTable | None = None  # the external loads on the particles (mpm.loads); None: none
+    """the bodies grouped by material model (one P2G each)"""
+    body_ranges: list[tuple[int, int]]
+    """(start, count) per body"""
+    body_volumes: list[dict]
+    """per body: the particles' volume [m^d], the shape's, the cells', and which was used"""
+    wall_codes: tuple[tuple[int, ...], tuple[int, ...]]
+    """(lo, hi) per axis"""
+    loads: LoadTable | None = None
+    """the external loads on the particles (mpm.loads); None: none"""
 
     @property
     def dim(self) -> int:
@@ -115,15 +132,24 @@ class State:
     configuration and is recomputed with it (mpm.reference_update).
     """
 
-    x: wp.array  # current positions [m]
-    v: wp.array  # velocities [m/s]
-    C: wp.array  # affine matrices: velocity gradient w.r.t. the reference [1/s]
-    F0s: wp.array  # deformation gradient at the last configuration update
-    Fsn: wp.array  # deformation gradient since the last configuration update
-    X: wp.array  # reference positions [m]
-    dJ: wp.array  # |det Fsn - 1| after the last step (written when recorded)
-    stencils: object  # the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)
-    history: wp.array  # history variables of plastic models (one unused entry without them)
+    x: wp.array
+    """current positions [m]"""
+    v: wp.array
+    """velocities [m/s]"""
+    C: wp.array
+    """affine matrices: velocity gradient w.r.t. the reference [1/s]"""
+    F0s: wp.array
+    """deformation gradient at the last configuration update"""
+    Fsn: wp.array
+    """deformation gradient since the last configuration update"""
+    X: wp.array
+    """reference positions [m]"""
+    dJ: wp.array
+    """|det Fsn - 1| after the last step (written when recorded)"""
+    stencils: object
+    """the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)"""
+    history: wp.array
+    """history variables of plastic models (one unused entry without them)"""
 
     def numpy(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k).numpy().copy()
@@ -185,6 +211,12 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
     for i, load in enumerate(scene.loads):
         for name, message in load.problems(d, len(scene.bodies)):
             raise SceneError(f"loads[{i}].{name}", message)
+        if load.at is not None and len(load.at) == d and not all(0.0 <= a <= L for a, L in zip(load.at, scene.domain)):
+            raise SceneError(f"loads[{i}].at", f"{list(load.at)} lies outside the domain; accepted: a point in "
+                                               + " x ".join(f"[0, {L:g}]" for L in scene.domain) + " [m]")
+    for i, c in enumerate(scene.colliders):
+        for name, message in c.problems(d):
+            raise SceneError(f"colliders[{i}].{name}", message)
     if scene.loads and getattr(scene.solution, "has_body_force", False):
         raise SceneError("loads", "given with a manufactured solution, whose body force they would replace; "
                                   "accepted: no loads with that solution")
@@ -228,10 +260,14 @@ def _rigid_velocity(body, x, dim):
 class BodySample:
     """One body's particles as :func:`build` places them."""
 
-    x: np.ndarray  # positions [m], the initial deformation applied
-    volume: float  # each particle's volume [m^d]
-    F: np.ndarray  # the initial deformation gradient (d, d)
-    volumes: dict  # the body's volume [m^d]: "volume" (used), "shape", "cells", "used" (which)
+    x: np.ndarray
+    """positions [m], the initial deformation applied"""
+    volume: float
+    """each particle's volume [m^d]"""
+    F: np.ndarray
+    """the initial deformation gradient (d, d)"""
+    volumes: dict
+    """the body's volume [m^d]: "volume" (used), "shape", "cells", "used" (which)"""
 
 
 def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
@@ -313,7 +349,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     if scene.loads:
         spacing = [(dxp**d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
         try:
-            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing)
+            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing, dx)
         except LoadError as e:
             raise SceneError(f"loads[{e.index}].{e.key}", e.message) from None
     S = np.float32 if precision == "float32" else np.float64

@@ -14,8 +14,10 @@ import numpy as np
 from .colliders import Collider
 from .materials import Material
 
-WALL_TYPES = ("sticky", "slip", "open")
 CONTACT_TYPES = ("frictionless", "none", "shared")
+"""between bodies (Scene.contact): frictionless (mpm.contact), none (they
+pass through each other) or shared (EMPM only: one grid for all bodies)"""
+WALL_TYPES = ("sticky", "slip", "open")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
 
@@ -25,7 +27,9 @@ class Box:
     """Axis-aligned box (a rectangle in 2D)."""
 
     center: tuple[float, ...]
+    """[m]"""
     half_size: tuple[float, ...]
+    """half the extent along each axis [m]"""
 
     def bounds(self):
         c, h = np.asarray(self.center, float), np.asarray(self.half_size, float)
@@ -41,7 +45,9 @@ class Sphere:
     """Ball (a disc in 2D); a shell (a ring in 2D) when ``inner_radius`` > 0."""
 
     center: tuple[float, ...]
+    """[m]"""
     radius: float
+    """[m]"""
     inner_radius: float = 0.0
 
     def bounds(self):
@@ -59,8 +65,11 @@ class Cylinder:
     (a tube) when ``inner_radius`` > 0."""
 
     center: tuple[float, ...]
+    """[m]"""
     radius: float
+    """[m]"""
     half_height: float
+    """half the length along ``axis`` [m]"""
     axis: int = 1
     inner_radius: float = 0.0
 
@@ -87,6 +96,7 @@ class Bowl:
     center: tuple[float, ...]
     radius: float
     thickness: float
+    """the shell's thickness outside ``radius`` [m]"""
     rim: float
     axis: int = 1
 
@@ -109,6 +119,7 @@ class Compound:
     """Union of shapes, filled as one body (e.g. a bunny hanging from a cord)."""
 
     parts: tuple
+    """the shapes (Box, Sphere, Cylinder, Bowl, mpm.MeshShape, ...)"""
 
     def bounds(self):
         lo, hi = zip(*(p.bounds() for p in self.parts))
@@ -196,11 +207,15 @@ class KinematicRegion:
     body: int
     select: Shape
     name: str = ""
+    """a name for reports and the recording (default: region<index>)"""
     velocity: Sequence[float] | None = None
+    """the translation velocity [m/s] (None: 0)"""
     angular_velocity: float | Sequence[float] | None = None
     center: Sequence[float] | None = None
     start: float = 0.0
+    """[s]"""
     end: float = float("inf")
+    """[s]; after it the particles move freely"""
     velocity_gradient: Sequence[Sequence[float]] | None = None
 
     def gradient(self, dim: int) -> np.ndarray:
@@ -227,23 +242,35 @@ class Body:
     """
 
     shape: Shape
+    """where its particles are sampled (Box, Sphere, Cylinder, Bowl, Compound, mpm.MeshShape)"""
     material: Material
+    """its constitutive model and parameters (mpm.MATERIALS)"""
     name: str = ""
+    """a name for reports and the recording (default: body<index>)"""
     velocity: Sequence[float] | None = None
     angular_velocity: float | Sequence[float] | None = None
     ppc: int | None = None
+    """particles per cell of this body (default: the scene's ``ppc``)"""
     deformation: Sequence[Sequence[float]] | None = None
 
 
 @dataclass
 class Scene:
-    """Domain, grid, walls, gravity and bodies of a run."""
+    """Domain, grid, walls, gravity and bodies of a run. The domain is the
+    box [0, domain[a]] along each axis a; the grid has ``resolution`` cells
+    along x (dx = domain[0] / resolution) and as many cells of that width
+    along the other axes as the domain holds (a multiple of dx)."""
 
     dim: int
+    """2 or 3"""
     domain: tuple[float, ...]
+    """the domain's extent per axis [m]"""
     resolution: int
+    """grid cells along x"""
     bodies: list[Body]
+    """the objects (at least one)"""
     gravity: tuple[float, ...] = (0.0, -9.81)
+    """[m/s^2]"""
     walls: tuple[str, ...] = ("slip", "slip", "slip", "slip")
     """wall type per face: (x_lo, x_hi, y_lo, y_hi[, z_lo, z_hi])"""
     wall_cells: int = 3

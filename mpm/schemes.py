@@ -106,6 +106,7 @@ class EMPM(_FixedRule):
     """Eulerian MLS-MPM: every body's configuration is updated every step."""
 
     name: str = "empm"
+    """the scheme's name (the key of SCHEMES)"""
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         return True
@@ -116,6 +117,7 @@ class TLMPM(_FixedRule):
     """Total Lagrangian MPM: the reference configuration is the initial one."""
 
     name: str = "tlmpm"
+    """the scheme's name (the key of SCHEMES)"""
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
         return False
@@ -136,6 +138,7 @@ class AULMPM:
     """
 
     name: str = "aulmpm"
+    """the scheme's name (the key of SCHEMES)"""
     epsilon: float | None = param(None, "mark particles with dJ >= epsilon [-]", ge=0.0, inf=True)
     eta: float | None = param(None, "update when marked / n >= eta [-]", ge=0.0, le=1.0)
     dJ_max: float | None = param(None, "distortion: also update when any particle has dJ >= "
@@ -178,6 +181,8 @@ class AULMPM:
 
 
 SCHEMES = {"empm": EMPM, "tlmpm": TLMPM, "aulmpm": AULMPM}
+"""name -> scheme class: Eulerian (every step), total Lagrangian (never) and
+adaptively updated Lagrangian (when the criterion says) reference updates"""
 
 
 @wp.struct

@@ -21,6 +21,7 @@ and precision; contact, separate boundary passes and the implicit
 integrator's kernels only when the scene needs them.
 """
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -47,6 +48,11 @@ from .transfer import AFFINE_FREE, TRANSFERS, GridConstants, Transfers
 
 @dataclass
 class SolverOptions:
+    """How a :class:`Solver` steps: the transfer, the integrator, what each
+    step measures. The defaults work with :class:`mpm.Driver`'s defaults
+    (its blow-up detection reads the tracked energies and, for models that
+    cannot invert, det F)."""
+
     record_dJ: bool = False
     """write the per-particle dJ field every step (for logging)"""
     transfer: str = "mls"
@@ -56,12 +62,15 @@ class SolverOptions:
     by the grid's change (1: FLIP, 0: PIC)"""
     integrator: Explicit | Implicit = field(default_factory=Explicit)
     """forward or backward Euler on the grid velocities (mpm.integrators)"""
-    track_J: bool = False
+    track_J: bool | None = None
     """report every body's smallest det F and smallest singular value of F
-    (for inversion detection, mpm.stepping.detection)"""
-    track_energy: bool = False
+    (for inversion detection, mpm.stepping.detection); None: where a body's
+    model cannot invert (what :class:`mpm.Driver`'s default detection reads)"""
+    track_energy: bool | None = None
     """report the new state's kinetic and potential energy and each body's
-    fastest particle every step (mpm.stepping.detection)"""
+    fastest particle every step (mpm.stepping.detection); None: on (the
+    default detection of :class:`mpm.Driver` needs it; False saves a few
+    atomic sums per particle when the detection is off)"""
     fuse: bool | None = None
     """the explicit Eulerian scheme locates stencils in P2G and G2P instead
     of caching them, and (when its bodies share one projection) G2P does
@@ -85,6 +94,14 @@ class SolverOptions:
             raise ValueError(f"flip {self.flip!r}; accepted: 0 <= flip <= 1")
 
 
+def resolved(options: SolverOptions, scene) -> SolverOptions:
+    """``options`` with the tracking left to the solver (None) decided for ``scene``."""
+    return dataclasses.replace(
+        options, track_energy=True if options.track_energy is None else options.track_energy,
+        track_J=(any(not b.material.invertible for b in scene.bodies) if options.track_J is None
+                 else options.track_J))
+
+
 class Solver:
     """Advances a :class:`State` of a :class:`Model` with a scheme. Its parts are public: ``layout``,
     ``grid``, ``const``, ``buffer`` (mpm.stepping.status), ``transfers``, ``conditions``, ``contact`` (or None),
@@ -96,7 +113,7 @@ class Solver:
         scheme = scheme or EMPM()
         if isinstance(scheme, AULMPM):
             scheme = scheme.resolved(scene_kind(b.material for b in model.scene.bodies))
-        self.scheme, self.options = scheme, options or SolverOptions()
+        self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene)
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
         opt.check()
         if scene.contact == "shared" and not isinstance(scheme, EMPM):

@@ -1,18 +1,19 @@
 """The signed distance of a rigid collider at given points, evaluated by the
-solver's own Warp function (mpm.colliders.make_sdf), for the tests."""
+solver's own Warp function (mpm.collider_device.make_sdf), for the tests."""
 
 import numpy as np
 import warp as wp
 
 from helpers import DEVICE
-from mpm.colliders import Collider, make_sdf, pack
+from mpm.collider_device import make_sdf, pack
+from mpm.colliders import Collider
 from mpm.launch import warp_kernel
 from mpm.types import make_types
 
 
 def _sdf_kernel(t, kinds):
     sdf = make_sdf(t, kinds)
-    from mpm.colliders import make_collider_data
+    from mpm.collider_device import make_collider_data
     Data = make_collider_data(t)
 
     @warp_kernel
@@ -31,12 +32,12 @@ def evaluate(collider: Collider, q: np.ndarray):
     dim = q.shape[1]
     t = make_types(dim, "float64")
     meshes = {}
-    if collider.kind == "mesh":
-        from mpm.colliders import build_meshes
+    if collider.type == "mesh":
+        from mpm.collider_device import build_meshes
         meshes = build_meshes([collider], DEVICE)
     data = pack([collider], t, meshes, DEVICE)
     qa = wp.array(q, dtype=t.vec, device=DEVICE)
     phi = wp.zeros(len(q), dtype=t.scalar, device=DEVICE)
     n = wp.zeros(len(q), dtype=t.vec, device=DEVICE)
-    wp.launch(_sdf_kernel(t, (collider.kind,)), len(q), inputs=[data, qa, phi, n], device=DEVICE)
+    wp.launch(_sdf_kernel(t, (collider.type,)), len(q), inputs=[data, qa, phi, n], device=DEVICE)
     return phi.numpy(), n.numpy()

@@ -13,6 +13,7 @@ report imports every module of ``pipelines.report.sections`` by name
 from __future__ import annotations
 
 import ast
+import re
 from collections import deque
 from pathlib import Path
 
@@ -188,3 +189,46 @@ def test_no_module_over_500_lines_and_a_short_solver():
     tree = ast.parse((ROOT / "mpm" / "solver.py").read_text())
     solver = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Solver")
     assert solver.end_lineno - solver.lineno + 1 < MAX_SOLVER_LINES
+
+
+LAYOUT = ROOT / "docs" / "layout.md"
+
+
+def listed_in_layout(package: str, relpath: str, text: str) -> bool:
+    """Whether docs/layout.md's section of ``package`` (its heading names
+    ``package/``) lists the module at ``relpath`` (relative to the package):
+    as `relpath` itself, or as `name.py` in a table row that names its
+    folder `folder/`."""
+    sections = re.split(r"^## ", text, flags=re.M)
+    section = next((s for s in sections if s.startswith(f"`{package}/`")), "")
+    folder, _, name = relpath.rpartition("/")
+    if folder and f"`{relpath}`" in section:
+        return True
+    rows = [line for line in section.splitlines() if line.startswith("|")]
+    if not folder:  # a top-level module: in a row that is not a folder's
+        return any(f"`{name}`" in row for row in rows if not re.match(r"\|\s*`\w+/`", row))
+    return any(f"`{folder}/`" in row and f"`{name}`" in row for row in rows)
+
+
+def test_every_module_is_in_the_layout_guide():
+    """docs/layout.md lists every module of mpm and pipelines (package
+    __init__ files aside, but a package's __main__ counts)."""
+    text = LAYOUT.read_text()
+    missing = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            if path.name == "__init__.py":
+                continue
+            rel = path.relative_to(ROOT / package).as_posix()
+            if not listed_in_layout(package, rel, text):
+                missing.append(f"{package}/{rel}")
+    assert not missing, f"not in docs/layout.md: {missing}"
+
+
+def test_the_layout_check_reads_rows_and_folders():
+    text = ("## `pkg/`: x\n\n| a | b |\n|---|---|\n| `sub/` | `one.py` (one), `two.py` |\n"
+            "| `top.py` | top |\n| `sub/three.py` | three |\n")
+    assert listed_in_layout("pkg", "sub/one.py", text) and listed_in_layout("pkg", "sub/two.py", text)
+    assert listed_in_layout("pkg", "top.py", text) and listed_in_layout("pkg", "sub/three.py", text)
+    assert not listed_in_layout("pkg", "sub/four.py", text) and not listed_in_layout("pkg", "one.py", text)
+    assert not listed_in_layout("other", "top.py", text)

@@ -7,5 +7,6 @@ from .linear import LINEAR
 from .quadratic import QUADRATIC
 
 KERNELS: dict[str, Kernel] = {k.name: k for k in (LINEAR, QUADRATIC, CUBIC, COMPACT)}
+"""name -> kernel (the ``kernel`` config group's options)"""
 
 __all__ = ["KERNELS", "Kernel", "LINEAR", "QUADRATIC", "CUBIC", "COMPACT"]

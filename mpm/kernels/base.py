@@ -41,18 +41,40 @@ from typing import Callable
 
 @dataclass(frozen=True)
 class Kernel:
+    """An interpolation kernel (the module docstring says what each field
+    means): a tensor product of a 1-D function on ``grids`` of spacing dx,
+    ``support`` nodes per axis from the stencil's first node, with the
+    factories ``weights`` and ``gradients`` of its Warp functions. Register
+    one of your own with mpm.kernels.register_kernel (docs/extending.md)."""
+
     name: str
+    """the kernel's name (the key of KERNELS)"""
+    support: int
+    """nodes per axis of a particle's stencil"""
+    offset: float
+    """the stencil's first node: floor(x / dx - grid - offset) [cells]"""
+    moment: float | None
+    """the constant second moment in units of dx^2 (None: per particle)"""
+    margin: float
+    """[cells]: a particle closer to the domain's edge reaches outside the grid"""
     support: int
     offset: float
     moment: float | None
     margin: float
     weights: Callable = None
+    """types -> Warp function t -> (w_0 .. w_{support-1})"""
     gradients: Callable = None
+    """types -> Warp function t -> dw/dt (divide by dx for the spatial gradient)"""
     grids: tuple[float, ...] = (0.0,)
+    """each grid's shift [cells]: (0,) for the B-splines, (-1/4, 1/4) for the compact kernel"""
     gradient_affine: bool = False
+    """C and the force from the kernel gradient (a moment matrix singular somewhere)"""
     phase: Callable = None
+    """optional: types, with_gradients -> per-axis work the grids share"""
     weights_at: Callable = None
+    """optional, with phase: types -> (t, P, g) -> weights on grid g"""
     gradients_at: Callable = None
+    """optional, with phase: types -> (t, P, g) -> gradients on grid g"""
 
     @property
     def n_grids(self) -> int:

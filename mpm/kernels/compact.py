@@ -139,3 +139,4 @@ def _gradients(t: Types):
 COMPACT = Kernel(name="compact", support=2, offset=0.0, moment=None, margin=1.0,
                  weights=_weights, gradients=_gradients, grids=(-0.25, 0.25),
                  phase=_phase, weights_at=_weights_at, gradients_at=_gradients_at)
+"""CK-MPM's compact C^2 kernel: support 2 on two grids shifted by -dx/4 and +dx/4"""

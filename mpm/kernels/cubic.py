@@ -53,3 +53,4 @@ def _gradients(t: Types):
 
 CUBIC = Kernel(name="cubic", support=4, offset=1.0, moment=1.0 / 3.0, margin=1.0,
                weights=_weights, gradients=_gradients)
+"""the cubic B-spline: support 4, C^2, one grid"""

@@ -40,3 +40,4 @@ def _gradients(t: Types):
 
 LINEAR = Kernel(name="linear", support=2, offset=0.0, moment=None, margin=1.0,
                 weights=_weights, gradients=_gradients, gradient_affine=True)
+"""the linear (tent) B-spline: support 2, C^0, one grid"""

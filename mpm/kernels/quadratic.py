@@ -43,3 +43,4 @@ QUADRATIC = Kernel(
     name="quadratic", support=3, offset=0.5, moment=0.25, margin=1.0,
     weights=_weights, gradients=_gradients,
 )
+"""the quadratic B-spline: support 3, C^1, one grid (the default)"""

@@ -25,6 +25,7 @@ MATERIALS: dict[str, type[Material]] = {
     cls.name: cls for cls in (FixedCorotated, NeoHookean, Fluid, Viscous, Snow, Sand, VonMises,
                               NACC, Viscoplastic)
 }
+"""model name -> material class (the ``material`` config group's options)"""
 
 
 def material_fields(model: str) -> list[str]:

@@ -53,6 +53,7 @@ class Material:
     """Base class; ``model`` names the constitutive model (the registry key)."""
 
     model: str = ""
+    """the constitutive model's name, the key of mpm.MATERIALS (set by the class)"""
     rho: float = param(1000.0, "rest density [kg/m^3]", gt=0.0)
 
     name: ClassVar[str] = ""

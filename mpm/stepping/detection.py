@@ -49,6 +49,7 @@ import warp as wp
 from ..params import param, violations
 
 DETECTION_ACTIONS = ("stop", "warn", "off")
+"""what a tripped criterion does: stop the run (unstable), warn (an event, the run goes on) or nothing"""
 CRITERIA = ("energy", "speed", "inversion")
 FLOOR_SPEED = 1.0e-3  # of the slowest wave speed: the kinetic-energy floor of the energy scale
 

@@ -80,25 +80,39 @@ class Event:
     """Something a person should read: a warning, a halved step."""
 
     step: int
-    time: float  # [s]
+    """the step it happened at"""
+    time: float
+    """[s]"""
     text: str
-    level: str = "INFO"  # INFO | WARN | ERROR
+    """what happened, one line"""
+    level: str = "INFO"
+    """INFO | WARN | ERROR"""
     values: dict = field(default_factory=dict)
-    kind: str = ""  # "detection": a warning of the blow-up detection; "halving": an implicit step halved
+    """the figures behind it, by name"""
+    kind: str = ""
+    """"detection": a warning of the blow-up detection; "halving": an implicit step halved"""
 
 
 @dataclass
 class Outcome:
     """How a run ended (``status`` running while it has not)."""
 
-    status: str = "running"  # one of STATUSES
+    status: str = "running"
+    """one of STATUSES"""
     reason: str = ""
-    step: int = 0  # steps completed
-    time: float = 0.0  # [s]
-    criterion: str | None = None  # nonfinite, outside, dt_collapse, newton, or a detection criterion
-    body: str | None = None  # the body it names, if any
+    """why the run stopped, one line (empty: completed)"""
+    step: int = 0
+    """steps completed"""
+    time: float = 0.0
+    """[s]"""
+    criterion: str | None = None
+    """nonfinite, outside, dt_collapse, newton, or a detection criterion"""
+    body: str | None = None
+    """the body it names, if any"""
     values: dict = field(default_factory=dict)
-    report: StepReport | None = None  # the step that failed (None: none was taken)
+    """the criterion's figures, by name"""
+    report: StepReport | None = None
+    """the step that failed (None: none was taken)"""
 
 
 class Observer:

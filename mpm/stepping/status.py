@@ -39,8 +39,10 @@ HALTS = ("running", "done", "pause", "regrid", "nonfinite", "outside", "detectio
 @dataclass(frozen=True)
 class Field:
     name: str
-    per: str  # STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis)
-    reset: float  # the value before a step (the identity of its reduction), or at the start
+    per: str
+    """STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis)"""
+    reset: float
+    """the value before a step (the identity of its reduction), or at the start"""
     doc: str
 
 
@@ -187,47 +189,87 @@ class StepReport:
     """What one step left behind: stability figures, the criterion per body,
     the configuration updates it triggered."""
 
-    max_speed: float  # [m/s]
-    nonfinite: int  # particles with a non-finite position, velocity or F^sn
-    outside: int  # particles that left the domain interior
-    marked: np.ndarray  # per body: particles with dJ >= epsilon (A-ULMPM), else 0
-    max_dJ: np.ndarray  # per body: the largest dJ (A-ULMPM), else 0
-    min_J: np.ndarray  # per body: the smallest det F (compression, for the time step)
-    min_stretch: np.ndarray  # per body: the smallest singular value of F^sn (for the time step)
-    max_rate: np.ndarray  # per body: the largest velocity gradient |L| [1/s] (for the time step)
-    stiffening: np.ndarray  # per body: the largest growth of the squared wave speed (0: none)
-    box_lo: np.ndarray  # per body: bounding box of the new positions [m] (the next reference grids)
+    max_speed: float
+    """the fastest particle of the new state [m/s]"""
+    nonfinite: int
+    """particles with a non-finite position, velocity or F^sn"""
+    outside: int
+    """particles that left the domain interior"""
+    marked: np.ndarray
+    """per body: particles with dJ >= epsilon (A-ULMPM), else 0"""
+    max_dJ: np.ndarray
+    """per body: the largest dJ (A-ULMPM), else 0"""
+    min_J: np.ndarray
+    """per body: the smallest det F (compression, for the time step)"""
+    min_stretch: np.ndarray
+    """per body: the smallest singular value of F^sn (for the time step)"""
+    max_rate: np.ndarray
+    """per body: the largest velocity gradient |L| [1/s] (for the time step)"""
+    stiffening: np.ndarray
+    """per body: the largest growth of the squared wave speed (0: none)"""
+    box_lo: np.ndarray
+    """per body: bounding box of the new positions [m] (the next reference grids)"""
     box_hi: np.ndarray
-    updated: list[int] = field(default_factory=list)  # bodies whose configuration was updated
-    update_time: float = 0.0  # [s] deciding and updating
-    dt: float = 0.0  # [s] the step taken (an implicit step may have been halved)
-    newton: object = None  # the implicit solve's NewtonReport (None: explicit)
-    halvings: int = 0  # times the implicit step was halved after a failed solve
-    body_speed: np.ndarray | None = None  # per body: the fastest particle [m/s] (track_energy; else 0)
-    min_F_stretch: np.ndarray | None = None  # per body: smallest singular value of F (track_J; else inf)
-    boundary_work: float = 0.0  # [J] work of the boundary conditions on the grid (all grids)
-    load_work: float = 0.0  # [J] work of the external loads over the step (mpm.loads)
-    # [N s] per axis: the momentum the walls, colliders and regions gave the grid in the step (all grids:
-    # the bodies receive it divided by the kernel's n_grids, as every grid carries their full mass)
+    """per body: its upper corner [m]"""
+    updated: list[int] = field(default_factory=list)
+    """bodies whose configuration was updated"""
+    update_time: float = 0.0
+    """[s] deciding and updating"""
+    dt: float = 0.0
+    """[s] the step taken (an implicit step may have been halved)"""
+    newton: object = None
+    """the implicit solve's NewtonReport (None: explicit)"""
+    halvings: int = 0
+    """times the implicit step was halved after a failed solve"""
+    body_speed: np.ndarray | None = None
+    """per body: the fastest particle [m/s] (track_energy; else 0)"""
+    min_F_stretch: np.ndarray | None = None
+    """per body: smallest singular value of F (track_J; else inf)"""
+    boundary_work: float = 0.0
+    """[J] work of the boundary conditions on the grid (all grids)"""
+    load_work: float = 0.0
+    """[J] work of the external loads over the step (mpm.loads)"""
     boundary_impulse: np.ndarray | None = None
-    load_position: np.ndarray | None = None  # per load: its particles' mean position at the step's start [m]
-    kinetic: float = float("nan")  # [J] kinetic energy of the new state (track_energy)
-    potential: float = float("nan")  # [J] its gravitational potential energy, -sum m g . x
-    removed: np.ndarray | None = None  # per body: particles removed at open faces in this step (None: none)
-    max_F_norm: np.ndarray | None = None  # per body: the largest |F^sn|_inf (walls-only Lagrangian scenes)
-    contact_nodes: int = 0  # body nodes whose bin was in contact in this step (mpm.contact)
-    positioned: bool = True  # the node positions were available (False: not summed)
-    regrid: list[int] = field(default_factory=list)  # bodies whose grids the host refits (mpm.stepping.criterion)
-    host_update: bool = False  # the host moves a reference configuration (its diagnostics wait for it)
-    step: int = 0  # steps completed after this one (0: a step the host took by hand)
-    time: float = 0.0  # [s] the time after it (0: a step the host took by hand)
-    halt: int = 0  # why the steps stopped after it (mpm.stepping.status.HALTS)
-    diagnostics: np.ndarray | None = None  # the new state's diagnostics as summed (when measured)
-    trips: np.ndarray | None = None  # the detection's new trips (TRIP_SIZE values each, mpm.stepping.detection)
-    elastic: float = float("nan")  # [J] elastic energy of the state the step started from (its P2G)
-    dt_fresh: float = float("nan")  # [s] the step a freshly updated reference would have allowed
-    wall_time: float = 0.0  # [s] host time the step took
-    measure_time: float = 0.0  # [s] host time its diagnostics took after it (driver's measure)
+    """[N s] per axis: the momentum the walls, colliders and regions gave the
+    grid in the step, summed over the kernel's grids: the bodies receive it
+    divided by the kernel's ``n_grids`` (2 for the compact kernel), as every
+    grid carries their full mass"""
+    load_position: np.ndarray | None = None
+    """per load: its particles' mean position at the step's start [m]"""
+    kinetic: float = float("nan")
+    """[J] kinetic energy of the new state (track_energy)"""
+    potential: float = float("nan")
+    """[J] its gravitational potential energy, -sum m g . x"""
+    removed: np.ndarray | None = None
+    """per body: particles removed at open faces in this step (None: none)"""
+    max_F_norm: np.ndarray | None = None
+    """per body: the largest |F^sn|_inf (walls-only Lagrangian scenes)"""
+    contact_nodes: int = 0
+    """body nodes whose bin was in contact in this step (mpm.contact)"""
+    positioned: bool = True
+    """the node positions were available (False: not summed)"""
+    regrid: list[int] = field(default_factory=list)
+    """bodies whose grids the host refits (mpm.stepping.criterion)"""
+    host_update: bool = False
+    """the host moves a reference configuration (its diagnostics wait for it)"""
+    step: int = 0
+    """steps completed after this one (0: a step the host took by hand)"""
+    time: float = 0.0
+    """[s] the time after it (0: a step the host took by hand)"""
+    halt: int = 0
+    """why the steps stopped after it (mpm.stepping.status.HALTS)"""
+    diagnostics: np.ndarray | None = None
+    """the new state's diagnostics as summed (when measured)"""
+    trips: np.ndarray | None = None
+    """the detection's new trips (TRIP_SIZE values each, mpm.stepping.detection)"""
+    elastic: float = float("nan")
+    """[J] elastic energy of the state the step started from (its P2G)"""
+    dt_fresh: float = float("nan")
+    """[s] the step a freshly updated reference would have allowed"""
+    wall_time: float = 0.0
+    """[s] host time the step took"""
+    measure_time: float = 0.0
+    """[s] host time its diagnostics took after it (driver's measure)"""
 
     @classmethod
     def failed(cls, n_bodies: int, dim: int) -> "StepReport":

@@ -73,7 +73,7 @@ class _Collider:
         return []
 
     def common(self) -> dict:
-        return dict(kind=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
+        return dict(type=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
                     inside=self.inside, velocity=self.velocity, start=self.start,
                     end=float("inf") if self.end is None else self.end)
 

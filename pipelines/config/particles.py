@@ -68,8 +68,13 @@ def check_particles(scene: mpm.Scene, seed: int, key: str = "scene", samples: li
         ranges = [(int(s), n) for s, n in zip(np.cumsum([0] + counts[:-1]), counts)]
         spacing = [(dxp ** d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
         try:
-            resolve(scene.loads, np.concatenate(xs), np.concatenate(vols), np.concatenate(ids), ranges, spacing)
+            resolve(scene.loads, np.concatenate(xs), np.concatenate(vols), np.concatenate(ids), ranges, spacing,
+                    scene.dx)
         except LoadError as e:
+            if e.key == "at":  # a point load off its body
+                body = scene.loads[e.index].body
+                message = e.message if body is None else e.message.replace(f"of body {body}", f"of body '{names[body]}'")
+                raise ConfigError(f"{key}.loads[{e.index}].at", message) from None
             load = scene.loads[e.index]
             which = list(range(len(xs))) if load.body is None else [load.body]
             x = np.concatenate([xs[b] for b in which])

@@ -203,7 +203,7 @@ class RerunSink(Sink):
         static; a moving one is translated at every logged particle step."""
         self._moving = []
         for i, c in enumerate(meta.colliders):
-            path = f"colliders/{c.name or c.kind + str(i)}"
+            path = f"colliders/{c.name or c.type + str(i)}"
             color = (150, 150, 160)
             if meta.dim == 3:
                 v, f = surfaces.surface_3d(c, np.zeros(3), meta.domain)

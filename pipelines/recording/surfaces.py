@@ -102,9 +102,9 @@ def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3), triangles (m, 3)) of a 3D collider at its initial place."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     m = _Mesh()
-    if c.kind in ("half_space", "wedge"):
+    if c.type in ("half_space", "wedge"):
         p = np.asarray(c.point, float)
-        normals = [c.normal] if c.kind == "half_space" else list(c.normals)
+        normals = [c.normal] if c.type == "half_space" else list(c.normals)
         normals = [np.asarray(n, float) / np.linalg.norm(n) for n in normals]
         for i, n in enumerate(normals):
             poly = _box_edges_polygon(p, n, lo, hi)
@@ -113,11 +113,11 @@ def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
                     poly = _clip(poly, p, other)
             m.polygon(poly)
         return m.result()
-    if c.kind == "mesh":
+    if c.type == "mesh":
         pts, tris = c.mesh.geometry
         return np.asarray(pts, float), np.asarray(tris, np.int32)
     center = np.asarray(c.center, float)
-    if c.kind == "box":
+    if c.type == "box":
         h = np.asarray(c.half_size, float)
         corners = np.array([[(-1) ** (1 + ((i >> k) & 1)) for k in range(3)] for i in range(8)]) * h + center
         for k in range(3):
@@ -126,16 +126,16 @@ def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
                 quad = corners[[face[0], face[1], face[3], face[2]]]
                 m.polygon(quad)
         return m.result()
-    if c.kind == "sphere":
+    if c.type == "sphere":
         th = np.linspace(0, np.pi, N_AROUND // 2 + 1)
         profile = np.stack([c.radius * np.sin(th), -c.radius * np.cos(th)], axis=1)
         m.grid(_revolve(profile, center, np.array([0.0, 1.0, 0.0])))
         return m.result()
     axis = np.asarray(axis_vector(c.axis, 3))
-    if c.kind == "cylinder":
+    if c.type == "cylinder":
         r, h = c.radius, c.half_height
         profile = np.array([[0, -h], [r, -h], [r, h], [0, h]])
-    elif c.kind == "cup":
+    elif c.type == "cup":
         r, w, d = c.radius, c.thickness, c.depth
         profile = np.array([[0, -w], [r + w, -w], [r + w, d], [r, d], [r, 0], [0, 0]])
     else:  # bowl: outer cap, rim, inner cap (below the rim plane)
@@ -153,9 +153,9 @@ def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
 def outline_2d(c: Collider, lo, hi) -> list[np.ndarray]:
     """Polylines (each (n, 2)) of a 2D collider's boundary at its initial place."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    if c.kind in ("half_space", "wedge"):
+    if c.type in ("half_space", "wedge"):
         p = np.asarray(c.point, float)
-        normals = [c.normal] if c.kind == "half_space" else list(c.normals)
+        normals = [c.normal] if c.type == "half_space" else list(c.normals)
         normals = [np.asarray(n, float) / np.linalg.norm(n) for n in normals]
         box = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])
         solid = box
@@ -163,19 +163,19 @@ def outline_2d(c: Collider, lo, hi) -> list[np.ndarray]:
             solid = _clip(solid, p, n) if len(solid) else solid
         return [np.vstack([solid, solid[:1]])] if len(solid) else []
     center = np.asarray(c.center, float)
-    if c.kind == "box":
+    if c.type == "box":
         h = np.asarray(c.half_size, float)
         return [center + h * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]])]
     ang = np.linspace(0, 2 * np.pi, 2 * N_AROUND + 1)
-    if c.kind == "sphere":
+    if c.type == "sphere":
         return [center + c.radius * np.stack([np.cos(ang), np.sin(ang)], axis=1)]
     a = np.asarray(axis_vector(c.axis, 2))
     e = np.array([-a[1], a[0]])
     to = lambda rs: center + rs[:, :1] * e + rs[:, 1:] * a  # noqa: E731 - (radial, along) -> x
-    if c.kind == "cylinder":
+    if c.type == "cylinder":
         r, h = c.radius, c.half_height
         return [to(np.array([[-r, -h], [r, -h], [r, h], [-r, h], [-r, -h]]))]
-    if c.kind == "cup":
+    if c.type == "cup":
         r, w, d = c.radius, c.thickness, c.depth
         return [to(np.array([[-r - w, d], [-r - w, -w], [r + w, -w], [r + w, d], [r, d], [r, 0],
                              [-r, 0], [-r, d], [-r - w, d]]))]

@@ -408,7 +408,7 @@ class Recorder(mpm.Observer):
         return frac
 
     def collider_names(self) -> list[str]:
-        return [c.name or f"{c.kind}{i}" for i, c in enumerate(self.spec.scene.colliders)]
+        return [c.name or f"{c.type}{i}" for i, c in enumerate(self.spec.scene.colliders)]
 
     # ------------------------------------------------------------ finish
     def finish(self) -> None:

@@ -7,7 +7,8 @@ import pytest
 
 import mpm
 from collider_sdf import evaluate
-from mpm.colliders import Collider, kinds_of
+from mpm.collider_device import kinds_of
+from mpm.colliders import Collider
 from mpm.materials import FixedCorotated, Fluid
 from mpm.meshes import MeshShape
 from mpm.scene import Rotated, rotation_matrix
@@ -234,3 +235,44 @@ def test_only_the_scene_colliders_compile():
     model, _ = mpm.build(mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=[body], colliders=cols),
                          mpm.KERNELS["quadratic"])
     assert mpm.Solver(model).conditions.collider_kinds == ("half_space", "sphere")
+
+
+# ------------------------------------------------------------ the Python description
+def test_each_types_constructor_is_the_keyword_record():
+    """``Collider.<type>(...)`` builds the same collider as ``Collider(type, ...)``,
+    with the keys every collider has passed through."""
+    pairs = [
+        (Collider.half_space((0.5, 0.3), (0.0, 1.0), friction=0.2), Collider("half_space", point=(0.5, 0.3),
+                                                                             normal=(0.0, 1.0), friction=0.2)),
+        (Collider.wedge((0.5, 0.3), ((-1.0, 1.0), (1.0, 1.0))), Collider("wedge", point=(0.5, 0.3),
+                                                                        normals=((-1.0, 1.0), (1.0, 1.0)))),
+        (Collider.box((0.5, 0.5), (0.1, 0.2), boundary="sticky"), Collider("box", center=(0.5, 0.5),
+                                                                           half_size=(0.1, 0.2), boundary="sticky")),
+        (Collider.sphere((0.5, 0.5), 0.3, inside=True), Collider("sphere", center=(0.5, 0.5), radius=0.3, inside=True)),
+        (Collider.cylinder((0.5, 0.5, 0.5), 0.1, 0.2, axis=2), Collider("cylinder", center=(0.5, 0.5, 0.5), radius=0.1,
+                                                                        half_height=0.2, axis=2)),
+        (Collider.cup((0.5, 0.1), 0.2, 0.3, 0.05, velocity=(0.1, 0.0), end=1.0),
+         Collider("cup", center=(0.5, 0.1), radius=0.2, depth=0.3, thickness=0.05, velocity=(0.1, 0.0), end=1.0)),
+        (Collider.bowl((0.5, 0.5), 0.2, 0.05, 0.1), Collider("bowl", center=(0.5, 0.5), radius=0.2, thickness=0.05,
+                                                             rim=0.1)),
+    ]
+    for built, keyed in pairs:
+        assert built == keyed
+        assert built.problems(len(built.center if built.center is not None else built.point)) == []
+    assert {c.type for c, _ in pairs} | {"mesh"} == set(mpm.COLLIDER_KINDS)
+
+
+@pytest.mark.parametrize("collider, key", [
+    (Collider("cone", center=(0.5, 0.5)), "colliders[0].type"),
+    (Collider("box", center=(0.5, 0.5)), "colliders[0].half_size"),
+    (Collider("half_space", point=(0.5, 0.2)), "colliders[0].normal"),
+    (Collider.half_space((0.5, 0.2), (0.0, 1.0), boundary="glue"), "colliders[0].boundary"),
+    (Collider.half_space((0.5, 0.2), (0.0, 1.0), friction=-0.1), "colliders[0].friction"),
+    (Collider("mesh"), "colliders[0].mesh"),
+])
+def test_a_bad_collider_is_refused_naming_its_field(collider, key):
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, colliders=[collider],
+                      bodies=[mpm.Body(mpm.Sphere((0.5, 0.6), 0.1), FixedCorotated())])
+    with pytest.raises(mpm.SceneError) as e:
+        mpm.build(scene, mpm.QUADRATIC)
+    assert e.value.key == key, str(e.value)

@@ -10,7 +10,7 @@ import pytest
 
 import mpm
 from mpm.beams import bar_wave
-from mpm.loads import Load
+from mpm.loads import POINT_REACH, Load
 
 QUADRATIC = mpm.KERNELS["quadratic"]
 STEEL_LIKE = dict(E=1.0e4, nu=0.0, rho=100.0)  # c = 10 m/s
@@ -78,6 +78,20 @@ def test_point_and_body_loads_share_their_totals():
     assert half["volume"] == pytest.approx(0.25 * 0.1, rel=1e-12)  # the lattice rows inside x < 0.5
 
 
+def test_a_point_load_near_its_body_is_taken_and_one_off_it_refused():
+    """``at`` within POINT_REACH cells of the body's nearest particle loads the
+    nearest particles; farther it is refused naming ``at``, the distance and
+    the reach (it would load whatever particles are nearest)."""
+    dx = 1.0 / 32
+    edge = 0.75 - 0.25 * dx  # the bar's last particles (ppc 4: a quarter cell in)
+    near = mpm.build(bar_scene([Load.point((1.0, 0.0), at=(edge + 1.9 * dx, 0.25), count=2)]), QUADRATIC)[0]
+    assert near.loads.summary[0]["particles"] == 2
+    with pytest.raises(mpm.SceneError) as e:
+        mpm.build(bar_scene([Load.point((1.0, 0.0), at=(edge + 2.1 * dx, 0.25), count=2)]), QUADRATIC)
+    assert e.value.key == "loads[0].at" and "from the nearest particle of any body" in str(e.value)
+    assert f"within {POINT_REACH:g} cells" in str(e.value)
+
+
 def test_profiles():
     """Constant, ramp and table profiles inside their window, 0 outside."""
     f = (1.0, 0.0)
@@ -103,6 +117,9 @@ def test_profiles():
     (Load("body", (1.0, 0.0), start=1.0, end=1.0), "loads[0].end"),
     (Load("body", (1.0, 0.0), body=3), "loads[0].body"),
     (Load("body", (1.0, 0.0), select=mpm.Box((0.1, 0.1), (0.01, 0.01))), "loads[0].select"),
+    (Load("point", (1.0, 0.0), at=(1.5, 0.25)), "loads[0].at"),  # outside the domain
+    (Load("point", (1.0, 0.0), at=(0.95, 0.25)), "loads[0].at"),  # 0.2 m (6.4 cells) off the bar's end
+    (Load("point", (1.0, 0.0), at=(0.5, 0.4), body=0), "loads[0].at"),  # 0.1 m above it
 ])
 def test_a_bad_load_is_refused_naming_its_field(load, key):
     with pytest.raises(mpm.SceneError) as e:

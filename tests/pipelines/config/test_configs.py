@@ -153,7 +153,7 @@ def test_scene_resolves_to_its_file(scene):
     assert s.walls == (tuple([walls] * 2 * dim) if isinstance(walls, str) else tuple(walls))
     assert s.gravity == tuple(f["gravity"]) and s.contact == f.get("contact", schema.contact)
     assert s.dx == s.domain[0] / s.resolution
-    assert [c.kind for c in s.colliders] == [c["type"] for c in f.get("colliders") or []]
+    assert [c.type for c in s.colliders] == [c["type"] for c in f.get("colliders") or []]
     assert [c.name for c in s.colliders] == [c.get("name", "") for c in f.get("colliders") or []]
     assert len(s.regions) == len(f.get("regions") or [])
     assert [b.name for b in s.bodies] == [b["name"] for b in f["bodies"]]

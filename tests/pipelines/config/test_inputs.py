@@ -88,6 +88,11 @@ def test_a_closed_mesh_file_is_accepted_and_one_too_small_names_the_file(tmp_pat
      "scene.loads[0].select", ["of any body"]),
     (["scene=cantilever_2d", "scene.regions.0.select.center=[0.2,0.1]"], "scene.regions[0].select",
      ["region 'clamp'", "body 'beam'", "the body's particles", "domain"]),
+    (["scene=cantilever_2d", "scene.loads.0.kind=point", "scene.loads.0.select=null", "scene.loads.0.normal=null",
+      "scene.loads.0.at=[1.15,0.7]"], "scene.loads[0].at",
+     ["[1.15, 0.7] is 0.1064 m from the nearest particle of body 'beam'", "within 2 cells (0.05 m)"]),
+    (["scene=cantilever_2d", "scene.loads.0.kind=point", "scene.loads.0.select=null", "scene.loads.0.normal=null",
+      "scene.loads.0.at=[1.25,0.7]"], "scene.loads[0].at", ["outside the domain", "[0, 1.2] x [0, 0.9]"]),
     (["scene=cantilever_2d", "scene.regions.0.select.half_size=[0.001,0.001]"], "scene.regions[0].select",
      ["region 'clamp'"]),
     (["scene=yoyo", "scene.regions.0.select.center=[0.1,0.3,0.1]"], "scene.regions[0].select", ["'anchor'"]),
@@ -221,7 +226,7 @@ COMPOUND = "{type: compound, parts: [{type: box, center: [0.5,0.5], half_size: [
     (["scene=cantilever_2d", "scene.loads.0.select={type: sphere, center: [1.05,0.7], radius: 0.05}"],
      lambda s: type(s.loads[0].select).__name__ == "Sphere"),
     (["scene=viscous_cup", "scene.colliders.0={type: sphere, center: [0.5,0.1,0.5], radius: 0.1}"],
-     lambda s: s.colliders[0].kind == "sphere" and s.colliders[0].radius == 0.1  # the cup's keys gone:
+     lambda s: s.colliders[0].type == "sphere" and s.colliders[0].radius == 0.1  # the cup's keys gone:
      and s.colliders[0].depth == 0.0 and s.colliders[0].boundary == "slip" and s.colliders[0].name == ""),
     (["scene.bodies.0.shape={radius: 0.25}"],  # without its type: merged into the scene's
      lambda s: s.bodies[0].shape.radius == 0.25 and tuple(s.bodies[0].shape.center) == (0.5, 0.6)),

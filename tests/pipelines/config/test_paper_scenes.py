@@ -51,7 +51,7 @@ def test_collider_config_errors_are_one_line():
 def test_colliders_from_the_config():
     spec = spec_for(["scene=viscous_cup"])
     cup, = spec.scene.colliders
-    assert (cup.kind, cup.boundary, cup.friction, cup.depth, cup.thickness) == ("cup", "separate", 0.2, 0.35, 0.06)
+    assert (cup.type, cup.boundary, cup.friction, cup.depth, cup.thickness) == ("cup", "separate", 0.2, 0.35, 0.06)
     spec = spec_for(["scene=water_bunny", "scene.colliders.0.velocity=[0.0,1.0,0.0]",
                      "scene.colliders.0.end=0.5"])
     c = spec.scene.colliders[0]
