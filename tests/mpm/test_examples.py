@@ -1,7 +1,11 @@
-"""The examples in examples/ run, and what they compute is right."""
+"""The examples in examples/ run, what they compute is right, and each
+refuses a bad argument with one line and exit code 2 before it builds
+anything."""
 
 from __future__ import annotations
 
+import csv
+import functools
 import importlib.util
 import os
 import subprocess
@@ -9,15 +13,34 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
+import warp as wp
 
 ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples"
+SCRIPTS = ("drop_ball", "slope_push", "stiffness_study")
 
 
+@functools.cache
 def load(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / f"{name}.py")
+    """An example as a module, loaded by path. Its folder goes on the path
+    first, as when Python runs it as a script (the scripts share examples/_args.py)."""
+    if str(EXAMPLES) not in sys.path:
+        sys.path.insert(0, str(EXAMPLES))
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def script(name: str, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """``python examples/<name>.py args``. A script's own folder comes first
+    on its path, not the working directory: PYTHONPATH names the checkout,
+    so that the script imports this checkout's packages (as the tests do),
+    not another installed copy."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT, env=env)
 
 
 def test_drop_ball_falls_freely_under_the_driver(device):
@@ -42,13 +65,119 @@ def test_drop_ball_falls_freely_under_the_driver(device):
     assert np.abs(E - E[0]).max() <= m * g**2 * dt * t.max()
 
 
-def test_drop_ball_script_prints_its_outcome():
-    """``python examples/drop_ball.py`` runs as a script and reports a completed run.
-    A script's own folder comes first on its path, not the working directory:
-    PYTHONPATH names the checkout, so that the script imports this checkout's
-    packages (as the tests do), not another installed copy."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    out = subprocess.run([sys.executable, str(ROOT / "examples" / "drop_ball.py"), "--duration", "0.3"],
-                         capture_output=True, text=True, timeout=600, cwd=ROOT, env=env)
+def test_drop_ball_script_prints_its_outcome(device):
+    out = script("drop_ball", "--duration", "0.3", "--device", device)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("completed after") and "at the floor" in out.stdout
+
+
+def test_drop_ball_reports_a_run_too_short_to_land(device, capsys):
+    # a few steps: the lowest state is the last, whose elastic energy no step has measured yet
+    assert load("drop_ball").main(["--duration", "0.002", "--resolution", "16", "--device", device]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("completed after") and " end: " in out
+
+
+@pytest.mark.parametrize("friction,push", [(0.3, 2.0), (0.6, 2.0)])
+def test_slope_blocks_slide_at_coulomb_acceleration_and_the_push_adds_to_it(device, friction, push):
+    """On the 25 deg slope the free block slides at a = g (sin - mu cos)
+    (with mu = 0.6 > tan 25 deg friction holds it) and the pushed one at
+    a + b, b the push per unit mass. The fitted accelerations are within 2 %
+    of the forces per unit mass that balance (g sin, mu g cos, b) of the
+    closed forms at 20 cells per metre; no particle ends inside the slope."""
+    example = load("slope_push")
+    driver, track, _ = example.slide(duration=0.3, friction=friction, push=push, device=device)
+    assert driver.outcome.status == "completed"
+    th = np.radians(example.THETA)
+    scale = example.G * (np.sin(th) + friction * np.cos(th))
+    free, pushed = example.expected(friction, push)
+    a = track.acceleration()
+    t, v = np.array(track.t), np.array(track.v)
+    travel = np.array(track.s)[-1] - np.array(track.s)[0]
+    if free > 0.0:
+        assert a[0] == pytest.approx(free, abs=0.02 * scale)
+    else:  # held: it moves less than a third of a cell while friction builds up, then stops
+        assert abs(travel[0]) < 0.35 / 20 and abs(v[-1, 0]) < 0.01 and np.abs(v[t > 0.15, 0]).max() < 0.05
+    assert a[1] == pytest.approx(pushed, abs=0.02 * (scale + push))
+    assert travel[1] > max(travel[0], 0.0) + 0.04
+    solver = driver.solver
+    assert solver.conditions.inside_colliders(driver.state.x, solver.time).tolist() == [0]
+
+
+def test_slope_script_prints_both_blocks(device):
+    out = script("slope_push", "--duration", "0.08", "--resolution", "16", "--device", device)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("completed after")
+    assert lines[2].startswith("block 0 (  free)") and lines[3].startswith("block 1 (pushed)")
+
+
+def test_stiffness_study_writes_one_row_per_modulus_and_a_plot(device, tmp_path):
+    """One CSV row per modulus, every run completed, the stiffer disc
+    compresses less; the plot is a PNG; ``--out`` is created."""
+    out_dir = tmp_path / "new" / "study"
+    E = (2.5e4, 1e5, 4e5)
+    out = script("stiffness_study", "--E", ",".join(map(str, E)), "--duration", "0.25",
+                 "--resolution", "32", "--device", device, "--out", str(out_dir))
+    assert out.returncode == 0, out.stderr
+    with open(out_dir / "stiffness_study.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [float(r["E_Pa"]) for r in rows] == list(E)
+    assert all(r["status"] == "completed" and int(r["steps"]) > 0 for r in rows)
+    squash = [float(r["peak_compression"]) for r in rows]
+    assert squash[0] > squash[1] > squash[2] > 0.0
+    assert (out_dir / "stiffness_study.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "peak compression ~ E^k" in out.stdout
+
+
+# ------------------------------------------------------------ bad arguments
+DURATIONS = ["nan", "inf", "-1", "0", "x"]
+BAD = [(name, "--duration", value) for name in SCRIPTS for value in DURATIONS] + [
+    (name, "--device", value) for name in SCRIPTS for value in ("tpu", "cuda", "cuda:7")] + [
+    ("drop_ball", "--resolution", "8"), ("drop_ball", "--scheme", "mls"),
+    ("slope_push", "--resolution", "1.5"), ("slope_push", "--friction", "-0.1"), ("slope_push", "--push", "nan"),
+    ("stiffness_study", "--resolution", "1000"), ("stiffness_study", "--E", "5e4,nan"),
+    ("stiffness_study", "--E", "5e4,-1"), ("stiffness_study", "--E", "5e4,,1e5"), ("stiffness_study", "--E", ""),
+    ("stiffness_study", "--E", "1e12"), ("stiffness_study", "--out", "FILE"), ("stiffness_study", "--out", "FILE/sub"),
+]
+
+
+def _value(value: str, tmp_path: Path) -> str:
+    if value.startswith("FILE"):  # an existing file, not a folder
+        (tmp_path / "FILE").write_text("")
+        return str(tmp_path / value)
+    return value
+
+
+def _skip_cuda_with_a_gpu(option: str, value: str) -> None:
+    n = wp.get_cuda_device_count()
+    if option == "--device" and value.startswith("cuda") and (value == "cuda" or int(value[5:]) < n) and n:
+        pytest.skip("a CUDA device exists here: this --device is accepted")
+
+
+@pytest.mark.parametrize("name,option,value", BAD)
+def test_a_bad_argument_is_one_line_and_exit_code_2(name, option, value, tmp_path, capsys):
+    """In the process: ``main`` exits with code 2 while it parses, one line
+    on stderr, ``error: <option>: ...`` with what is accepted, nothing on stdout."""
+    _skip_cuda_with_a_gpu(option, value)
+    with pytest.raises(SystemExit) as exit_:
+        load(name).main([f"{option}={_value(value, tmp_path)}"])
+    assert exit_.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith(f"error: {option}: ")
+    assert "accepted: " in err
+
+
+@pytest.mark.parametrize("name,option,value", [
+    ("drop_ball", "--duration", "-1"), ("drop_ball", "--duration", "nan"), ("slope_push", "--device", "cuda"),
+    ("stiffness_study", "--out", "FILE"),
+])
+def test_a_bad_argument_ends_the_script_at_once(name, option, value, tmp_path):
+    """As a script: exit code 2, one line on stderr (Warp's own start-up
+    messages silenced), no traceback, well within the time limit (``--duration
+    nan`` used to hang, ``-1`` to end in a traceback)."""
+    _skip_cuda_with_a_gpu(option, value)
+    out = script(name, option, _value(value, tmp_path), timeout=60)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.count("\n") == 1 and out.stderr.startswith(f"error: {option}: "), out.stderr
+    assert "Traceback" not in out.stderr
