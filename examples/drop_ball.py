@@ -58,8 +58,8 @@ def drop(duration: float = 0.4, scheme: str = "aulmpm", device: str = "cpu", res
     driver and its trajectory."""
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=resolution, gravity=(0.0, -9.81),
                       bodies=[mpm.Body(mpm.Sphere((0.5, 0.4), 0.1), mpm.NeoHookean(E=1.0e5, nu=0.3, rho=1000.0))])
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", device)
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(track_energy=True, track_J=True))
+    model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(track_energy=True))
     trajectory = Trajectory(model.mass.numpy().astype(np.float64))
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[trajectory])
     driver.run()

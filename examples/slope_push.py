@@ -1,7 +1,7 @@
 """Two elastic blocks slide down a rough slope in 3D; a body force pushes
 one of them down the slope. Built with ``mpm`` alone: the slope is a rigid
-collider (``mpm.Collider``, a half-space with Coulomb friction), the push an
-external load (``mpm.loads.Load``, a body force ramped in), the scheme
+collider (``mpm.Collider.half_space``, with Coulomb friction), the push an
+external load (``mpm.Load.body_force``, ramped in), the scheme
 A-ULMPM (by default).
 
     python examples/slope_push.py [--duration 0.3] [--friction 0.3] [--push 2]
@@ -26,7 +26,6 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no start-up banner or module-load lines
 
 import mpm  # noqa: E402
-from mpm.loads import Load  # noqa: E402
 from mpm.scene import Rotated, rotation_matrix  # noqa: E402
 from _args import Parser, bounded, choice, device, integer, positive  # noqa: E402 (this folder)
 
@@ -34,7 +33,7 @@ G = 9.81  # [m/s^2]
 THETA = 25.0  # the slope [deg]
 RHO = 1000.0  # the blocks' density [kg/m^3]
 RAMP = 0.02  # the push grows from 0 to full over this time [s]
-SETTLE = 0.05  # the blocks land on the slope within this time [s]; the fit starts after it
+SETTLE = 0.05  # the blocks settle on the slope within this time [s]; the fit starts after it
 
 
 class AlongSlope(mpm.Observer):
@@ -93,13 +92,12 @@ def slide(duration: float = 0.3, friction: float = 0.3, push: float = 2.0, resol
         c[2] = z
         blocks.append(mpm.Body(Rotated(mpm.Box(tuple(c), tuple(half)), turn),
                                mpm.NeoHookean(E=1.0e5, nu=0.3, rho=RHO)))
-    slope = mpm.Collider("half_space", boundary="separate", friction=friction, point=tuple(foot),
-                         normal=tuple(normal))
-    pushed = Load("body", force=tuple(RHO * push * down), body=1, ramp=RAMP)
+    slope = mpm.Collider.half_space(foot, normal, boundary="separate", friction=friction)
+    pushed = mpm.Load.body_force(RHO * push * down, body=1, ramp=RAMP)
     scene = mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=resolution, gravity=(0.0, -G, 0.0),
                       walls=("slip",) * 6, ppc=8, bodies=blocks, colliders=[slope], loads=[pushed])
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", device)
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(track_energy=True, track_J=True))
+    model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
     track = AlongSlope(model, down)
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
     driver.run()

@@ -66,8 +66,8 @@ def drop(E: float, duration: float, resolution: int, scheme: str, device: str) -
     """One run: the disc of modulus ``E`` [Pa] dropped for ``duration`` [s]; its row of COLUMNS."""
     ball = mpm.Body(mpm.Sphere((0.5, 0.3), 0.1), mpm.NeoHookean(E=E, nu=0.3, rho=1000.0))
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=resolution, gravity=(0.0, -9.81), bodies=[ball])
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32", device)
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(track_energy=True, track_J=True))
+    model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(track_energy=True))
     squash = Squash(model.mass.numpy().astype(np.float64))
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[squash])
     start = time.perf_counter()
