@@ -117,7 +117,8 @@ def main(argv=None) -> int:
     parser.add_argument("--friction", type=bounded(0.0, 2.0, "-"), default=0.3, help="Coulomb coefficient mu")
     parser.add_argument("--push", type=bounded(0.0, 10.0, "m/s^2"), default=2.0,
                         help="the body force on block 1 per unit mass, down the slope [m/s^2]")
-    parser.add_argument("--resolution", type=integer(16, 48), default=20, help="grid cells along each side of the 1 m box")
+    parser.add_argument("--resolution", type=integer(16, 48), default=20,
+                        help="grid cells along each side of the 1 m box")
     parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="aulmpm", help=", ".join(mpm.SCHEMES))
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     args = parser.parse_args(argv)
