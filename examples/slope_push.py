@@ -26,7 +26,6 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no start-up banner or module-load lines
 
 import mpm  # noqa: E402
-from mpm.scene import Rotated, rotation_matrix  # noqa: E402
 from _args import Parser, bounded, choice, device, integer, positive  # noqa: E402 (this folder)
 
 G = 9.81  # [m/s^2]
@@ -85,12 +84,12 @@ def slide(duration: float = 0.3, friction: float = 0.3, push: float = 2.0, resol
     normal = np.array([np.sin(th), np.cos(th), 0.0])  # out of the slope
     foot = np.array([0.5, 0.35, 0.5])  # a point of the slope's surface [m]
     half = np.array([0.1, 0.05, 0.075])  # the blocks' half sizes: along, across the slope, sideways [m]
-    turn = rotation_matrix((0.0, 0.0, -THETA), 3)  # x onto the downhill direction, y onto the normal
+    turn = mpm.rotation_matrix((0.0, 0.0, -THETA), 3)  # x onto the downhill direction, y onto the normal
     blocks = []
     for z in (0.35, 0.65):
         c = foot - 0.2 * down + normal * half[1]  # 0.2 m uphill of the foot, on the slope
         c[2] = z
-        blocks.append(mpm.Body(Rotated(mpm.Box(tuple(c), tuple(half)), turn),
+        blocks.append(mpm.Body(mpm.Rotated(mpm.Box(tuple(c), tuple(half)), turn),
                                mpm.NeoHookean(E=1.0e5, nu=0.3, rho=RHO)))
     slope = mpm.Collider.half_space(foot, normal, boundary="separate", friction=friction)
     pushed = mpm.Load.body_force(RHO * push * down, body=1, ramp=RAMP)

@@ -152,10 +152,13 @@ def rotation_matrix(angles, dim: int) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Rotated:
-    """``shape`` turned by the rotation matrix ``R`` about its centre."""
+    """``shape`` turned by the rotation matrix ``R`` about its centre
+    (``Rotated(shape, rotation_matrix(angles, dim))``)."""
 
     shape: object
+    """the shape turned (any shape of a body)"""
     R: np.ndarray
+    """d x d rotation matrix (:func:`rotation_matrix`)"""
 
     @property
     def center(self):
