@@ -84,7 +84,7 @@ def run(cfg: DictConfig) -> dict:
             _last_status.append(done["status"])
             return done
     if spec.stability_map is not None:  # a stability map: its points in this process
-        from ..sweeps.stability import run_map
+        from .stability_map import run_map
 
         metrics = run_map(spec, spec.stability_map, out_dir, identity)
     else:
