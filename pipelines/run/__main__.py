@@ -192,7 +192,7 @@ def main() -> None:
         _config_errors.append(message)
     if _config_errors:  # run() has printed its own
         sys.exit(EXIT_CONFIG)
-    from ..sweeps.callback import SWEEPS
+    from .multiruns import SWEEPS
 
     if SWEEPS:  # a multirun: the worst outcome of any job (the summary line is printed)
         statuses = {s for outcome in SWEEPS for s in outcome}
