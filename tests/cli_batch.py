@@ -17,14 +17,14 @@ sys.path[0] = os.getcwd()
 
 from hydra.core.global_hydra import GlobalHydra  # noqa: E402
 
-from pipelines.sweeps import callback  # noqa: E402
+from pipelines.run import multiruns  # noqa: E402
 
 
 def one(args: list[str]) -> tuple[int, str]:
     """One command line, as ``python -m pipelines.run`` runs it (the module
     runs afresh as __main__: Hydra finds conf/ from its file)."""
     GlobalHydra.instance().clear()
-    callback.SWEEPS.clear()
+    multiruns.SWEEPS.clear()
     sys.argv = ["pipelines/run/__main__.py", *args]
     err = io.StringIO()
     code = 0

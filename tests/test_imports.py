@@ -8,7 +8,10 @@ submodule of the package it comes from (``from pkg import mod``:
 ``pkg.mod``), else the package itself (a package is its ``__init__``);
 relative imports are resolved against the importing module's package. The
 report imports every module of ``pipelines.report.sections`` by name
-(pkgutil): it counts as importing each of them."""
+(pkgutil): it counts as importing each of them.
+
+The packages of ``pipelines`` stand on floors (:data:`PIPELINES_FLOORS`):
+every import from one package to another points down."""
 
 from __future__ import annotations
 
@@ -22,6 +25,17 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mpm", "pipelines")
 NOT_IN_THE_SOLVER = ("hydra", "omegaconf", "rerun")
 DISCOVERS = {"pipelines.report": "pipelines.report.sections"}  # importer: package of modules it imports
+# bottom to top: a package (or top-level module) of pipelines imports only those on floors below its own
+PIPELINES_FLOORS = [
+    ("pipelines",),  # the package's own __init__
+    ("pipelines.config",),  # the config groups, their checks, RunSpec
+    ("pipelines.recording",),  # logging a run, reading a recording back, drawing it
+    ("pipelines.run",),  # one job: the run (or stability map) of one config, and the Hydra entry
+    ("pipelines.report",),  # the report of a sweep's jobs
+    ("pipelines.sweeps",),  # the end of a multirun: its report and outcomes
+    ("pipelines.bench", "pipelines.replay", "pipelines.material_point", "pipelines.granular",
+     "pipelines.cfl_bound"),  # the other commands
+]
 
 
 def find_modules(root: Path, packages=PACKAGES) -> dict[str, tuple[Path, bool]]:
@@ -156,6 +170,74 @@ def test_the_check_finds_a_circle(tmp_path):
     (pkg / "b.py").write_text("from mpm.sub import a\n")
     cycles = describe_cycles(import_graph(find_modules(tmp_path, ("mpm",)), tmp_path))
     assert len(cycles) == 1 and "mpm.other, mpm.sub.a, mpm.sub.b" in cycles[0], cycles
+
+
+def pipelines_unit(module: str) -> str | None:
+    """The package or top-level module of ``pipelines`` holding ``module``
+    (``pipelines.run.runner``: ``pipelines.run``; ``pipelines`` itself: ``pipelines``), else None."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "pipelines" else None
+
+
+def floor_violations(graph: dict[str, dict[str, str]], floors=PIPELINES_FLOORS) -> list[str]:
+    """What breaks the floors of ``pipelines``, a line each. The package
+    graph has an edge A -> B for every module of package A importing a
+    module of another package B (:func:`import_graph`: imports inside
+    functions and the report's discovery of its sections count); each edge
+    must go from a higher floor to a lower one, so two packages on one floor
+    import neither each other. A package on no floor breaks them too."""
+    floor = {unit: i for i, units in enumerate(floors) for unit in units}
+    out = [f"{unit} is on no floor: add it to PIPELINES_FLOORS"
+           for unit in sorted({pipelines_unit(m) for m in graph} - {None} - set(floor))]
+    for importer in sorted(graph):
+        a = pipelines_unit(importer)
+        for imported, where in sorted(graph[importer].items()):
+            b = pipelines_unit(imported)
+            if a is None or b is None or a == b or a not in floor or b not in floor or floor[a] > floor[b]:
+                continue
+            out.append(f"{importer} ({where}) imports {imported}: {a} (floor {floor[a]}) may import only "
+                       f"packages on floors below its own, and {b} is on floor {floor[b]}")
+    return out
+
+
+def test_pipelines_packages_point_down():
+    graph = import_graph(find_modules(ROOT))
+    units = {pipelines_unit(m) for m in graph} - {None}
+    assert {"pipelines.run", "pipelines.sweeps", "pipelines.report", "pipelines.replay"} <= units
+    declared = [unit for units in PIPELINES_FLOORS for unit in units]
+    assert len(declared) == len(set(declared)) and set(declared) <= units, declared
+    violations = floor_violations(graph)
+    assert not violations, "imports between pipelines packages that do not point down " \
+                           "(tests/test_imports.py: PIPELINES_FLOORS):\n" + "\n".join(violations)
+
+
+def test_the_check_finds_an_import_up_a_floor(tmp_path):
+    """An import inside a function from a lower package up to a higher one,
+    an import between two packages of one floor and a package on no floor
+    are each said, with the importing module and where."""
+    root = tmp_path / "pipelines"
+    for pkg in ("low", "high"):
+        (root / pkg).mkdir(parents=True)
+        (root / pkg / "__init__.py").write_text("")
+    (root / "__init__.py").write_text("")
+    (root / "low" / "a.py").write_text("VALUE = 1\n")
+    (root / "high" / "b.py").write_text("from ..low import a\n")
+    (root / "tool.py").write_text("import pipelines.high.b\n")
+    floors = [("pipelines",), ("pipelines.low",), ("pipelines.high",), ("pipelines.tool",)]
+
+    def violations(floors=floors):
+        return floor_violations(import_graph(find_modules(tmp_path, ("pipelines",)), tmp_path), floors)
+
+    assert violations() == []
+    (root / "low" / "a.py").write_text("VALUE = 1\n\n\ndef f():\n    from ..high import b\n")
+    found = violations()
+    assert len(found) == 1 and found[0].startswith(
+        "pipelines.low.a (pipelines/low/a.py:5) imports pipelines.high.b: pipelines.low (floor 1)"), found
+    (root / "low" / "a.py").write_text("VALUE = 1\n")
+    same = violations([("pipelines",), ("pipelines.low",), ("pipelines.high", "pipelines.tool")])
+    assert len(same) == 1 and same[0].startswith("pipelines.tool (pipelines/tool.py:1) imports pipelines.high.b"), same
+    (root / "new.py").write_text("")
+    assert violations() == ["pipelines.new is on no floor: add it to PIPELINES_FLOORS"]
 
 
 def test_solver_imports_neither_hydra_omegaconf_nor_rerun():

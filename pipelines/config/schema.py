@@ -47,7 +47,7 @@ class Config:
     detect: mpm.Detection = setting(mpm.Detection(), "blow-up detection (mpm.stepping.detection)")
     seed: int = setting(0, "seeds the random particle sampling and random shape rotations", ge=0)
     scale: Any = setting(None, "sizes of the named experiments (conf/scale), read by conf/experiment")
-    stability_map: Optional[MapSpec] = setting(None, "the job is a stability map (pipelines.sweeps.stability)")
+    stability_map: Optional[MapSpec] = setting(None, "the job is a stability map (pipelines.run.stability_map)")
     expected: Optional[str] = setting(None, "the outcome a case of the extreme suite should have (conf/extreme)")
 
 

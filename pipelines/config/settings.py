@@ -137,7 +137,7 @@ class KernelConfig:
 
 @dataclass
 class MapSpec:
-    """The points of a stability map (pipelines.sweeps.stability)."""
+    """The points of a stability map (pipelines.run.stability_map)."""
 
     E: List[float] = setting([], "stiffness [Pa]: Young's modulus (a fluid's bulk modulus)", gt=0.0,
                              nonempty="a list of numbers > 0")

@@ -46,7 +46,7 @@ class RunSpec:
     seed: int
     integrator: Any = field(default_factory=Explicit)  # mpm.integrators
     detect: mpm.Detection = field(default_factory=mpm.Detection)  # blow-up detection (mpm.stepping.detection)
-    stability_map: MapSpec | None = None  # the job is a stability map (pipelines.sweeps.stability)
+    stability_map: MapSpec | None = None  # the job is a stability map (pipelines.run.stability_map)
     flip: float = 0.95  # the flip transfer's blend (mpm.SolverOptions.flip)
     material_used: bool = True  # some body takes the material group (else every body brings its own)
     # the particles the check sampled (mpm.model.sample_bodies), handed to mpm.build once (take_samples)

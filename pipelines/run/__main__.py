@@ -84,7 +84,7 @@ def run(cfg: DictConfig) -> dict:
             _last_status.append(done["status"])
             return done
     if spec.stability_map is not None:  # a stability map: its points in this process
-        from ..sweeps.stability import run_map
+        from .stability_map import run_map
 
         metrics = run_map(spec, spec.stability_map, out_dir, identity)
     else:
@@ -192,7 +192,7 @@ def main() -> None:
         _config_errors.append(message)
     if _config_errors:  # run() has printed its own
         sys.exit(EXIT_CONFIG)
-    from ..sweeps.callback import SWEEPS
+    from .multiruns import SWEEPS
 
     if SWEEPS:  # a multirun: the worst outcome of any job (the summary line is printed)
         statuses = {s for outcome in SWEEPS for s in outcome}

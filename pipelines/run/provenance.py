@@ -64,7 +64,7 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
 
 # pipeline code that reads results but never shapes a run (paths below pipelines/, folders ending in /)
 POST_PROCESSING = ("report/", "bench/", "recording/recordings.py", "recording/replay.py", "replay.py",
-                   "sweeps/callback.py")
+                   "sweeps/callback.py", "run/multiruns.py")
 
 
 def code_hash(root: Path = REPO) -> str:

@@ -1,2 +1,2 @@
 """Sweeps: the end of a multirun (``callback``: the report and the jobs per
-status) and the stability-map jobs (``stability``)."""
+status)."""

@@ -1,7 +1,7 @@
 """The end of a multirun: :class:`ReportCallback` writes the sweep report
 (:func:`pipelines.report.write_report`) and counts the jobs per status
-(:data:`SWEEPS`, from which ``python -m pipelines.run`` takes a sweep's exit
-code)."""
+(into :data:`pipelines.run.multiruns.SWEEPS`, from which ``python -m
+pipelines.run`` takes a sweep's exit code)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 from hydra.experimental.callback import Callback
 
 from ..report import write_report
+from ..run.multiruns import SWEEPS
 
 
 class ReportCallback(Callback):
@@ -35,9 +36,6 @@ class ReportCallback(Callback):
         SWEEPS.append(outcomes)
         print(f"sweep {sweep}: " + ", ".join(f"{n} {status}" for status, n in sorted(outcomes.items()))
               + (f"; report: {report}" if report is not None else ""), file=sys.stderr)
-
-
-SWEEPS: list[dict[str, int]] = []  # per multirun of this process: jobs per status (pipelines.run's exit code)
 
 
 def sweep_outcomes(sweep_dir: Path) -> dict[str, int]:

@@ -177,7 +177,7 @@ def test_every_config_key_refuses_bad_values_in_one_line(base):
 
 
 # ------------------------------------------------------------------ the other entry points' options
-MAINS = {"pipelines.replay": "pipelines.recording.replay", "pipelines.report": "pipelines.report",
+MAINS = {"pipelines.replay": "pipelines.replay", "pipelines.report": "pipelines.report",
          "pipelines.material_point": "pipelines.material_point", "pipelines.bench": "pipelines.bench.__main__",
          "pipelines.granular": "pipelines.report.sections.granular", "pipelines.cfl_bound": "pipelines.cfl_bound"}
 

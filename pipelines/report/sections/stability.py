@@ -1,4 +1,4 @@
-"""Stability maps (``+experiment=stability``, :mod:`pipelines.sweeps.stability`):
+"""Stability maps (``+experiment=stability``, :mod:`pipelines.run.stability_map`):
 per scene one heat map per combination (a scheme, kernel, transfer and
 integrator), the failure step as colour, and the largest stable step
 multiple k per combination and stiffness (stability.csv, stability.md)."""
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...sweeps.stability import MAP_KEY
+from ...run.stability_map import MAP_KEY
 from ..common import absent, fmt, md_table, pyplot, write_csv
 from ..registry import section
 

@@ -32,7 +32,7 @@ def test_the_body_bound_predicts_the_stiff_balls_growth():
     import mpm
     from helpers import spec_for
     from pipelines.cfl_bound import body_bound
-    from pipelines.sweeps.stability import cfl_limit, point_spec
+    from pipelines.run.stability_map import cfl_limit, point_spec
 
     spec = point_spec(spec_for(["scene=stability_ball_2d", "run.precision=float64"]), 1e12, 1.2, 60)
     model, state = mpm.build(spec.scene, spec.kernel, "float64", "cpu", spec.seed, samples=spec.take_samples())

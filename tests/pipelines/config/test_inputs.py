@@ -355,7 +355,7 @@ def test_the_material_point_summary_and_table_are_float64(argv, closed_form, tmp
 
 
 def test_replay_and_report_refuse_an_existing_file_as_an_output_folder(tmp_path):
-    from pipelines.recording.replay import main as replay
+    from pipelines.replay import main as replay
     from pipelines.report import main as report
 
     (tmp_path / "f.png").write_text("not a folder")
@@ -368,7 +368,7 @@ def test_replay_and_report_refuse_an_existing_file_as_an_output_folder(tmp_path)
 
 
 def test_replay_of_a_timings_file_says_what_to_replay(tmp_path):
-    from pipelines.recording.replay import main as replay
+    from pipelines.replay import main as replay
 
     timings = tmp_path / "recording.timings.rrd"
     timings.write_bytes(np.zeros(8, np.uint8).tobytes())

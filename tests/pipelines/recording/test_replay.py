@@ -133,7 +133,7 @@ def test_a_file_that_is_no_recording_is_one_line(tmp_path):
 def test_every_below_one_is_refused_in_one_line(tmp_path, every):
     """--every N takes every N-th logged step: N < 1 is refused before the
     recording is read, naming the option and what it accepts."""
-    from pipelines.recording.replay import main
+    from pipelines.replay import main
 
     import contextlib
     import io

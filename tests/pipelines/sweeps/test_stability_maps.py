@@ -1,4 +1,4 @@
-"""The stability-map jobs (pipelines.sweeps.stability) and the extreme-case
+"""The stability-map jobs (pipelines.run.stability_map) and the extreme-case
 suite's configs."""
 
 import numpy as np
@@ -20,14 +20,14 @@ def test_every_extreme_case_resolves(case, scale):
 
 
 def test_map_job_runs_its_points(tmp_path):
-    """A stability-map job (pipelines.sweeps.stability.run_map): every point runs at
+    """A stability-map job (pipelines.run.stability_map.run_map): every point runs at
     k times the CFL limit of its stiffness; below the limit the point
     completes, far above it the point stops unstable with its step and
     criterion; the job's metrics.json holds the map and the points' own
     metrics are not jobs of the sweep."""
     from pipelines.report.jobs import load_jobs
     from pipelines.report.sections.stability import largest_stable
-    from pipelines.sweeps.stability import run_map
+    from pipelines.run.stability_map import run_map
     from pipelines.config.validate import MapSpec
 
     spec = spec_for(["scene=stability_ball_2d"])
@@ -60,7 +60,7 @@ def test_the_maps_ball_is_excited_whatever_its_kernel(tmp_path):
 
     from pipelines.recording.sinks import Sink
     from pipelines.run.runner import execute
-    from pipelines.sweeps.stability import point_spec
+    from pipelines.run.stability_map import point_spec
 
     spec = spec_for(["scene=stability_ball_2d", "kernel=linear"])
     assert spec.scene.bodies[0].deformation is not None

@@ -33,7 +33,7 @@ import numpy as np
 
 import mpm
 
-from ..run.runner import execute, write_metrics
+from .runner import execute, write_metrics
 from ..recording.sinks import Sink
 from ..config.validate import MapSpec
 
