@@ -41,7 +41,7 @@ import tempfile
 from pathlib import Path
 
 from .recording import recordings
-from .recording.replay import open_viewer, render_frames
+from .recording.display import open_viewer, render_frames
 from .run import provenance, runner
 
 

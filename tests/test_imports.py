@@ -277,19 +277,24 @@ LAYOUT = ROOT / "docs" / "layout.md"
 
 
 def listed_in_layout(package: str, relpath: str, text: str) -> bool:
-    """Whether docs/layout.md's section of ``package`` (its heading names
-    ``package/``) lists the module at ``relpath`` (relative to the package):
-    as `relpath` itself, or as `name.py` in a table row that names its
-    folder `folder/`."""
-    sections = re.split(r"^## ", text, flags=re.M)
-    section = next((s for s in sections if s.startswith(f"`{package}/`")), "")
+    """Whether docs/layout.md's section of ``package`` (its ``## `package/` ``
+    heading) lists the module at ``relpath`` (relative to the package): as
+    `relpath` itself, as `name.py` in a table under a ``### `folder/` ``
+    heading of its first folder or in a row naming its folder, or, for a
+    module at the package's top, as `name.py` in a row's first cell."""
+    section = next((s for s in re.split(r"^## ", text, flags=re.M) if s.startswith(f"`{package}/`")), "")
     folder, _, name = relpath.rpartition("/")
-    if folder and f"`{relpath}`" in section:
+    rows = lambda part: [line for line in part.splitlines() if line.startswith("|")]  # noqa: E731
+    parts = re.split(r"^### ", section, flags=re.M)
+    if not folder:  # in a row's first cell, outside the subsections of folders
+        top = parts[:1] + [s for s in parts[1:] if not re.search(r"`\w+/`", s.split("\n")[0])]
+        return any(f"`{name}`" in row.split("|")[1] for part in top for row in rows(part))
+    if f"`{relpath}`" in section:
         return True
-    rows = [line for line in section.splitlines() if line.startswith("|")]
-    if not folder:  # a top-level module: in a row that is not a folder's
-        return any(f"`{name}`" in row for row in rows if not re.match(r"\|\s*`\w+/`", row))
-    return any(f"`{folder}/`" in row and f"`{name}`" in row for row in rows)
+    first = relpath.split("/")[0]
+    subsections = [s for s in parts[1:] if f"`{first}/`" in s.split("\n")[0]]
+    return (any(f"`{name}`" in row for part in subsections for row in rows(part))
+            or any(f"`{folder}/`" in row and f"`{name}`" in row for row in rows(section)))
 
 
 def test_every_module_is_in_the_layout_guide():
@@ -309,8 +314,11 @@ def test_every_module_is_in_the_layout_guide():
 
 def test_the_layout_check_reads_rows_and_folders():
     text = ("## `pkg/`: x\n\n| a | b |\n|---|---|\n| `sub/` | `one.py` (one), `two.py` |\n"
-            "| `top.py` | top |\n| `sub/three.py` | three |\n")
+            "| `top.py` | top |\n| `sub/three.py` | three |\n\n### `deep/`: y\n\n| `five.py` | five |\n"
+            "\n| `inner/` | what |\n|---|---|\n| `six.py` | six |\n\n## `other/`\n\n| `seven.py` | x |\n")
     assert listed_in_layout("pkg", "sub/one.py", text) and listed_in_layout("pkg", "sub/two.py", text)
     assert listed_in_layout("pkg", "top.py", text) and listed_in_layout("pkg", "sub/three.py", text)
+    assert listed_in_layout("pkg", "deep/five.py", text) and listed_in_layout("pkg", "deep/inner/six.py", text)
     assert not listed_in_layout("pkg", "sub/four.py", text) and not listed_in_layout("pkg", "one.py", text)
-    assert not listed_in_layout("other", "top.py", text)
+    assert not listed_in_layout("pkg", "five.py", text) and not listed_in_layout("pkg", "sub/five.py", text)
+    assert not listed_in_layout("other", "top.py", text) and not listed_in_layout("pkg", "deep/seven.py", text)

@@ -23,7 +23,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-from .replay import rerun_executable
+from .display import rerun_executable
 from .sinks import timings_path
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -63,7 +63,7 @@ def collect(device: str, precision: str, seed: int, overrides: list[str]) -> dic
 
 
 # pipeline code that reads results but never shapes a run (paths below pipelines/, folders ending in /)
-POST_PROCESSING = ("report/", "bench/", "recording/recordings.py", "recording/replay.py", "replay.py",
+POST_PROCESSING = ("report/", "bench/", "recording/recordings.py", "recording/display.py", "replay.py",
                    "sweeps/callback.py", "run/multiruns.py")
 
 

@@ -13,7 +13,7 @@ from PIL import Image
 from helpers import ROOT, compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import layout, recordings
-from pipelines.recording.replay import render_frames
+from pipelines.recording.display import render_frames
 from pipelines.recording.rerun_sink import PALETTE, color_range, colormap
 from pipelines.run.runner import execute
 
@@ -222,7 +222,7 @@ def test_every_body_of_a_two_body_scene_is_drawn_with_a_legend(tmp_path, two_bod
 def test_a_field_that_one_body_lacks_draws_that_body_grey(tmp_path, two_bodies):
     """--color plastic_strain: body a has no value (NaN) and is drawn grey;
     body b on the colour map; both disks, of equal areas."""
-    from pipelines.recording.replay import NO_VALUE
+    from pipelines.recording.display import NO_VALUE
 
     frames = render_frames(two_bodies, tmp_path / "field", color="plastic_strain", every=10)
     img = pixels(frames[0])
@@ -282,7 +282,7 @@ def test_series_names_carry_units_per_dimension():
 
 def test_the_viewer_opens_the_timings_file_too(tmp_path, monkeypatch):
     """replay --web hands the viewer both files, so the wall-clock series shows."""
-    from pipelines.recording import replay
+    from pipelines.recording import display as replay
 
     path = run(tmp_path, ["scene.resolution=16", "run.steps=1", "log.every=1"])
     called = []

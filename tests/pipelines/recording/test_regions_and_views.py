@@ -11,7 +11,7 @@ import yaml
 from PIL import Image
 
 from pipelines.recording import recordings, regions
-from pipelines.recording.replay import projection, render_frames
+from pipelines.recording.display import projection, render_frames
 from pipelines.recording.rerun_sink import PALETTE, PALETTE_PACKED
 
 MAGENTA = np.round(np.array(regions.EDGE) * 255).astype(np.int32)

@@ -14,7 +14,7 @@ import mpm
 from helpers import CONF, compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import recordings
-from pipelines.recording.replay import render_frames
+from pipelines.recording.display import render_frames
 from pipelines.recording.rerun_sink import PALETTE, RerunSink
 from pipelines.recording.sinks import RunMeta
 
