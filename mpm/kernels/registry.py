@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from numbers import Real
 
 from ..factories import probe
@@ -22,10 +23,19 @@ NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a name usable as a config option
 KERNELS: dict[str, Kernel] = {}
 
 
-def origin(kernel: Kernel) -> str:
-    """Where a kernel is defined: ``module.factory`` of its weights."""
+def defined_at(kernel: Kernel) -> str:
+    """Where a kernel's weights factory is defined (``module.qualified_name``):
+    the same for a kernel made again by a reloaded module."""
     f = kernel.weights
     return f"{getattr(f, '__module__', '?')}.{getattr(f, '__qualname__', type(f).__name__)}"
+
+
+def origin(kernel: Kernel) -> str:
+    """Where a kernel is, in words: ``module.NAME`` of the module global
+    holding it, else where its weights factory is defined."""
+    module = sys.modules.get(getattr(kernel.weights, "__module__", None) or "")
+    names = [k for k, v in vars(module).items() if v is kernel] if module is not None else []
+    return f"{module.__name__}.{names[0]}" if names else defined_at(kernel)
 
 
 def _number(v, low: float, strict: bool) -> bool:
@@ -89,8 +99,8 @@ def _add(kernel: Kernel, factories: bool) -> Kernel:
         name = getattr(kernel, "name", None) if isinstance(kernel, Kernel) else None
         raise ValueError(f"kernel {name if isinstance(name, str) and name else repr(kernel)}: {problem}")
     held = KERNELS.get(kernel.name)
-    if held is not None and held is not kernel and origin(held) != origin(kernel):
-        raise ValueError(f"kernel {kernel.name}: the name is taken by the kernel of {origin(held)}; accepted: a "
+    if held is not None and held is not kernel and defined_at(held) != defined_at(kernel):
+        raise ValueError(f"kernel {kernel.name}: name {kernel.name!r} is taken by {origin(held)}; accepted: a "
                          f"name not in {', '.join(KERNELS)}")
     KERNELS[kernel.name] = kernel
     return kernel

@@ -65,7 +65,8 @@ def _kind(obj) -> str:
     """What an object is, in words: ``the class X``, ``a function``, ``a Kernel``."""
     if isinstance(obj, type):
         return f"the class {obj.__name__}"
-    return "a function" if callable(obj) else f"a {type(obj).__name__}"
+    name = type(obj).__name__
+    return "a function" if callable(obj) else f"{'an' if name[:1].lower() in 'aeiou' else 'a'} {name}"
 
 
 def import_module(module: str, key: str, given: str, accepted_text: str):
@@ -173,8 +174,7 @@ def _defined(scene: mpm.Scene, kernel: mpm.Kernel) -> list[tuple[str, str, str]]
             out.append((f"material {cls.name}", class_origin(cls), cls.__module__))
     module = getattr(kernel.weights, "__module__", "") or ""
     if not module.startswith("mpm."):
-        names = [k for k, v in vars(sys.modules[module]).items() if v is kernel] if module in sys.modules else []
-        out.append((f"kernel {kernel.name}", f"{module}.{names[0]}" if names else kernel_origin(kernel), module))
+        out.append((f"kernel {kernel.name}", kernel_origin(kernel), module))
     return out
 
 
