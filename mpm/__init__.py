@@ -14,10 +14,10 @@ from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
 from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
 from .integrators import INTEGRATORS, Explicit, Implicit
-from .kernels import COMPACT, CUBIC, KERNELS, LINEAR, QUADRATIC, Kernel
+from .kernels import COMPACT, CUBIC, KERNELS, LINEAR, QUADRATIC, Kernel, register_kernel
 from .loads import LOAD_KINDS, Load
 from .materials import (MATERIALS, NACC, FixedCorotated, Fluid, Material, NeoHookean, Plastic, Sand, Snow,
-                        Viscoplastic, Viscous, VonMises)
+                        Viscoplastic, Viscous, VonMises, register_material)
 from .meshes import MeshShape
 from .model import Model, SceneError, State, build
 from .scene import (CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, Cylinder, KinematicRegion, Rotated, Scene, Sphere,
@@ -38,9 +38,9 @@ __all__ = [
     "Collider", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES", "CONTACT_TYPES",
     # materials
     "Material", "MATERIALS", "FixedCorotated", "NeoHookean", "Fluid", "Viscous", "Plastic", "Snow", "Sand",
-    "VonMises", "NACC", "Viscoplastic",
+    "VonMises", "NACC", "Viscoplastic", "register_material",
     # kernels, transfers, schemes, integrators
-    "Kernel", "KERNELS", "LINEAR", "QUADRATIC", "CUBIC", "COMPACT", "TRANSFERS",
+    "Kernel", "KERNELS", "LINEAR", "QUADRATIC", "CUBIC", "COMPACT", "register_kernel", "TRANSFERS",
     "EMPM", "TLMPM", "AULMPM", "SCHEMES", "Explicit", "Implicit", "INTEGRATORS",
     # building and stepping
     "build", "Model", "State", "SceneError", "Solver", "SolverOptions", "plan",

@@ -116,14 +116,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from hydra import compose, initialize_config_dir
 
-    from .config import schema
+    from .config import plugins, schema
     from .config.errors import describe
     from .config.validate import make_material
     from .run.warp_setup import init_warp
 
-    schema.register()
     conf = Path(__file__).resolve().parents[1] / "conf"
     try:
+        plugins.prepare(args.overrides)  # MPM_PLUGINS and material=<dotted path> (pipelines.config.plugins)
+        schema.register()
         with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
             cfg = compose(config_name="config", overrides=args.overrides)
         material = make_material(cfg.material, "material")

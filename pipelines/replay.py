@@ -16,7 +16,8 @@
                   front (+z), xz from above (+y, z down the picture), zy
                   from the left (-x); the nearest particles drawn last)
   --reproduce     re-run the recorded configuration (its command-line
-                  overrides, into a fresh directory reproduce-* beside the
+                  overrides, with the recorded MPM_PLUGINS modules, from the
+                  working directory; into a fresh directory reproduce-* beside the
                   recording, in its run directory) and compare the two
                   recordings: bit for bit on the CPU, else the largest
                   deviation per quantity; exit code 0 on a match, 1 otherwise
@@ -35,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -60,7 +62,9 @@ def reproduce(path: Path, workdir: Path | None = None) -> dict:
         notes.append("uncommitted changes (then or now): a mismatch may come from them")
     tmp = Path(tempfile.mkdtemp(prefix="reproduce-", dir=workdir if workdir is not None else Path(path).parent))
     cmd = [sys.executable, "-m", "pipelines.run", *overrides, f"hydra.run.dir={tmp}"]
-    run = subprocess.run(cmd, capture_output=True, text=True)
+    modules = [m for m in rec.properties.get("provenance:mpm_plugins", []) if m]
+    env = {**os.environ, "MPM_PLUGINS": ",".join(modules)} if modules else None  # the models they registered
+    run = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if run.returncode not in (0, 3):
         return {"match": False, "problems": [f"re-run failed ({run.returncode}): {run.stderr.strip()}"],
                 "largest": {}, "notes": notes, "rerun_dir": str(tmp)}

@@ -3,7 +3,9 @@
 Elastic: ``fixed_corotated``, ``neo_hookean``. Fluids: ``viscous``
 (Newtonian, weakly compressible) and ``fluid`` (the same, inviscid by
 default). Plastic (mpm.materials.plastic, a return mapping every step):
-``snow``, ``sand``, ``von_mises``, ``nacc``, ``viscoplastic``.
+``snow``, ``sand``, ``von_mises``, ``nacc``, ``viscoplastic``. A model
+defined elsewhere joins them with :func:`register_material`
+(mpm.materials.registry; docs/extending.md).
 """
 
 from __future__ import annotations
@@ -15,17 +17,16 @@ from .fixed_corotated import FixedCorotated
 from .nacc import NACC
 from .neo_hookean import NeoHookean
 from .plastic import Plastic
+from .registry import MATERIALS, _add, material_problem, register_material
 from .sand import Sand
 from .snow import Snow
 from .viscoplastic import Viscoplastic
 from .viscous import Fluid, Viscous
 from .von_mises import VonMises
 
-MATERIALS: dict[str, type[Material]] = {
-    cls.name: cls for cls in (FixedCorotated, NeoHookean, Fluid, Viscous, Snow, Sand, VonMises,
-                              NACC, Viscoplastic)
-}
-"""model name -> material class (the ``material`` config group's options)"""
+for _cls in (FixedCorotated, NeoHookean, Fluid, Viscous, Snow, Sand, VonMises, NACC, Viscoplastic):
+    _add(_cls, factories=False)
+del _cls, _add
 
 
 def material_fields(model: str) -> list[str]:
@@ -34,4 +35,5 @@ def material_fields(model: str) -> list[str]:
 
 
 __all__ = ["MATERIALS", "Material", "Plastic", "FixedCorotated", "NeoHookean", "Fluid", "Viscous",
-           "Snow", "Sand", "VonMises", "NACC", "Viscoplastic", "lame", "material_fields"]
+           "Snow", "Sand", "VonMises", "NACC", "Viscoplastic", "lame", "material_fields", "material_problem",
+           "register_material"]

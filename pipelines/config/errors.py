@@ -9,6 +9,7 @@ from hydra.errors import MissingConfigException, OverrideParseException
 from omegaconf.errors import (ConfigAttributeError, ConfigKeyError, ConfigTypeError, OmegaConfBaseException,
                               ValidationError)
 
+from . import plugins
 from .fields import ConfigError, override_key
 
 EXIT_CONFIG = 2
@@ -91,7 +92,8 @@ def describe(exc: BaseException) -> str | None:
         if "/" in missing and exc.options is not None:
             group, option = missing.rsplit("/", 1)
             options = sorted(exc.options)
-            return f"{group}={option}: unknown option; accepted: {', '.join(options)}"
+            more = f", or {plugins.dotted(group)}" if group in plugins.GROUPS else ""
+            return f"{group}={option}: unknown option; accepted: {', '.join(options)}{more}"
         return _first_line(exc)
     if isinstance(exc, OverrideParseException):
         return f"cannot parse the command line: {_first_line(exc)}"

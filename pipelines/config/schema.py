@@ -6,10 +6,13 @@ Each group is defined once (:mod:`pipelines.config.fields` says how and
 why): ``material``, ``scheme`` and ``integrator`` by the solver's classes,
 one ConfigStore node per option (:mod:`pipelines.config.physics`);
 ``kernel`` by :class:`KernelConfig`, one node per kernel of
-:data:`mpm.KERNELS`; ``scene`` by :class:`SceneConfig`, whose options are
-the files of ``conf/scene/`` (values only); ``run``, ``log``, ``detect`` and
-``stability_map`` are settings of the root. The files in ``conf/`` hold
-values: the defaults list, the scenes, the scales and the experiments.
+:data:`mpm.KERNELS` (models and kernels registered from outside ``mpm``
+included, and a dotted path given as the option:
+:mod:`pipelines.config.plugins`); ``scene`` by :class:`SceneConfig`, whose
+options are the files of ``conf/scene/`` (values only); ``run``, ``log``,
+``detect`` and ``stability_map`` are settings of the root. The files in
+``conf/`` hold values: the defaults list, the scenes, the scales and the
+experiments.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import mpm
 
 from .fields import setting
 from .physics import GROUPS
+from .plugins import ALIASES
 from .scene import SceneConfig
 from .settings import DEVICES, PRECISIONS, KernelConfig, LogSettings, MapSpec, RunSettings
 
@@ -55,6 +59,8 @@ def option_nodes() -> dict[str, dict[str, Any]]:
     """group -> option -> the ConfigStore node of the groups defined in code."""
     nodes = {group: {name: cls() for name, cls in family.variants.items()} for group, family in GROUPS.items()}
     nodes["kernel"] = {name: KernelConfig(name=name) for name in mpm.KERNELS}
+    for group, aliases in ALIASES.items():  # a dotted path given as the option (pipelines.config.plugins)
+        nodes[group].update({path: nodes[group][name] for path, name in aliases.items()})
     return nodes
 
 

@@ -128,7 +128,8 @@ class LogSettings:
 class KernelConfig:
     """Interpolation kernel (mpm.kernels) and the transfer that uses it (mpm.transfer)."""
 
-    name: str = setting("quadratic", "the kernel", choices=tuple(mpm.KERNELS))
+    # choices: the registry itself, so that kernels registered later (pipelines.config.plugins) are accepted
+    name: str = setting("quadratic", "the kernel", choices=mpm.KERNELS)
     transfer: str = setting("mls", "the transfer: mls, apic (affine), pic, flip (a PIC/FLIP blend)",
                             choices=TRANSFERS)
     flip: float = setting(0.95, "transfer=flip: the share of each particle's own velocity updated by the grid's "

@@ -245,8 +245,9 @@ def compose_spec(overrides: list[str]) -> RunSpec:
     ``pipelines.run``."""
     from hydra import compose, initialize_config_dir
 
-    from . import schema
+    from . import plugins, schema
 
+    plugins.prepare(overrides)  # MPM_PLUGINS and dotted paths (pipelines.config.plugins)
     schema.register()
     with initialize_config_dir(config_dir=str(schema.CONF), version_base="1.3"):
         return resolve(compose(config_name="config", overrides=list(overrides)))

@@ -25,7 +25,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from . import provenance
-from ..config import schema
+from ..config import plugins, schema
 from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
 from ..config.overrides import check_groups, replace_inline_mappings
 from ..config.validate import ConfigError, validate
@@ -48,6 +48,7 @@ def run(cfg: DictConfig) -> dict:
         if experiment and hc.mode != RunMode.MULTIRUN:  # its sweep would be ignored: one default job would run
             raise ConfigError("experiment", f"{experiment} is a sweep; accepted: run it with -m (python -m "
                                             f"pipelines.run -m +experiment={experiment})")
+        plugins.prepare(list(hc.overrides.task))  # done by main(), but not in a launcher's worker process
         spec, warnings = validate(cfg, list(hc.overrides.task))
     except ConfigError as e:
         # said here too: a launcher's worker process never reaches main()
@@ -72,10 +73,14 @@ def run(cfg: DictConfig) -> dict:
     for note in unused_overrides(spec, overrides):
         print(f"note: {note}", file=sys.stderr)
     choices = effective_choices(cfg, {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")})
-    identity = {"config_hash": provenance.config_hash(OmegaConf.to_container(cfg, resolve=True),
-                                                      provenance.code_hash(), files=spec.meshes)}
+    origins = plugins.origins(spec.scene, spec.kernel)
+    identity = {"config_hash": provenance.config_hash(
+        OmegaConf.to_container(cfg, resolve=True), provenance.code_hash(),
+        files={**spec.meshes, **plugins.sources(spec.scene, spec.kernel)})}
     if spec.meshes:
         identity["meshes"] = spec.meshes
+    if origins:  # materials and kernels defined outside mpm: where
+        identity["plugins"] = origins
     if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
         done = finished(out_dir, identity["config_hash"])
         if done is not None:
@@ -157,7 +162,8 @@ def effective_choices(cfg, choices: dict) -> dict:
     out = dict(choices)
     for group in NAMED_GROUPS:
         name = OmegaConf.select(cfg, f"{group}.name", default=None)
-        if group in out and name is not None and str(name) != str(out[group]):
+        alias = plugins.ALIASES.get(group, {}).get(str(out.get(group)))  # a dotted path chose it
+        if group in out and name is not None and str(name) not in (str(out[group]), alias):
             print(f"note: {group}.name={name} set by key in the {group} option {out[group]}: the run and its "
                   f"record use {name} with its defaults ({group}={name} chooses it as the group)", file=sys.stderr)
             out[group] = str(name)
@@ -176,6 +182,8 @@ def main() -> None:
     sys.argv[1:] = replace_inline_mappings(sys.argv[1:])
     init_warp()
     try:
+        plugins.prepare(sys.argv[1:])  # MPM_PLUGINS and dotted paths: registered, then offered as options
+        schema.register()
         check_groups(sys.argv[1:])
         _main()
     except KeyboardInterrupt:

@@ -22,6 +22,7 @@ import mpm
 from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
+from ..config import plugins
 from ..config.validate import RunSpec
 from ..recording.rerun_sink import RerunSink
 from ..recording.sinks import Sink
@@ -34,9 +35,13 @@ RUN_PROPERTIES = ("command", "host", "started")  # differ between identical runs
 def recording_properties(spec: RunSpec, config_yaml: str, overrides: list[str],
                          choices: dict | None = None) -> dict:
     """How to reproduce the run: resolved config, overrides, group choices,
-    git commit and dirty flag, package versions, device, precision, seed; and
-    (``run``: the timings file's) when, where and with which command it ran."""
+    git commit and dirty flag, package versions, device, precision, seed,
+    where the materials and kernels defined outside ``mpm`` come from
+    (``plugins``) and the modules ``MPM_PLUGINS`` named (``mpm_plugins``);
+    and (``run``: the timings file's) when, where and with which command it ran."""
     prov = provenance.collect(spec.run.device, spec.run.precision, spec.seed, overrides)
+    prov["plugins"] = [f"{k} = {v}" for k, v in plugins.origins(spec.scene, spec.kernel).items()]
+    prov["mpm_plugins"] = plugins.env_modules()
     packages = prov.pop("packages")
     when = {k: prov.pop(k) for k in RUN_PROPERTIES}
     nonempty = lambda v: v or [""]  # noqa: E731 - Rerun needs a non-empty batch
