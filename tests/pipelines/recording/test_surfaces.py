@@ -19,7 +19,7 @@ DRAWN = [Collider("half_space", point=(0.5, 0.3, 0.5), normal=(0.2, 1.0, 0.1)),
          Collider("mesh", mesh=MeshShape("warp:bunny", (0.5, 0.5, 0.5), 0.4))]
 
 
-@pytest.mark.parametrize("collider", DRAWN, ids=lambda c: c.kind)
+@pytest.mark.parametrize("collider", DRAWN, ids=lambda c: c.type)
 def test_drawn_surfaces_lie_on_the_collider(collider):
     """Every vertex of the recording's surface is on the zero level set of
     the collider's signed distance; in 2D the unbounded shapes are drawn as
@@ -30,11 +30,11 @@ def test_drawn_surfaces_lie_on_the_collider(collider):
     assert len(v) >= 4 and len(f) >= 2 and f.max() < len(v)
     phi, _ = evaluate(collider, v)
     assert np.abs(phi).max() < 1e-6
-    if collider.kind != "mesh":
+    if collider.type != "mesh":
         flat = Collider(**{**collider.__dict__, **_to_2d(collider)})
         for line in outline_2d(flat, np.zeros(2), np.ones(2)):
             phi2, _ = evaluate(flat, line)
-            if collider.kind in ("half_space", "wedge"):
+            if collider.type in ("half_space", "wedge"):
                 assert phi2.max() < 1e-9 and np.sum(np.abs(phi2) < 1e-9) >= 2
             else:
                 assert np.abs(phi2).max() < 1e-9

@@ -144,7 +144,8 @@ def test_a_dotted_material_runs_is_recorded_and_reproduced(tmp_path):
     the overrides and the group choices keep the dotted path, metrics.json
     and the recording say where the model came from, the resolved config
     holds its keys; replay --reproduce re-runs it to the same bits."""
-    from pipelines.recording import recordings, replay
+    from pipelines import replay
+    from pipelines.recording import recordings
 
     run = tmp_path / "run"
     p = run_cli(["material=examples.my_models.MyNeoHookean", "material.E=2e5", *SMALL, f"hydra.run.dir={run}"],
