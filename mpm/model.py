@@ -150,6 +150,10 @@ class State:
     """the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)"""
     history: wp.array
     """history variables of plastic models (one unused entry without them)"""
+    xc: wp.array | None = None
+    """(prototype) the compensation of x's compensated sum (MPM_COMPENSATE contains x)"""
+    Fc: wp.array | None = None
+    """(prototype) the compensation of F^sn's (F^0s's with EMPM's commit) compensated sum"""
 
     def numpy(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k).numpy().copy()
@@ -379,5 +383,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             stencils=stencil_cache(t, kernel, n),
             history=wp.array(np.concatenate(hs).astype(S) if model.plastic else np.zeros((1, 2), S),
                              dtype=t.history),
+            xc=wp.zeros(n, dtype=t.vec),
+            Fc=wp.zeros(n, dtype=t.mat),
         )
     return model, state

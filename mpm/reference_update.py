@@ -18,6 +18,7 @@ K_p = I/(moment dx^2) is a constant of the solver and not cached.
 """
 
 import functools
+import os
 
 import numpy as np
 import warp as wp
@@ -133,6 +134,10 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
     Gv = wp.types.vector(G, S)
     per_particle_K = moment and kernel.moment is None
     located = not fused  # the cache holds the stencils (fused: the transfers locate them)
+    # prototype (mpm.g2p, MPM_COMPENSATE): F^sn's compensation (or H = F^sn - I) restarts at the
+    # update, and with "U" u = x - X
+    comp = frozenset(c for c in os.environ.get("MPM_COMPENSATE", "").split(",") if c)
+    reset_F, reset_u = bool(comp & {"F", "H"}), "U" in comp
 
     @warp_kernel
     def update(
@@ -155,6 +160,9 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         # Stencil cache out (entry p * G + g; K_p per particle):
         cache: Cache,
         control: StepControl,
+        # prototype: the compensations (mpm.g2p)
+        xc: wp.array(dtype=t.vec),
+        Fc: wp.array(dtype=t.mat),
     ):
         p = wp.tid() + start
         b = body[p]
@@ -174,6 +182,10 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         X[p] = Xp
         F0s[p] = committed(Fs, F0s[p], body_params[b])
         Fsn[p] = wp.identity(n=dim, dtype=S)
+        if wp.static(reset_F):
+            Fc[p] = t.mat()
+        if wp.static(reset_u):
+            xc[p] = t.vec()
         if wp.static(located):
             D = t.mat()
             u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
@@ -235,4 +247,5 @@ class References:
             start, count = m.body_ranges[b]
             self.launch(kernels[b], count, [
                 m.body, m.body_params, lay.lo_d, lay.shape_d, lay.offset_d, const.grid_offsets, const.dx,
-                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils, self.control])
+                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils, self.control,
+                state.xc, state.Fc])

@@ -127,4 +127,5 @@ class Transfers:
             m.body, layout.shape_d, grid.v, grid.m, grid.p0, self.flip, state.stencils, const.dx, const.K, b.control,
             self.epsilon,
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
-            m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force])
+            m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force,
+            state.xc, state.Fc, state.X])
