@@ -46,8 +46,9 @@ step ``d_eps = eps dt / T`` and its dominant speed its position increment
     r_F = d_eps / 2^-24,      r_x = d_x / (2^-23 x_max)
 
 (float64: 2^-53, 2^-52), ``x_max`` the domain's largest coordinate, say
-how many spacings a step moves. Below :data:`THRESHOLD` (one spacing)
-the precision cannot resolve the motion. Measured on the stiff cantilever
+how many spacings a step moves. Below :data:`THRESHOLD` (r_F < 1: under
+one spacing) or :data:`POSITION_THRESHOLD` (r_x < 0.1) the precision
+cannot resolve the motion. Measured on the stiff cantilever
 (4 cells across, its load scaled; float32 against float64, TLMPM / EMPM):
 the deflection 190 % too large at r_F = 0.0095, 36 / 28 % at 0.028,
 4.8 / 7.2 % at 0.095, 0.4 / 1.9 % at 0.28, 0.1 / 0.1 % at 0.95, 0.00 /
@@ -68,10 +69,13 @@ import numpy as np
 
 from .stepping.timestep import cfl_dt
 
-__all__ = ["THRESHOLD", "SPACING", "Source", "BodyResolution", "Resolution", "resolution"]
+__all__ = ["THRESHOLD", "POSITION_THRESHOLD", "SPACING", "Source", "BodyResolution", "Resolution", "resolution"]
 
 THRESHOLD = 1.0
-"""r_F or r_x below this: the precision cannot resolve a step's increment"""
+"""r_F below this: the precision cannot resolve a step's strain increment"""
+POSITION_THRESHOLD = 0.1
+"""r_x below this: nor a step's motion (the positions' rounding alone cost the
+cantilever 0.2 % at r_x = 0.013 and 0.5 % at 0.0067: F's rounding dominates)"""
 
 # (strain spacing near 1, relative spacing of a position): 2^-24 (just below 1) and 2^-23 in float32
 SPACING = {"float32": (2.0 ** -24, 2.0 ** -23), "float64": (2.0 ** -53, 2.0 ** -52)}
@@ -123,6 +127,7 @@ class Resolution:
     position_spacing: float  # 2^-23 x_max (float32) or 2^-52 x_max [m]
     bodies: list[BodyResolution]
     threshold: float = THRESHOLD
+    position_threshold: float = POSITION_THRESHOLD
 
     @property
     def r_F(self) -> float:
@@ -134,19 +139,19 @@ class Resolution:
 
     @property
     def resolved(self) -> bool:
-        """Does every body move at least ``threshold`` spacings a step?"""
-        return self.r_F >= self.threshold and self.r_x >= self.threshold
+        """Does every body strain by ``threshold`` spacings a step, and move by ``position_threshold``?"""
+        return self.r_F >= self.threshold and self.r_x >= self.position_threshold
 
     def message(self) -> str:
         """One line: what is below the threshold, and the remedy ("" when resolved)."""
         if self.resolved:
             return ""
-        worst = min(self.bodies, key=lambda b: min(b.r_F, b.r_x))
+        worst = min(self.bodies, key=lambda b: min(b.r_F / self.threshold, b.r_x / self.position_threshold))
         parts = []
         if worst.r_F < self.threshold:
             parts.append(f"a step's strain increment ({worst.strain_source}) is about {worst.strain_step:.2g}, "
                          f"{worst.r_F:.2g} of {self.precision}'s spacing {self.strain_spacing:.2g} of F near I")
-        if worst.r_x < self.threshold:
+        if worst.r_x < self.position_threshold:
             parts.append(f"a step moves it about {worst.position_step:.2g} m ({worst.speed_source}), "
                          f"{worst.r_x:.2g} of {self.precision}'s spacing of positions {self.position_spacing:.2g} m")
         return (f"body '{worst.name}': " + "; ".join(parts)
@@ -239,7 +244,8 @@ def _sources(scene, i: int, c: float, M: float, h: float, r: float, V: float, lo
 
 
 def resolution(scene, dt: float | None = None, cfl: float = 0.4, dt_max: float = 1.0e-3,
-               precision: str = "float32", threshold: float = THRESHOLD) -> Resolution:
+               precision: str = "float32", threshold: float = THRESHOLD,
+               position_threshold: float = POSITION_THRESHOLD) -> Resolution:
     """The per-step increments of ``scene``'s bodies against ``precision``'s
     spacings (module docstring): with the step ``dt`` [s] when given, else
     the smallest of the bodies' ``cfl dx / (c + v)``, capped by ``dt_max`` [s]
@@ -275,4 +281,4 @@ def resolution(scene, dt: float | None = None, cfl: float = 0.4, dt_max: float =
             br.speed_source, br.position_step = top.name, top.speed * step
             br.r_x = br.position_step / (s_x * x_max)
         bodies.append(br)
-    return Resolution(precision, step, x_max, s_F, s_x * x_max, bodies, threshold)
+    return Resolution(precision, step, x_max, s_F, s_x * x_max, bodies, threshold, position_threshold)
