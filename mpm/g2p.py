@@ -6,18 +6,18 @@ eq. 28, 30, 31; notation: mpm.transfer):
 grad v = C_p for MLS, 1/G sum v_i grad_ip^T for APIC and PIC. On the way,
 the step's stability figures (mpm.stepping.status).
 
-Prototype (float32 study, mpm.precision): ``MPM_COMPENSATE`` in the
-environment, a comma-separated list read when the kernel is built, changes
-how the sums x += dt v and F += dt grad v are kept (State.xc, State.Fc):
-``x`` and ``F`` compensated (Kahan) sums of x and of F^sn (F^0s under
-EMPM's commit, where F^0s <- F^0s + (dt grad v) F^0s); ``G`` that commit's
-increment added last, uncompensated; ``H`` the displacement gradient
-H = F^sn - I (F^0s - I) accumulated and F = I + H formed from it; ``U``
-(not EMPM) u = x - X accumulated and x = X + u.
+Compensated sums (``compensate``, mpm.SolverOptions.compensate): a step's
+increments dt v and dt grad v can fall below float32's spacing of the sums
+they are added to (mpm.precision), and rounded away every step the sums
+drift. Kept as compensated (Kahan) sums, each with the running error of
+its sum (State.xc, State.Fc),
+    y = inc - c,   s' = s + y,   c' = (s' - s) - y,
+they keep the increments' lost bits: x and F^sn (with EMPM's commit, F^0s,
+updated as F^0s + (dt grad v) F^0s). The configuration update restarts
+F^sn's (mpm.reference_update).
 """
 
 import functools
-import os
 
 import warp as wp
 
@@ -56,7 +56,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
              bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False,
-             loads: bool = False):
+             loads: bool = False, compensate: bool = False):
     """G2P for all particles, for the step ``control.dt`` (``batched``: nothing
     in a step the driver skips, mpm.stepping.driver).
 
@@ -94,7 +94,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     (exact for a free particle, and no work under a load held still);
     ``track_inversion``: the smallest J and the smallest stretch of F (its
     smallest singular value, squared; in 3D a lower bound, see
-    :func:`make_min_stretch2`) per body (mpm.stepping.detection).
+    :func:`make_min_stretch2`) per body (mpm.stepping.detection);
+    ``compensate``: x and F^sn as compensated sums with their running errors
+    ``xc`` [m] and ``Fc`` (module docstring; with ``commit``, F^0s's unless
+    ``project`` is given: a projected F^0s is committed as before).
 
     ``status`` (mpm.stepping.status.StepStatus) accumulates the largest |v_p|^2, the
     non-finite and outside counts, then per body the marked count
@@ -111,15 +114,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     f64 = wp.float64
     vec, mat = t.vec, t.mat
     dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    # prototype: compensated (Kahan) sums of x ("x") and of F^sn / F^0s ("F"); "G": EMPM's commit
-    # as F^0s + (dt grad v) F^0s instead of (I + dt grad v) F^0s
-    comp = frozenset(c for c in os.environ.get("MPM_COMPENSATE", "").split(",") if c)
-    comp_x, comp_F, grouped = "x" in comp, "F" in comp, "G" in comp
-    # "H": Fc holds H = F^sn - I (F^0s - I with EMPM's commit), accumulated, F = I + H formed from it
-    # (valid from F = I, without configuration updates other than EMPM's commit)
-    store_H = "H" in comp
-    # "U": xc holds u = x - X (x = X + u formed from it; TLMPM: X never moves)
-    store_u = "U" in comp and not commit
+    comp_F0 = compensate and commit and project is None  # F^0s's sum (EMPM's commit)
+    comp_Fsn = compensate and not commit  # F^sn's sum
     node = make_node(t, kernel)
     node_gradient = make_node_gradient(t, kernel)
     Cache = make_stencil_cache(t, kernel)
@@ -147,24 +143,15 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             cache.K[p] = moment_at(Xp, S(1.0) / dx, cache.grid_offsets, dx)
 
     @wp.func
-    def commit_increment(p: int, Xp: vec, D: mat, F0: mat, F0s: wp.array(dtype=mat), Fsn: wp.array(dtype=mat),
-                         Fc: wp.array(dtype=mat), cache: Cache, dx: S):
-        """(prototype, ``commit`` without projection) F^0s <- F^0s + D F^0s, D = dt grad v, the small
-        part added last (``grouped``), compensated (``comp_F``)."""
+    def commit_compensated(p: int, Xp: vec, D: mat, F0: mat, F0s: wp.array(dtype=mat),
+                           Fsn: wp.array(dtype=mat), Fc: wp.array(dtype=mat), cache: Cache, dx: S):
+        """``commit_reference`` with F^0s <- F^0s + D F^0s, D = dt grad v, a
+        compensated sum whose running error is Fc (``comp_F0``)."""
         cache.X[p] = Xp
-        inc = D * F0
-        if wp.static(store_H):
-            H0 = Fc[p]
-            H0n = H0 + (D + D * H0)
-            Fc[p] = H0n
-            F0s[p] = wp.identity(n=dim, dtype=S) + H0n
-        elif wp.static(comp_F):
-            y = inc - Fc[p]
-            F0n = F0 + y
-            Fc[p] = (F0n - F0) - y
-            F0s[p] = F0n
-        else:
-            F0s[p] = F0 + inc
+        y = D * F0 - Fc[p]
+        F0n = F0 + y
+        Fc[p] = (F0n - F0) - y
+        F0s[p] = F0n
         Fsn[p] = wp.identity(n=dim, dtype=S)
         if wp.static(commit_K):
             cache.K[p] = moment_at(Xp, S(1.0) / dx, cache.grid_offsets, dx)
@@ -234,10 +221,9 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         body_params: wp.array(dtype=t.params),
         # with loads: the step's body force [m/s^2]
         body_force: wp.array(dtype=t.vec),
-        # prototype: the compensations
+        # with compensate: the running errors of the sums of x [m] and of F^sn (F^0s with commit)
         xc: wp.array(dtype=t.vec),
         Fc: wp.array(dtype=t.mat),
-        Xref: wp.array(dtype=t.vec),
     ):
         if wp.static(batched):
             if control.skip[0] != f64(0.0):
@@ -311,25 +297,16 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
                     Cp = S(inv_G) * B * cache.K[p]
                 else:
                     Cp = (S(inv_G) * K) * B
-        xold = x[p]
-        xp = xold + dt * vp
-        xc_new = vec()
-        if wp.static(comp_x):
+        xp = x[p] + dt * vp
+        if wp.static(compensate):
+            x_old = x[p]
             yx = dt * vp - xc[p]
-            xp = xold + yx
-            xc_new = (xp - xold) - yx
-        if wp.static(store_u):
-            xc_new = xc[p] + dt * vp
-            xp = Xref[p] + xc_new
+            xp = x_old + yx
+            xc_new = (xp - x_old) - yx
         Fsn_old = Fsn[p]
-        D = dt * grad_v
-        Fs = Fsn_old + D
-        Fc_new = mat()
-        if wp.static(store_H and not commit):
-            Fc_new = Fc[p] + D
-            Fs = wp.identity(n=dim, dtype=S) + Fc_new
-        if wp.static(comp_F and not commit):
-            yF = D - Fc[p]
+        Fs = Fsn_old + dt * grad_v
+        if wp.static(comp_Fsn):
+            yF = dt * grad_v - Fc[p]
             Fs = Fsn_old + yF
             Fc_new = (Fs - Fsn_old) - yF
         if wp.static(removal):
@@ -354,13 +331,13 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             work = S(0.5) * dt * mass[p] * wp.dot(body_force[p], v[p] + v_new)
             wp.atomic_add(status.load_work, 0, f64(work))
         x[p] = xp
-        if wp.static(comp_x or store_u):
+        if wp.static(compensate):
             xc[p] = xc_new
         v[p] = v_new
         C[p] = Cp
         if wp.static(not commit):
             Fsn[p] = Fs
-            if wp.static(comp_F or store_H):
+            if wp.static(comp_Fsn):
                 Fc[p] = Fc_new
         dj = wp.abs(wp.determinant(Fs) - S(1.0))
         if wp.static(record_dJ):
@@ -403,8 +380,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             if outside:
                 wp.atomic_add(status.outside, 0, f64(1.0))
         if wp.static(commit):
-            if wp.static((comp_F or grouped or store_H) and project is None):
-                commit_increment(p, xp, D, F0s[p], F0s, Fsn, Fc, cache, dx)
+            if wp.static(comp_F0):
+                commit_compensated(p, xp, dt * grad_v, F0s[p], F0s, Fsn, Fc, cache, dx)
             else:
                 commit_reference(p, xp, Fs, F0s[p], body_params[b], F0s, Fsn, cache, dx)
 

@@ -151,9 +151,20 @@ class State:
     history: wp.array
     """history variables of plastic models (one unused entry without them)"""
     xc: wp.array | None = None
-    """(prototype) the compensation of x's compensated sum (MPM_COMPENSATE contains x)"""
+    """the running error [m] of the compensated sum x += dt v (mpm.g2p), where the
+    solver compensates (mpm.SolverOptions.compensate; one unused entry otherwise)"""
     Fc: wp.array | None = None
-    """(prototype) the compensation of F^sn's (F^0s's with EMPM's commit) compensated sum"""
+    """the running error of the compensated sum F^sn += dt grad v (with the Eulerian
+    scheme's commit in G2P: of F^0s's sum), where the solver compensates (one
+    unused entry otherwise)"""
+
+    def compensated(self, on: bool = True) -> None:
+        """Where ``on``: allocate :attr:`xc` and :attr:`Fc` for every particle
+        (zero: the sums start exact), unless they are."""
+        n = self.x.shape[0]
+        if on and (self.xc is None or self.xc.shape[0] != n):
+            self.xc = wp.zeros(n, dtype=self.x.dtype, device=self.x.device)
+            self.Fc = wp.zeros(n, dtype=self.Fsn.dtype, device=self.x.device)
 
     def numpy(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k).numpy().copy()
@@ -383,7 +394,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             stencils=stencil_cache(t, kernel, n),
             history=wp.array(np.concatenate(hs).astype(S) if model.plastic else np.zeros((1, 2), S),
                              dtype=t.history),
-            xc=wp.zeros(n, dtype=t.vec),
-            Fc=wp.zeros(n, dtype=t.mat),
+            xc=wp.zeros(1, dtype=t.vec),  # (mpm.Solver.prepare: every particle's where it compensates)
+            Fc=wp.zeros(1, dtype=t.mat),
         )
     return model, state

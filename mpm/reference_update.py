@@ -18,7 +18,6 @@ K_p = I/(moment dx^2) is a constant of the solver and not cached.
 """
 
 import functools
-import os
 
 import numpy as np
 import warp as wp
@@ -112,7 +111,7 @@ def make_committed(t: Types, project):
 
 @functools.cache
 def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
-                fused: bool = False, moment: bool = True, gated: bool = False):
+                fused: bool = False, moment: bool = True, gated: bool = False, compensate: bool = False):
     """``project``: the material's projection factory or None; ``affine``: C
     over the update (mpm.schemes.AFFINE: keep, transform C <- C (F^sn)^-1,
     rotate C <- C R^T with F^sn = R U); ``gradients``:
@@ -121,7 +120,9 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
     cached; ``moment``: the transfer uses K_p (not PIC), built when the
     kernel's moment varies per particle; ``gated``: only when the criterion
     asked for it (``control.update`` of the body, mpm.stepping.criterion), so that the
-    driver can launch it every step without the host."""
+    driver can launch it every step without the host; ``compensate``: G2P keeps
+    F^sn as a compensated sum (mpm.g2p), whose running error ``Fc`` restarts
+    at zero with F^sn = I."""
     S = t.scalar
     dim, G = t.dim, kernel.n_grids
     locate = make_locate(t, kernel, gradients)
@@ -134,10 +135,6 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
     Gv = wp.types.vector(G, S)
     per_particle_K = moment and kernel.moment is None
     located = not fused  # the cache holds the stencils (fused: the transfers locate them)
-    # prototype (mpm.g2p, MPM_COMPENSATE): F^sn's compensation (or H = F^sn - I) restarts at the
-    # update, and with "U" u = x - X
-    comp = frozenset(c for c in os.environ.get("MPM_COMPENSATE", "").split(",") if c)
-    reset_F, reset_u = bool(comp & {"F", "H"}), "U" in comp
 
     @warp_kernel
     def update(
@@ -160,8 +157,7 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         # Stencil cache out (entry p * G + g; K_p per particle):
         cache: Cache,
         control: StepControl,
-        # prototype: the compensations (mpm.g2p)
-        xc: wp.array(dtype=t.vec),
+        # with compensate: the running error of G2P's sum of F^sn (mpm.g2p)
         Fc: wp.array(dtype=t.mat),
     ):
         p = wp.tid() + start
@@ -182,10 +178,8 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         X[p] = Xp
         F0s[p] = committed(Fs, F0s[p], body_params[b])
         Fsn[p] = wp.identity(n=dim, dtype=S)
-        if wp.static(reset_F):
+        if wp.static(compensate):
             Fc[p] = t.mat()
-        if wp.static(reset_u):
-            xc[p] = t.vec()
         if wp.static(located):
             D = t.mat()
             u0, P = origin(Xp, S(1.0) / dx, grid_offsets)
@@ -215,13 +209,14 @@ class References:
     update of their particles (one kernel per body, for its material's
     projection; a gated twin for the driver, mpm.stepping.driver). ``affine``: C
     over an update (mpm.schemes.AFFINE); ``gradients``, ``fused``, ``moment``:
-    what the stencil cache holds (:func:`make_update`)."""
+    what the stencil cache holds; ``compensate``: restart G2P's compensated sum
+    of F^sn (:func:`make_update`)."""
 
     def __init__(self, model, launch, layout, grid, control, *, affine: str, gradients: bool, fused: bool,
-                 moment: bool):
+                 moment: bool, compensate: bool = False):
         t, k = model.types, model.kernel
         self.model, self.launch, self.layout, self.grid, self.control = model, launch, layout, grid, control
-        options = dict(gradients=gradients, fused=fused, moment=moment)
+        options = dict(gradients=gradients, fused=fused, moment=moment, compensate=compensate)
         self.update = [make_update(t, k, b.material.project, affine, **options) for b in model.scene.bodies]
         self.gated = [make_update(t, k, b.material.project, affine, gated=True, **options)
                       for b in model.scene.bodies]
@@ -247,5 +242,4 @@ class References:
             start, count = m.body_ranges[b]
             self.launch(kernels[b], count, [
                 m.body, m.body_params, lay.lo_d, lay.shape_d, lay.offset_d, const.grid_offsets, const.dx,
-                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils, self.control,
-                state.xc, state.Fc])
+                start, state.x, state.X, state.C, state.F0s, state.Fsn, state.stencils, self.control, state.Fc])

@@ -62,12 +62,13 @@ class Transfers:
     the host; the model's external loads (mpm.loads) set it on the device;
     ``bound_reach``: G2P bounds |F^sn|_inf (walls-only Lagrangian scenes);
     ``removal``: particles leave at open faces; ``marks``: count dJ >=
-    epsilon; ``epsilon``: the criterion's threshold."""
+    epsilon; ``epsilon``: the criterion's threshold; ``compensate``: G2P keeps
+    x and F as compensated sums (mpm.g2p; the state's ``xc`` and ``Fc``)."""
 
     def __init__(self, model, launch, buffer, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
                  with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
                  track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None,
-                 batched: bool = False, flip: float = 0.0):
+                 batched: bool = False, flip: float = 0.0, compensate: bool = False):
         t, k = model.types, model.kernel
         self.model, self.launch, self.buffer = model, launch, buffer
         self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
@@ -79,7 +80,7 @@ class Transfers:
                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
                             track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
                             bound_reach=bound_reach, commit=commit, project=project, batched=batched,
-                            loads=model.loads is not None)
+                            loads=model.loads is not None, compensate=compensate)
         margin = k.margin * model.dx
         open_code = WALL_TYPES.index("open")
         self.inside_lo = t.vec(*([margin] * t.dim))
@@ -128,4 +129,4 @@ class Transfers:
             self.epsilon,
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
             m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force,
-            state.xc, state.Fc, state.X])
+            state.xc, state.Fc])
