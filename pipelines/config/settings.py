@@ -61,6 +61,9 @@ class RunSettings:
     plan: bool = setting(False, "print the stages and kernels of a step and exit (nothing compiled or run)")
     fuse: Optional[bool] = setting(None, "explicit EMPM: stencils located in P2G/G2P, G2P updates the "
                                          "reference (the same results); null: where it pays")
+    compensate: Optional[bool] = setting(None, "G2P keeps x and F as compensated sums (float32 resolves a small "
+                                               "step's strain as float64 does); null: where float32 cannot "
+                                               "resolve the scene (mpm.precision)")
     reference: Optional[str] = setting(None, "a run directory (or its final_state.npz) to measure the error "
                                              "against", parse=reference)
     sync_every: Optional[int] = setting(None, "the host reads the step's figures every k steps; null: 1 on the "

@@ -13,12 +13,14 @@ from __future__ import annotations
 import json
 import math
 import signal
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 import mpm
+from mpm.precision import resolution
 from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
@@ -66,15 +68,36 @@ def sync_every(spec: RunSpec) -> int:
     return 1 if host_steps else int(k)
 
 
+def precision_check(spec: RunSpec) -> tuple[dict, str]:
+    """Can the run's precision resolve the scene? mpm.precision's estimate with
+    the run's step settings: metrics.json's ``precision_check`` entry (r_F and r_x,
+    whether they resolve the scene, whether G2P keeps compensated sums:
+    ``run.compensate``, null: where they do not, in float32) and a line to
+    print before compiling ("" where they do)."""
+    run = spec.run
+    r = resolution(spec.scene, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max, precision=run.precision)
+    on = run.compensate if run.compensate is not None else run.precision == "float32" and not r.resolved
+    entry = {"r_F": r.r_F, "r_x": r.r_x, "resolved": r.resolved, "compensate": bool(on)}
+    if r.resolved:
+        return entry, ""
+    what = (f"{run.precision} cannot resolve a step's motion (mpm.precision: r_F = {r.r_F:.2g}, threshold "
+            f"{r.threshold:g}; r_x = {r.r_x:.2g}, threshold {r.position_threshold:g})")
+    if on:
+        return entry, f"note: {what}: G2P keeps compensated sums of x and F (run.compensate)"
+    return entry, (f"warning: {what} and run.compensate=false: the deformation drifts; "
+                   f"set run.precision=float64 or run.compensate=true")
+
+
 def solver_options(spec: RunSpec) -> mpm.SolverOptions:
     """What the solver compiles for this run: dJ only when it is logged, the
     detection's measurements only when it is on, the batched steps' early
-    exits only when the host reads back less than every step."""
+    exits only when the host reads back less than every step, compensated
+    sums where the precision cannot resolve the scene (:func:`precision_check`)."""
     detect = spec.detect.action != "off"
     return mpm.SolverOptions(record_dJ=spec.log.particles and spec.log.dJ, transfer=spec.transfer, flip=spec.flip,
                              integrator=spec.integrator, track_energy=detect, fuse=spec.run.fuse,
                              track_J=detect and any(not b.material.invertible for b in spec.scene.bodies),
-                             batched=sync_every(spec) > 1)
+                             batched=sync_every(spec) > 1, compensate=precision_check(spec)[0]["compensate"])
 
 
 def step_policy(spec: RunSpec) -> mpm.StepPolicy:
@@ -164,6 +187,9 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     except ValueError:  # not the main thread
         pass
     try:
+        run.metrics["precision_check"], note = precision_check(spec)
+        if note:
+            print(note, file=sys.stderr)
         run.build(step_policy(spec), solver_options(spec), sync_every(spec), spec.run.graph)
         sink.start(run.meta())
         driver = run.driver

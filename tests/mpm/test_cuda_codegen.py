@@ -181,6 +181,7 @@ class Case:
     detect: str | None = None  # the driver's blow-up detection: stop | warn | off (None: stop
     # with the step's energies, which the detection needs; off without them)
     measure: bool = False  # the driver measures the diagnostics every step
+    compensate: bool | None = None  # compensated sums of x and F in G2P (None: where the estimate flags the scene)
 
     def label(self) -> str:
         default = Case()
@@ -240,7 +241,7 @@ def driver(case: Case, dim: int, precision: str) -> mpm.Driver:
     integrator = mpm.Implicit(psd=case.psd) if case.implicit else mpm.Explicit()
     options = mpm.SolverOptions(transfer=case.transfer, integrator=integrator, fuse=case.fuse,
                                 record_dJ=case.record_dJ, track_energy=case.track_energy, track_J=case.track_J,
-                                batched=case.batched)
+                                batched=case.batched, compensate=case.compensate)
     solver = mpm.Solver(model, scheme(case), options)
     detect = case.detect or ("stop" if case.track_energy else "off")
     return mpm.Driver(solver, state, mpm.StepPolicy(steps=1), mpm.Detection(action=detect),
@@ -286,6 +287,9 @@ def cases(dim: int) -> list[Case]:
         Case(record_dJ=True, track_energy=True, track_J=True, fuse=True),
         Case(scheme="tlmpm", record_dJ=True, track_energy=True, track_J=True),
         Case(forcing=True), Case(scheme="tlmpm", materials=("neo_hookean",), forcing=True),
+        # compensated sums: of F^sn (restarted by the update), of F^0s in the Eulerian commit, in batches
+        Case(scheme="tlmpm", compensate=True), Case(compensate=True), Case(kernel="compact", compensate=True),
+        Case(batched=True, scheme="aulmpm", compensate=True),
         # external loads: explicit, implicit, in batches
         Case(loads=True), Case(scheme="tlmpm", loads=True, implicit=True), Case(batched=True, loads=True),
         # the driver: its detection warning or off; steps in batches (every stage's early exits,
