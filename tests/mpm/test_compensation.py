@@ -24,11 +24,12 @@ class _Tip(mpm.Observer):
 
 
 @functools.cache
-def tip_hold_mean(scheme: str, precision: str, compensate: bool | None) -> float:
+def tip_hold_mean(scheme: str, kernel: str | None, precision: str, compensate: bool | None) -> float:
     """[m] the stiff cantilever's (4 cells across) time-mean tip deflection over
-    the load's hold, as conf/scene/cantilever_stiff_2d.yaml describes it."""
+    the load's hold, as conf/scene/cantilever_stiff_2d.yaml describes it
+    (``kernel``: the scene's, or another)."""
     spec = spec_for(["scene=cantilever_stiff_2d", f"scheme={scheme}"])
-    model, state = mpm.build(spec.scene, spec.kernel, precision, "cpu", spec.seed)
+    model, state = mpm.build(spec.scene, mpm.KERNELS[kernel] if kernel else spec.kernel, precision, "cpu", spec.seed)
     solver = mpm.Solver(model, spec.scheme, mpm.SolverOptions(transfer=spec.transfer, compensate=compensate))
     assert solver.options.compensate is (precision == "float32" if compensate is None else compensate)
     tip = _Tip()
@@ -43,13 +44,15 @@ def tip_hold_mean(scheme: str, precision: str, compensate: bool | None) -> float
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scheme", ["tlmpm", "empm"])
-def test_float32_compensated_deflects_as_float64(scheme):
+@pytest.mark.parametrize("scheme,kernel", [("tlmpm", None), ("empm", None), ("aulmpm", None), ("empm", "compact")])
+def test_float32_compensated_deflects_as_float64(scheme, kernel):
     """float32 (compensated by default: the estimate flags the scene) within 2 %
-    of float64's tip deflection; without the compensation 3-6 % further."""
-    reference = tip_hold_mean(scheme, "float64", None)
-    compensated = tip_hold_mean(scheme, "float32", None)
-    plain = tip_hold_mean(scheme, "float32", False)
+    of float64's tip deflection (measured: to 3e-5); without the compensation
+    3-7 % further (TLMPM and A-ULMPM 3.2 %, EMPM 5.5 %, EMPM compact 7.1 %,
+    which compensation runs fused so that G2P commits F^0s)."""
+    reference = tip_hold_mean(scheme, kernel, "float64", None)
+    compensated = tip_hold_mean(scheme, kernel, "float32", None)
+    plain = tip_hold_mean(scheme, kernel, "float32", False)
     assert compensated == pytest.approx(reference, rel=0.02)
     assert plain != pytest.approx(reference, rel=0.02)
     assert abs(plain) > abs(reference)  # the drift deflects it further
