@@ -48,6 +48,9 @@ Everything runs through the same code path as ``pipelines.run``
 9. stages: the 2D ball with one optional stage added at a time, and the
    launches per step; profile: where a step's time goes, per kernel and
    host work, on the 2D ball and the 3D sphere (pipelines.bench.scale).
+10. precision: plain float32, float32 with compensated sums of x and F
+   (``run.compensate=true``) and float64 on the 2D ball, the 3D sphere and
+   the small-deflection cantilever, EMPM and TLMPM (pipelines.bench.precision).
 
 ``--device`` picks the Warp device of every run (default: run.device's,
 CUDA where Warp finds a GPU). ``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
@@ -68,7 +71,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import scale
+from . import precision, scale
 from ..config import schema
 from .runs import QUIET, interleaved, loop_s, spec_for, timed
 from ..run.runner import execute
@@ -237,11 +240,11 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 
 TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "paper", "scaling")
+          "profile", "precision", "paper", "scaling")
 SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
              "integrators": "integrator", "fused": "fused-against-cached EMPM",
              "sync": "read-backs every k steps", "stages": "optional-stage",
-             "profile": "per-kernel profile"}  # tables in the default run: --no-<table> leaves one out
+             "profile": "per-kernel profile", "precision": "precision"}  # tables in the default run: --no-<table> leaves one out
 
 
 def main(argv=None) -> None:
@@ -300,6 +303,7 @@ def main(argv=None) -> None:
         sync = bench_sync(Path(tmp), device) if args.sync else []
         stages = scale.bench_stages(Path(tmp)) if args.stages else []
         profile = scale.profile() if args.profile else []
+        precisions = precision.bench_precision(Path(tmp), args.steps) if args.precision else []
         paper = scale.bench_paper(Path(tmp)) if args.paper else []
         scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
     if rows:
@@ -376,6 +380,8 @@ def main(argv=None) -> None:
         scale.print_stages(stages)
     if profile:
         scale.print_profile(profile)
+    if precisions:
+        precision.print_precision(precisions)
     if paper:
         scale.print_paper(paper)
     if scaling:
@@ -385,7 +391,8 @@ def main(argv=None) -> None:
                                          "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
-                                         "profile": profile, "paper": paper, "scaling": scaling}, indent=2) + "\n")
+                                         "profile": profile, "precision": precisions, "paper": paper,
+                                         "scaling": scaling}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

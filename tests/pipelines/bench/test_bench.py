@@ -1,6 +1,7 @@
 """The bench's accounting (pipelines.bench.scale, mpm.memory): launches per
 step, the arrays a run holds. Speed itself is measured by the bench, not here."""
 
+import pytest
 import warp as wp
 
 import mpm
@@ -78,3 +79,19 @@ def test_the_fused_eulerian_path_holds_no_stencil_cache():
         stencils[fuse] = sum(getattr(state.stencils, k).capacity for k in ("base", "fx", "W", "dW"))
     assert stencils[False] >= model.n_particles * 4  # the cached run holds a first node per particle
     assert held[False] - held[True] >= stencils[False] - stencils[True]
+
+
+@pytest.mark.slow
+def test_the_precision_table_times_each_variant_in_the_same_rounds(tmp_path, monkeypatch):
+    """pipelines.bench's precision table: plain float32, compensated float32
+    and float64 of one case, each a completed run, ratios to plain float32
+    from the same rounds (one small case, one round, here)."""
+    from pipelines.bench import precision
+
+    monkeypatch.setattr(precision, "CASES", {"ball_2d": (["scene=elastic_ball_2d", "scene.resolution=16"], 3)})
+    monkeypatch.setattr(precision, "SCHEMES", ("tlmpm",))
+    monkeypatch.setattr(precision, "ROUNDS", 1)
+    rows = precision.bench_precision(tmp_path)
+    assert [r["variant"] for r in rows] == list(precision.VARIANTS)
+    assert rows[0]["vs_float32"] == 1.0 and all(r["step_ms"] > 0 and r["particles"] > 0 for r in rows)
+    assert rows[1]["vs_float32"] == rows[1]["step_ms"] / rows[0]["step_ms"]
