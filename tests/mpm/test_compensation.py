@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import mpm
-from tests.helpers import spec_for
+from helpers import spec_for
 
 
 class _Tip(mpm.Observer):

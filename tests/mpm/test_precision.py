@@ -10,7 +10,7 @@ import pytest
 
 import mpm
 from mpm.precision import SPACING, THRESHOLD, resolution
-from tests.helpers import spec_for
+from helpers import spec_for
 
 
 def scene(*overrides):

@@ -6,7 +6,7 @@ remedies where they are turned off, and nothing for a resolved scene."""
 import pytest
 
 from pipelines.run.runner import precision_check, solver_options
-from tests.helpers import spec_for
+from helpers import spec_for
 
 
 @pytest.mark.parametrize("overrides,compensate,starts", [
