@@ -243,7 +243,8 @@ TOOLS = {
         "--steps": ["--steps 0", "--steps abc"], "--cold": ["--cold=1"], "--json": ["--json {dir}", "--json {file}"],
         "--paper": ["--paper=1"], "--scaling": ["--scaling=1"], "--only": ["--only abc", "--only speed,abc"],
         "--device": ["--device tpu"], **{f"--no-{t}": [f"--no-{t}=1"] for t in (
-            "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile")},
+            "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile",
+            "precision")},
     }),
     "pipelines.cfl_bound": ([], {
         "--dim": ["--dim 4", "--dim abc"], "--per-axis": ["--per-axis 0", "--per-axis abc"],
