@@ -224,11 +224,11 @@ class LoadTable:
 
 
 def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarray, body_ranges,
-            spacing, dx: float) -> LoadTable:
+            spacing, dx: float, names=None) -> LoadTable:
     """The loads on the particles at positions ``x`` [m] with volumes ``volume``
     [m^d] and bodies ``body``; ``body_ranges[b]`` (start, count) of body b,
     ``spacing[b]`` [m] its sampling spacing (dx^d / ppc)^(1/d), ``dx`` [m]
-    the grid's cell. Raises :class:`LoadError` for a load that selects no
+    the grid's cell, ``names[b]`` its name for messages (None: its index). Raises :class:`LoadError` for a load that selects no
     particle, or a point load whose ``at`` lies farther than
     :data:`POINT_REACH` cells from every particle of its body."""
     entries = []  # (particle indices, load index, forces)
@@ -242,7 +242,8 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
         if load.kind == "point" and load.at is not None:
             dist = np.linalg.norm(x[idx] - np.asarray(load.at, float), axis=1)
             if dist.min() > POINT_REACH * dx:
-                whose = "of any body" if load.body is None else f"of body {load.body}"
+                whose = ("of any body" if load.body is None else
+                         f"of body '{names[load.body]}'" if names else f"of body {load.body}")
                 raise LoadError(i, "at", f"{list(load.at)} is {dist.min():.4g} m from the nearest particle {whose}; "
                                          f"accepted: a point within {POINT_REACH:g} cells ({POINT_REACH * dx:.4g} m) "
                                          "of the loaded body")

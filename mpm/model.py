@@ -364,7 +364,8 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     if scene.loads:
         spacing = [(dxp**d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
         try:
-            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing, dx)
+            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing, dx,
+                            [b.name or f"body{i}" for i, b in enumerate(scene.bodies)])
         except LoadError as e:
             raise SceneError(f"loads[{e.index}].{e.key}", e.message) from None
     S = np.float32 if precision == "float32" else np.float64

@@ -249,6 +249,13 @@ def _sources(scene, i: int, c: float, M: float, h: float, r: float, V: float, lo
     return out
 
 
+def compensates(requested: bool | None, precision: str, r: Resolution) -> bool:
+    """Whether a run keeps compensated sums (mpm.SolverOptions.compensate):
+    as ``requested``, else (None) exactly where the precision is float32 and
+    the estimate ``r`` finds the scene unresolved."""
+    return requested if requested is not None else precision == "float32" and not r.resolved
+
+
 def resolution(scene, dt: float | None = None, cfl: float = 0.4, dt_max: float = 1.0e-3,
                precision: str = "float32", threshold: float = THRESHOLD,
                position_threshold: float = POSITION_THRESHOLD) -> Resolution:

@@ -39,7 +39,7 @@ from .launch import Launches, load
 from .reference_grids import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
-from .precision import resolution
+from .precision import compensates, resolution
 from .schemes import AULMPM, EMPM, scene_kind
 from .stepping.status import StepBuffer, StepReport
 from .stencil import fuse
@@ -114,7 +114,7 @@ def resolved(options: SolverOptions, scene, precision: str = "float32") -> Solve
     decided for ``scene`` in ``precision``."""
     compensate = options.compensate
     if compensate is None:
-        compensate = precision == "float32" and not resolution(scene, precision=precision).resolved
+        compensate = compensates(None, precision, resolution(scene, precision=precision))
     return dataclasses.replace(
         options, track_energy=True if options.track_energy is None else options.track_energy,
         track_J=(any(not b.material.invertible for b in scene.bodies) if options.track_J is None

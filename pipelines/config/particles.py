@@ -69,12 +69,10 @@ def check_particles(scene: mpm.Scene, seed: int, key: str = "scene", samples: li
         spacing = [(dxp ** d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
         try:
             resolve(scene.loads, np.concatenate(xs), np.concatenate(vols), np.concatenate(ids), ranges, spacing,
-                    scene.dx)
+                    scene.dx, names)
         except LoadError as e:
             if e.key == "at":  # a point load off its body
-                body = scene.loads[e.index].body
-                message = e.message if body is None else e.message.replace(f"of body {body}", f"of body '{names[body]}'")
-                raise ConfigError(f"{key}.loads[{e.index}].at", message) from None
+                raise ConfigError(f"{key}.loads[{e.index}].at", e.message) from None
             load = scene.loads[e.index]
             which = list(range(len(xs))) if load.body is None else [load.body]
             x = np.concatenate([xs[b] for b in which])

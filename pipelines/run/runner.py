@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 import mpm
-from mpm.precision import resolution
+from mpm.precision import compensates, resolution
 from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
@@ -76,7 +76,7 @@ def precision_check(spec: RunSpec) -> tuple[dict, str]:
     print before compiling ("" where they do)."""
     run = spec.run
     r = resolution(spec.scene, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max, precision=run.precision)
-    on = run.compensate if run.compensate is not None else run.precision == "float32" and not r.resolved
+    on = compensates(run.compensate, run.precision, r)
     entry = {"r_F": r.r_F, "r_x": r.r_x, "resolved": r.resolved, "compensate": bool(on)}
     if r.resolved:
         return entry, ""
