@@ -106,24 +106,40 @@ def make_fracture(t: Types):
 
 
 class FractureMeasure:
-    """The measure for one model: the initial neighbour pairs (taken by
-    :meth:`prepare`), the fraction broken per body (:meth:`measure`), the
-    pieces per body (:meth:`fragments`)."""
+    """The measure for one model: the initial neighbour pairs (the positions
+    given to :meth:`prepare`; the pairs are found at the first use, so that a
+    run that never measures never pays for them), the fraction broken per
+    body (:meth:`measure`), the pieces per body (:meth:`fragments`)."""
 
     def __init__(self, model):
         self.model = model
         self.kernel = make_fracture(model.types)
-        self.pair_counts = np.zeros(len(model.scene.bodies), np.int64)
+        self._x0 = None
+        self._counts = np.zeros(len(model.scene.bodies), np.int64)
 
     def prepare(self, x: np.ndarray) -> None:
-        """The pairs of the positions ``x`` [m] closer than 1.5 particle spacings."""
+        """Take the positions ``x`` [m] whose pairs closer than 1.5 particle
+        spacings are tracked."""
+        self._x0 = np.array(x, copy=True)  # (on the CPU a Warp array's numpy() is a view of it)
+
+    @property
+    def pair_counts(self) -> np.ndarray:
+        """The tracked pairs per body."""
+        self._pairs()
+        return self._counts
+
+    def _pairs(self) -> None:
+        """Find the pairs of the prepared positions, once."""
+        if self._x0 is None:
+            return
+        x, self._x0 = self._x0, None
         m = self.model
         scene = m.scene
         n_bodies = len(scene.bodies)
         spacing = np.array([scene.particle_dx / (b.ppc or scene.ppc) ** (1.0 / m.dim) for b in scene.bodies])
         body = m.body.numpy()
         p, q = neighbour_pairs(x, body, 1.5 * spacing)
-        self.pair_counts = np.bincount(body[p], minlength=n_bodies)
+        self._counts = np.bincount(body[p], minlength=n_bodies)
         dtype = np.float32 if m.types.precision == "float32" else np.float64
         with wp.ScopedDevice(m.device):
             self._p = wp.array(p, dtype=wp.int32)
@@ -135,17 +151,19 @@ class FractureMeasure:
     def measure(self, state) -> np.ndarray:
         """Fraction of the initial pairs broken in ``state``, per body."""
         m = self.model
+        self._pairs()
         self._broken.zero_()
         if len(self._p):
             wp.launch(self.kernel, len(self._p), device=m.device, inputs=[
                 self._p, self._q, self._offset, m.body, state.x, state.F0s, state.Fsn, m.types.scalar(m.dx),
                 self._broken, self._pair_broken])
-        return self._broken.numpy() / np.maximum(self.pair_counts, 1)
+        return self._broken.numpy() / np.maximum(self._counts, 1)
 
     def fragments(self) -> np.ndarray:
         """Pieces per body (connected components of its intact pairs) at the
         last :meth:`measure`."""
         m = self.model
+        self._pairs()
         intact = self._pair_broken.numpy() == 0
         label = fragments(m.n_particles, self._p.numpy(), self._q.numpy(), intact)
         body = m.body.numpy()

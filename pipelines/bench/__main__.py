@@ -73,8 +73,7 @@ from pathlib import Path
 
 from . import precision, scale
 from ..config import schema
-from .runs import QUIET, interleaved, loop_s, spec_for, timed
-from ..run.runner import execute
+from .runs import QUIET, RECORDING, execute, interleaved, loop_s, spec_for, timed
 from ..run.warp_setup import init_warp
 
 CASES = {
@@ -95,17 +94,19 @@ def bench_case(name: str, overrides: list[str], steps: int, workdir: Path) -> di
     common = overrides + [f"run.steps={steps}", "log.progress=false"]
     warm = execute(spec_for(overrides + ["run.steps=5", "log.every=1"]), workdir / f"{name}_warm")
     plain = timed(common + ["log.every=0", "log.scalars=false"], workdir / f"{name}_plain")
-    logged = timed(common + ["log.every=1", "log.scalars=true"], workdir / f"{name}_logged")
     t0 = plain["step_time_ms"]
-    t1 = logged["step_time_ms"] + logged["log_time_ms"]
+    logged = None
+    if RECORDING["on"]:
+        logged = timed(common + ["log.every=1", "log.scalars=true"], workdir / f"{name}_logged")
+        t1 = logged["step_time_ms"] + logged["log_time_ms"]
     return {
         "case": name, "overrides": overrides, "steps": steps,
         "particles": plain["particles"], "grid_nodes": plain["grid_nodes"],
         "compile_time_s": warm["compile_time_s"],
         "step_ms": t0,
         "particle_steps_per_s": plain["particles"] / (t0 * 1e-3),
-        "logged_step_ms": logged["step_time_ms"], "log_ms": logged["log_time_ms"],
-        "log_overhead": t1 / t0 - 1.0,
+        "logged_step_ms": logged and logged["step_time_ms"], "log_ms": logged and logged["log_time_ms"],
+        "log_overhead": logged and t1 / t0 - 1.0,
     }
 
 
@@ -240,7 +241,7 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 
 TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "precision", "paper", "scaling")
+          "profile", "precision", "paper", "scaling", "large")
 SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
              "integrators": "integrator", "fused": "fused-against-cached EMPM",
              "sync": "read-backs every k steps", "stages": "optional-stage",
@@ -259,6 +260,10 @@ def main(argv=None) -> None:
         p.add_argument(f"--no-{table}", dest=table, action="store_false", help=f"skip the {what} table")
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
+    p.add_argument("--large", action="store_true", help="add the 1M and 10M particle sphere (for a GPU)")
+    p.add_argument("--no-recording", dest="recording", action="store_false",
+                   help="write no recordings (runs log to a sink that drops everything; the logged "
+                        "columns of the speed table are left out): for a machine without rerun-sdk")
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
     p.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"),
                    help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
@@ -278,6 +283,7 @@ def main(argv=None) -> None:
                 p.error(f"--only: unknown table {t!r}; accepted: {', '.join(TABLES)}")
         for t in TABLES:
             setattr(args, t, t in chosen)
+    RECORDING["on"] = args.recording
     if args.device is not None:  # run.device's default, for every run below
         os.environ["MPM_DEVICE"] = args.device
     schema.register()
@@ -306,14 +312,16 @@ def main(argv=None) -> None:
         precisions = precision.bench_precision(Path(tmp), args.steps) if args.precision else []
         paper = scale.bench_paper(Path(tmp)) if args.paper else []
         scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
+        large = scale.bench_large() if args.large else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
               f"{'Mpart-steps/s':>13} {'logged ms':>9} {'+log ms':>8} {'log overhead':>12}")
     for r in rows:
+        logged = (f"{r['logged_step_ms']:>9.3f} {r['log_ms']:>8.3f} {100 * r['log_overhead']:>11.0f}%"
+                  if r["logged_step_ms"] is not None else f"{'-':>9} {'-':>8} {'-':>12}")
         print(f"{r['case']:<9} {r['particles']:>9,} {r['grid_nodes']:>8,} {r['compile_time_s']:>9.2f} "
-              f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} "
-              f"{r['logged_step_ms']:>9.3f} {r['log_ms']:>8.3f} {100 * r['log_overhead']:>11.0f}%")
+              f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} {logged}")
     if schemes:
         print("\nschemes on the 2D ball (128^2) and the 3D sphere (64^3), step only")
         print(f"{'case':<8} {'place':<13} {'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} "
@@ -386,13 +394,15 @@ def main(argv=None) -> None:
         scale.print_paper(paper)
     if scaling:
         scale.print_scaling(scaling)
+    if large:
+        scale.print_large(large)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
                                          "profile": profile, "precision": precisions, "paper": paper,
-                                         "scaling": scaling}, indent=2) + "\n")
+                                         "scaling": scaling, "large": large}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..run.runner import execute
+from ..run import runner
 from ..config.validate import compose_spec
+from ..recording.sinks import Sink
 
 QUIET = ["log.every=0", "log.scalars=false", "log.progress=false"]  # step only
 REPEATS = 5  # timed runs of each configuration; the fastest median is reported
@@ -16,6 +17,13 @@ WARM = ["run.steps=3"]  # a warm-up run compiles (or loads) the kernels first
 
 
 spec_for = compose_spec  # a run's spec from its overrides
+RECORDING = {"on": True}  # False (``--no-recording``): every run logs to a sink that drops everything
+
+
+def execute(spec, out_dir: Path) -> dict:
+    """:func:`pipelines.run.runner.execute` with the bench's sink: the run's
+    recording, or none (``RECORDING``)."""
+    return runner.execute(spec, out_dir, sink=None if RECORDING["on"] else Sink())
 
 
 def step_ms(m: dict) -> float:

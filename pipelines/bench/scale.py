@@ -10,6 +10,10 @@ optional stage: the tables behind ``python -m pipelines.bench --paper``,
 - scaling: the elastic sphere (3D) and ball (2D) from about 10K (5K) to 1M
   particles: ms per step, particle-steps per second, the bytes of the run's
   Warp arrays per particle (mpm.memory) and the process's peak resident memory.
+- large: the elastic sphere at about 1M and 10M particles (EMPM, the run's
+  own read-back interval: every 10 steps with the CUDA graph on CUDA):
+  steps per second after warm-up, host reads per step, the run's Warp
+  arrays [MB] and the device's memory in use (``--large``; meant for a GPU).
 - stages: the 2D ball with one optional stage added at a time (detection,
   logging, a kinematic region, a collider, open walls, a second body with
   contact) against the plain step, and the Warp launches and memory
@@ -26,8 +30,8 @@ import warp as wp
 import mpm
 from mpm.launch import Counter, Launches, kernel_name
 
-from .runs import QUIET, interleaved, spec_for, step_ms, timed
-from ..run.runner import execute, solver_options
+from .runs import QUIET, execute, interleaved, spec_for, step_ms, timed
+from ..run.runner import solver_options
 
 # A-ULMPM Table 2 (journal version): scene label, overrides, seconds per step, machine, particles
 PAPER_TABLE2 = [
@@ -84,6 +88,58 @@ def bench_scaling(workdir: Path, repeats: int = 2) -> list[dict]:
                          "bytes_per_particle": 1e6 * m["memory_mb"] / m["particles"],
                          "peak_rss_mb": m["peak_rss_mb"]})
     return rows
+
+
+# sphere resolutions giving about 1M and 10M particles (the scaling table's 155 gives 1.0M)
+LARGE = {"1M": 155, "10M": 334}
+LARGE_CASE = ["scene=elastic_ball_3d", "material=fixed_corotated", "scheme=empm"]
+
+
+def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None) -> list[dict]:
+    """The sphere at each size of ``sizes`` (default LARGE): a started
+    driver (no logging, no detection), then ``rounds`` timed batches of
+    about ``steps`` steps, synchronised at their ends; the fastest batch."""
+    rows = []
+    for label, res in (sizes or LARGE).items():
+        spec = spec_for(LARGE_CASE + QUIET + [f"scene.resolution={res}"])
+        device = spec.run.device
+        t0 = time.perf_counter()
+        driver = _driver(spec)
+        wp.synchronize_device(device)
+        setup_s = time.perf_counter() - t0
+        best = None
+        for _ in range(rounds):
+            with Counter() as r:
+                first = driver.step
+                t0 = time.perf_counter()
+                while driver.step < first + steps:
+                    driver.advance()
+                wp.synchronize_device(device)
+                dt = time.perf_counter() - t0
+            n = driver.step - first
+            if best is None or dt / n < best[0]:
+                best = (dt / n, r.reads / n)
+        per_step, reads = best
+        dev = wp.get_device(device)
+        in_use = (dev.total_memory - dev.free_memory) / 1e6 if dev.is_cuda else None
+        rows.append({"size": label, "resolution": res, "particles": driver.solver.model.n_particles,
+                     "device": device, "sync_every": driver.k, "setup_s": setup_s,
+                     "step_ms": 1e3 * per_step, "steps_per_s": 1.0 / per_step,
+                     "particle_steps_per_s": driver.solver.model.n_particles / per_step, "reads": reads,
+                     "arrays_mb": driver.solver.memory_bytes(driver.state) / 1e6, "device_mb": in_use})
+        del driver
+    return rows
+
+
+def print_large(rows: list[dict]) -> None:
+    print("\nlarge: the 3D elastic sphere (EMPM, fixed corotated, quadratic MLS), no logging, no detection")
+    print(f"{'size':<5} {'particles':>11} {'device':<7} {'k':>3} {'setup s':>8} {'ms/step':>9} {'steps/s':>8} "
+          f"{'Gpart-steps/s':>13} {'reads/step':>10} {'arrays MB':>10} {'device MB':>10}")
+    for r in rows:
+        used = f"{r['device_mb']:>10,.0f}" if r["device_mb"] is not None else f"{'-':>10}"
+        print(f"{r['size']:<5} {r['particles']:>11,} {r['device']:<7} {r['sync_every']:>3} {r['setup_s']:>8.1f} "
+              f"{r['step_ms']:>9.3f} {r['steps_per_s']:>8.1f} {r['particle_steps_per_s'] / 1e9:>13.3f} "
+              f"{r['reads']:>10.2f} {r['arrays_mb']:>10,.0f} {used}")
 
 
 STAGE_BASE = ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated", "scheme=empm",
@@ -191,11 +247,12 @@ PROFILE_CASES = {"ball_2d (128^2)": ["scene=elastic_ball_2d", "scene.resolution=
 def profile(steps: int = 20, rounds: int = 3) -> list[dict]:
     """Where a step's time goes, per kernel (each launch timed, synchronised
     on CUDA) and the rest of the driver's step (host work: read-back, the
-    layout, Python), EMPM with the defaults; the fastest of ``rounds``."""
+    layout, Python), EMPM with the defaults, the host reading back every
+    step (so that no CUDA graph hides the launches); the fastest of ``rounds``."""
     rows = []
     for case, over in PROFILE_CASES.items():
         spec = spec_for(over + ["scheme=empm"])
-        driver = _driver(spec)
+        driver = _driver(spec, sync_every=1)
         best = None
         for _ in range(rounds):
             with _Counted(spec.run.device) as c:

@@ -26,7 +26,6 @@ from mpm.stepping.plan import plan as step_plan
 from . import provenance
 from ..config import plugins
 from ..config.validate import RunSpec
-from ..recording.rerun_sink import RerunSink
 from ..recording.sinks import Sink
 from .recorder import Recorder
 
@@ -173,6 +172,8 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     out_dir.mkdir(parents=True, exist_ok=True)
     properties = recording_properties(spec, config_yaml, list(overrides), choices)
     if sink is None:
+        from ..recording.rerun_sink import RerunSink  # imported here: a run given a sink needs no rerun-sdk
+
         sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
     run = Recorder(spec, out_dir, properties, sink)
     interrupts = Interrupts()

@@ -372,4 +372,8 @@ def test_node_positions_summed_only_near_a_wall(scheme):
     assert positioned[1:][y_min[:-1] < band + 1.5 * spec.scene.dx].all()
     assert y_min.min() < band  # it did reach the floor
     for got, ref in zip(fields, reference):
-        np.testing.assert_array_equal(got, ref)
+        if DEVICE == "cpu":
+            np.testing.assert_array_equal(got, ref)
+        else:  # CUDA's atomic sums in P2G take the particles in no fixed order: float64 rounding per step,
+            # grown over 260 steps (seen: 5e-9 relative, 4e-10 m)
+            np.testing.assert_allclose(got, ref, rtol=1e-7, atol=1e-8)

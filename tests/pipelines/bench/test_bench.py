@@ -95,3 +95,29 @@ def test_the_precision_table_times_each_variant_in_the_same_rounds(tmp_path, mon
     assert [r["variant"] for r in rows] == list(precision.VARIANTS)
     assert rows[0]["vs_float32"] == 1.0 and all(r["step_ms"] > 0 and r["particles"] > 0 for r in rows)
     assert rows[1]["vs_float32"] == rows[1]["step_ms"] / rows[0]["step_ms"]
+
+
+def test_the_large_table_reports_rate_reads_and_memory():
+    """``--large``'s rows at a small size: steps per second from the timed
+    steps, the host's reads per step (every step on the CPU), the arrays' MB."""
+    rows = bench_scale.bench_large(steps=3, rounds=1, sizes={"tiny": 16})
+    (r,) = rows
+    assert r["particles"] > 100 and r["device"] == DEVICE
+    assert r["steps_per_s"] == pytest.approx(1e3 / r["step_ms"])
+    assert r["reads"] == pytest.approx(1.0 / r["sync_every"])
+    assert r["arrays_mb"] > 0
+
+
+def test_the_bench_runs_without_rerun_sdk_when_asked(tmp_path):
+    """``--no-recording``: no run imports rerun (a machine without rerun-sdk,
+    such as a bare GPU node, can run the step-only tables)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['rerun'] = None; sys.modules['rerun_bindings'] = None\n"
+            "from pipelines.bench.__main__ import main\n"
+            f"main(['ball_2d', '--only', 'speed', '--steps', '3', '--no-recording', '--device', '{DEVICE}'])\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    row = next(line for line in r.stdout.splitlines() if line.startswith("ball_2d"))
+    assert row.split()[-3:] == ["-", "-", "-"]  # no logged columns
