@@ -9,6 +9,9 @@ Everything runs through the same code path as ``pipelines.run``
    (particles, dJ and scalars every step). Particles, grid nodes, compile (or
    cache load) time, median ms per step, particle-steps per second, logging
    overhead (logged step + logging time against the step-only time).
+   peers: the same 2D ball against Taichi's MLS-MPM on one CPU thread
+   (pipelines.bench.peers; taichi is optional: the table says when it is
+   missing), the ratio of their ms per step in interleaved rounds.
 2. schemes: EMPM, TLMPM and A-ULMPM on the same 2D ball and 3D sphere, step
    only, in flight (as the speed table: far from the walls, where the
    Lagrangian schemes sum no node positions) and placed at the floor (within
@@ -52,6 +55,10 @@ Everything runs through the same code path as ``pipelines.run``
    (``run.compensate=true``) and float64 on the 2D ball, the 3D sphere and
    the small-deflection cantilever, EMPM and TLMPM (pipelines.bench.precision).
 
+``--large`` adds the sphere at 1M and 10M particles (pipelines.bench.scale;
+meant for a GPU) and ``--sweep`` the runs per hour of a sweep of 2N jobs on
+1 and N workers (pipelines.bench.throughput).
+
 ``--device`` picks the Warp device of every run (default: run.device's,
 CUDA where Warp finds a GPU). ``--paper`` adds the A-ULMPM paper's Table 2 scenes at its particle counts
 and ``--scaling`` the growth of cost and memory from about 10K to 1M
@@ -71,7 +78,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import precision, scale
+from . import peers, precision, scale, throughput
 from ..config import schema
 from .runs import QUIET, RECORDING, execute, interleaved, loop_s, spec_for, timed
 from ..run.warp_setup import init_warp
@@ -240,9 +247,9 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
     return rows
 
 
-TABLES = ("speed", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "precision", "paper", "scaling", "large")
-SKIPPABLE = {"schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
+TABLES = ("speed", "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
+          "profile", "precision", "paper", "scaling", "large", "sweep")
+SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
              "integrators": "integrator", "fused": "fused-against-cached EMPM",
              "sync": "read-backs every k steps", "stages": "optional-stage",
              "profile": "per-kernel profile", "precision": "precision"}  # tables in the default run: --no-<table> leaves one out
@@ -261,6 +268,7 @@ def main(argv=None) -> None:
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
     p.add_argument("--large", action="store_true", help="add the 1M and 10M particle sphere (for a GPU)")
+    p.add_argument("--sweep", action="store_true", help="add the runs per hour of a 2N-job sweep on 1 and N workers")
     p.add_argument("--no-recording", dest="recording", action="store_false",
                    help="write no recordings (runs log to a sink that drops everything; the logged "
                         "columns of the speed table are left out): for a machine without rerun-sdk")
@@ -300,6 +308,7 @@ def main(argv=None) -> None:
               file=sys.stderr)
         rows = ([bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
                 if args.speed else [])
+        peer_rows = peers.bench_peers(Path(tmp), device) if args.peers else []
         schemes = bench_schemes(Path(tmp), args.steps) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
@@ -313,6 +322,7 @@ def main(argv=None) -> None:
         paper = scale.bench_paper(Path(tmp)) if args.paper else []
         scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
         large = scale.bench_large() if args.large else []
+        sweep = throughput.bench_sweep(Path(tmp)) if args.sweep else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
@@ -322,6 +332,8 @@ def main(argv=None) -> None:
                   if r["logged_step_ms"] is not None else f"{'-':>9} {'-':>8} {'-':>12}")
         print(f"{r['case']:<9} {r['particles']:>9,} {r['grid_nodes']:>8,} {r['compile_time_s']:>9.2f} "
               f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} {logged}")
+    if peer_rows:
+        peers.print_peers(peer_rows, device)
     if schemes:
         print("\nschemes on the 2D ball (128^2) and the 3D sphere (64^3), step only")
         print(f"{'case':<8} {'place':<13} {'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} "
@@ -396,13 +408,15 @@ def main(argv=None) -> None:
         scale.print_scaling(scaling)
     if large:
         scale.print_large(large)
+    if sweep:
+        throughput.print_sweep(sweep)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
-                                         "kernels": kernels, "materials": materials,
+                                         "peers": peer_rows, "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
                                          "profile": profile, "precision": precisions, "paper": paper,
-                                         "scaling": scaling, "large": large}, indent=2) + "\n")
+                                         "scaling": scaling, "large": large, "sweep": sweep}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -18,12 +18,13 @@ experiments.
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, OmegaConf
 
 import mpm
 
@@ -70,8 +71,20 @@ def options(group: str) -> list[str]:
     return sorted(set(option_nodes().get(group, {})) | set(files))
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity: what a container
+    or ``taskset`` leaves it), the sweep launcher's default worker count
+    (``hydra.launcher.n_jobs: ${cores:}``): a Warp CPU run steps on one core."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def register() -> None:
-    """Register the root schema and every option defined in code."""
+    """Register the root schema, every option defined in code and the
+    ``${cores:}`` resolver."""
+    OmegaConf.register_new_resolver("cores", usable_cores, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
     for group, nodes in option_nodes().items():

@@ -121,3 +121,26 @@ def test_the_bench_runs_without_rerun_sdk_when_asked(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     row = next(line for line in r.stdout.splitlines() if line.startswith("ball_2d"))
     assert row.split()[-3:] == ["-", "-", "-"]  # no logged columns
+
+
+@pytest.mark.slow
+def test_the_sweep_table_times_whole_sweeps(tmp_path, monkeypatch):
+    """The sweep table runs real multirun commands: 2N jobs per worker count,
+    runs per hour from the wall time (N = 1 here: one row, ratio 1)."""
+    from pipelines.bench import throughput
+
+    monkeypatch.setattr(throughput, "CASE", [c.replace("run.duration=0.5", "run.steps=5") for c in throughput.CASE])
+    (r,) = throughput.bench_sweep(tmp_path, cores=1)
+    assert r["jobs"] == 2 and r["workers"] == 1 and r["vs_one"] == 1.0
+    assert r["runs_per_hour"] == pytest.approx(3600 * 2 / r["wall_s"])
+    assert sorted(p.name for p in (tmp_path / "sweep_1").iterdir() if p.is_dir()) == ["0", "1"]
+
+
+def test_the_peers_table_says_when_taichi_is_missing(tmp_path, monkeypatch):
+    """Without taichi the peers table is one row saying so (taichi is not a dependency)."""
+    import sys
+
+    from pipelines.bench import peers
+
+    monkeypatch.setitem(sys.modules, "taichi", None)
+    assert peers.bench_peers(tmp_path, DEVICE) == [{"peer": "taichi", "missing": True}]

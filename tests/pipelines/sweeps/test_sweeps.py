@@ -223,7 +223,8 @@ def test_invalid_job_in_a_sweep_says_why_the_others_run_and_the_sweep_fails(tmp_
     assert f"sweep {sweep}: 1 completed, 1 invalid; report: {sweep / 'report.md'}" in p.stderr
 
 
-LAUNCHERS = {"basic": "hydra._internal.core_plugins.basic_launcher.BasicLauncher",
+LAUNCHERS = {"cores": "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher",
+             "basic": "hydra._internal.core_plugins.basic_launcher.BasicLauncher",
              "joblib": "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher",
              "submitit_local": "hydra_plugins.hydra_submitit_launcher.submitit_launcher.LocalLauncher",
              "submitit_slurm": "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher",
@@ -246,3 +247,17 @@ def test_named_experiments_compose_with_every_launcher(name):
         assert cfg.hydra.sweep.dir == base.hydra.sweep.dir == f"multirun/{name}/default"
         assert cfg.hydra.sweeper.params == base.hydra.sweeper.params
         assert job(cfg) == job(base), launcher
+
+
+def test_the_default_launcher_runs_one_worker_per_core():
+    """The default launcher is joblib with one worker per usable core (the
+    process's CPU affinity; a Warp CPU run steps on one core), and a count
+    given on the command line replaces it."""
+    import os
+
+    from pipelines.config.schema import usable_cores
+
+    cfg = _compose([])
+    assert cfg.hydra.launcher._target_ == LAUNCHERS["joblib"]
+    assert cfg.hydra.launcher.n_jobs == usable_cores() == len(os.sched_getaffinity(0))
+    assert _compose(["hydra.launcher.n_jobs=1"]).hydra.launcher.n_jobs == 1
