@@ -321,7 +321,7 @@ def main(argv=None) -> None:
         precisions = precision.bench_precision(Path(tmp), args.steps) if args.precision else []
         paper = scale.bench_paper(Path(tmp)) if args.paper else []
         scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
-        large = scale.bench_large() if args.large else []
+        large = scale.bench_large(energies=(True, False)) if args.large else []
         sweep = throughput.bench_sweep(Path(tmp)) if args.sweep else []
     if rows:
         print(f"speed (EMPM, float32, {device})")

@@ -95,16 +95,19 @@ LARGE = {"1M": 155, "10M": 334}
 LARGE_CASE = ["scene=elastic_ball_3d", "material=fixed_corotated", "scheme=empm"]
 
 
-def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None) -> list[dict]:
+def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None,
+                energies: tuple = (True,)) -> list[dict]:
     """The sphere at each size of ``sizes`` (default LARGE): a started
     driver (no logging, no detection), then ``rounds`` timed batches of
-    about ``steps`` steps, synchronised at their ends; the fastest batch."""
+    about ``steps`` steps, synchronised at their ends; the fastest batch.
+    ``energies``: with the step's energy sums (kinetic, potential and the
+    largest speed per body in G2P: what the blow-up detection reads), without, or both."""
     rows = []
-    for label, res in (sizes or LARGE).items():
+    for label, res, energy in ((label, res, e) for label, res in (sizes or LARGE).items() for e in energies):
         spec = spec_for(LARGE_CASE + QUIET + [f"scene.resolution={res}"])
         device = spec.run.device
         t0 = time.perf_counter()
-        driver = _driver(spec)
+        driver = _driver(spec, track_energy=energy)
         wp.synchronize_device(device)
         setup_s = time.perf_counter() - t0
         best = None
@@ -122,7 +125,8 @@ def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None) -> 
         per_step, reads = best
         dev = wp.get_device(device)
         in_use = (dev.total_memory - dev.free_memory) / 1e6 if dev.is_cuda else None
-        rows.append({"size": label, "resolution": res, "particles": driver.solver.model.n_particles,
+        rows.append({"size": label, "resolution": res, "energy": energy,
+                     "particles": driver.solver.model.n_particles,
                      "device": device, "sync_every": driver.k, "setup_s": setup_s,
                      "step_ms": 1e3 * per_step, "steps_per_s": 1.0 / per_step,
                      "particle_steps_per_s": driver.solver.model.n_particles / per_step, "reads": reads,
@@ -133,11 +137,11 @@ def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None) -> 
 
 def print_large(rows: list[dict]) -> None:
     print("\nlarge: the 3D elastic sphere (EMPM, fixed corotated, quadratic MLS), no logging, no detection")
-    print(f"{'size':<5} {'particles':>11} {'device':<7} {'k':>3} {'setup s':>8} {'ms/step':>9} {'steps/s':>8} "
+    print(f"{'size':<5} {'energy':<6} {'particles':>11} {'device':<7} {'k':>3} {'setup s':>8} {'ms/step':>9} {'steps/s':>8} "
           f"{'Gpart-steps/s':>13} {'reads/step':>10} {'arrays MB':>10} {'device MB':>10}")
     for r in rows:
         used = f"{r['device_mb']:>10,.0f}" if r["device_mb"] is not None else f"{'-':>10}"
-        print(f"{r['size']:<5} {r['particles']:>11,} {r['device']:<7} {r['sync_every']:>3} {r['setup_s']:>8.1f} "
+        print(f"{r['size']:<5} {'sums' if r['energy'] else 'none':<6} {r['particles']:>11,} {r['device']:<7} {r['sync_every']:>3} {r['setup_s']:>8.1f} "
               f"{r['step_ms']:>9.3f} {r['steps_per_s']:>8.1f} {r['particle_steps_per_s'] / 1e9:>13.3f} "
               f"{r['reads']:>10.2f} {r['arrays_mb']:>10,.0f} {used}")
 
@@ -159,7 +163,7 @@ STAGES = {
 }
 
 
-def _driver(spec, sync_every: int | None = None):
+def _driver(spec, sync_every: int | None = None, track_energy: bool | None = None):
     """A started driver of ``spec`` (mpm.Driver, no observers, no detection,
     reading back every ``sync_every`` steps: None, the run's own choice), one
     batch taken (the first steps size the grid arrays and compile nothing
@@ -169,6 +173,8 @@ def _driver(spec, sync_every: int | None = None):
     k = sync_every if sync_every is not None else run_sync_every(spec)
     options = solver_options(spec)
     options.batched = k > 1
+    if track_energy is not None:
+        options.track_energy = track_energy
     model, state = mpm.build(spec.scene, spec.kernel, spec.run.precision, spec.run.device, spec.seed)
     solver = mpm.Solver(model, spec.scheme, options)
     policy = step_policy(spec)
@@ -244,13 +250,13 @@ PROFILE_CASES = {"ball_2d (128^2)": ["scene=elastic_ball_2d", "scene.resolution=
                  "sphere_3d (64^3)": ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated"]}
 
 
-def profile(steps: int = 20, rounds: int = 3) -> list[dict]:
+def profile(steps: int = 20, rounds: int = 3, cases: dict | None = None) -> list[dict]:
     """Where a step's time goes, per kernel (each launch timed, synchronised
     on CUDA) and the rest of the driver's step (host work: read-back, the
     layout, Python), EMPM with the defaults, the host reading back every
     step (so that no CUDA graph hides the launches); the fastest of ``rounds``."""
     rows = []
-    for case, over in PROFILE_CASES.items():
+    for case, over in (cases or PROFILE_CASES).items():
         spec = spec_for(over + ["scheme=empm"])
         driver = _driver(spec, sync_every=1)
         best = None
