@@ -88,13 +88,11 @@ class Conditions:
         """Grid momentum to velocity, gravity over the device's step, and
         (unless separate) the conditions at the nodes' current positions."""
         self.launch(self.grid_update, layout.n_nodes, [
-            grid.m, const.gravity, self.control, self.data, grid.kin, grid.kin_id, grid.v, grid.q, status,
-            layout.lo_d, layout.shape_d, layout.offset_d, len(layout.lo), const.grid_offsets, const.dx])
+            grid.lattice, const.gravity, const.grid_offsets, self.control, self.data, status])
 
     def apply(self, grid, layout, status) -> None:
         """The conditions as a pass of their own (after contact), at the step's start."""
-        self.launch(self.boundary, layout.n_nodes, [
-            grid.m, grid.q, self.control, self.data, grid.kin, grid.kin_id, grid.v, status])
+        self.launch(self.boundary, layout.n_nodes, [grid.lattice, self.control, self.data, status])
 
     def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n) -> None:
         """The implicit solve's constraints on the first ``n`` nodes: the
@@ -102,8 +100,7 @@ class Conditions:
         velocities in ``free`` and, with friction, its coefficient, the
         collider's velocity and normal per node (mpm.grid.make_constraints)."""
         wp.launch(self.constraints, n, device=self.model.device, inputs=[
-            grid.m, grid.q, time, self.data, grid.kin, grid.kin_id, grid.v, free, friction, friction_u,
-            friction_n])
+            grid.lattice, time, self.data, free, friction, friction_u, friction_n])
 
     def inside_colliders(self, x, time: float) -> np.ndarray:
         """Per collider, the particles of ``x`` deeper inside it than

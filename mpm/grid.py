@@ -36,6 +36,7 @@ from .launch import warp_kernel
 from .stepping.status import StepControl, StepStatus
 
 from .collider_device import make_collide, make_collider_data, make_constrain, make_remove_direction
+from .lattice import make_lattice, make_node_mass
 from .scene import WALL_TYPES
 from .stencil import make_node_position
 from .types import Types
@@ -180,6 +181,7 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
     constrain = make_constrain(t, colliders)
     remove_direction = make_remove_direction(t)
     Data = make_boundary_data(t)
+    Lattice = make_lattice(t)
 
     @wp.func
     def wall(v: t.vec, Pi: t.mat, d: int, outward: S, kind: int):
@@ -194,27 +196,23 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
 
     @warp_kernel
     def constraints(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
+        lat: Lattice,  # v: in, predicted; out, constrained
         time: S,
         data: Data,
-        grid_kin: wp.array(dtype=S),
-        grid_kin_id: wp.array(dtype=wp.int32),
-        grid_v: wp.array(dtype=t.vec),  # in: predicted, out: constrained
         free: wp.array(dtype=t.mat),  # out: Pi
         friction: wp.array(dtype=S),  # out (with_friction): mu
         friction_u: wp.array(dtype=t.vec),  # out (with_friction): the collider's velocity
         friction_n: wp.array(dtype=t.vec),  # out (with_friction): its normal
     ):
         i = wp.tid()
-        m = grid_m[i]
+        m = lat.m[i]
         if wp.static(with_friction):
             friction[i] = S(0.0)
         if m <= S(0.0):
             free[i] = mat()
             return
-        v = grid_v[i]
-        q = grid_q[i]
+        v = lat.v[i]
+        q = lat.q[i]
         Pi = wp.identity(n=dim, dtype=S)
         for d in range(wp.static(dim)):
             if q[d] < data.band:
@@ -228,14 +226,14 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
                 friction_u[i] = uf
                 friction_n[i] = nf
         if wp.static(with_regions):
-            active, vk = kinematic(v, q, m, grid_kin[i], grid_kin_id[i], time, data.region_u,
+            active, vk = kinematic(v, q, m, lat.kin[i], lat.kin_id[i], time, data.region_u,
                                    data.region_gradient, data.region_center, data.region_window)
             if active:
                 v = vk
                 Pi = mat()
                 if wp.static(with_friction):
                     friction[i] = S(0.0)
-        grid_v[i] = v
+        lat.v[i] = v
         free[i] = Pi
 
     return constraints
@@ -263,6 +261,26 @@ def make_work(t: Types):
 
 
 @functools.cache
+def make_apply_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
+    """``apply_conditions(lat, i, m, v, q, time, data, status) -> v_bc``:
+    the conditions at node i (mass m, velocity v, position q), their
+    impulse and work into ``status`` (:func:`make_work`)."""
+    S = t.scalar
+    conditions = make_conditions(t, with_regions, colliders)
+    Data = make_boundary_data(t)
+    Lattice = make_lattice(t)
+    work = make_work(t)
+
+    @wp.func
+    def apply_conditions(lat: Lattice, i: int, m: S, v: t.vec, q: t.vec, time: S, data: Data, status: StepStatus):
+        vb = conditions(v, q, m, lat.kin[i], lat.kin_id[i], time, data)
+        work(m, v, vb, status)
+        return vb
+
+    return apply_conditions
+
+
+@functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
                      colliders: tuple[str, ...] = (), lattice: bool = False, n_grids: int = 1,
                      batched: bool = False):
@@ -278,51 +296,37 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     S = t.scalar
     node_position = make_node_position(t, n_grids)
     Gv = wp.types.vector(n_grids, S)
-    conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
-    work = make_work(t)
+    Lattice = make_lattice(t)
+    node_mass = make_node_mass(t, batched)
+    apply_conditions = make_apply_conditions(t, with_regions, colliders)
 
     @warp_kernel
     def grid_update(
-        grid_m: wp.array(dtype=S),
+        lat: Lattice,  # v: momentum in, velocity out; q: mass-weighted position (not lattice) in, position out
         gravity: t.vec,
+        grid_offsets: Gv,
         control: StepControl,
         data: Data,
-        grid_kin: wp.array(dtype=S),
-        grid_kin_id: wp.array(dtype=wp.int32),
-        grid_v: wp.array(dtype=t.vec),  # in: momentum, out: velocity
-        grid_q: wp.array(dtype=t.vec),  # in: mass-weighted position (not lattice), out: position
         status: StepStatus,  # boundary_work += the energy the conditions gave
-        # the layout (lattice):
-        lo: wp.array(dtype=t.ivec),
-        shape: wp.array(dtype=t.ivec),
-        offset: wp.array(dtype=wp.int32),
-        n_boxes: int,
-        grid_offsets: Gv,
-        dx: S,
     ):
-        if wp.static(batched):
-            if control.skip[0] != wp.float64(0.0):
-                return
         i = wp.tid()
-        m = grid_m[i]
+        m = node_mass(lat, control, i)
         if m <= S(0.0):
             return
         dt = S(control.dt[0])
         time = S(control.t[0])
         positioned = int(control.positions[0])
-        vi = grid_v[i] / m + dt * gravity
+        vi = lat.v[i] / m + dt * gravity
         if positioned != 0:
             if wp.static(lattice):
-                qi = node_position(i, lo, shape, offset, n_boxes, grid_offsets, dx)
+                qi = node_position(i, lat.lo, lat.shape, lat.offset, lat.n_boxes, grid_offsets, lat.dx)
             else:
-                qi = grid_q[i] / m
+                qi = lat.q[i] / m
             if wp.static(with_boundary):
-                vb = conditions(vi, qi, m, grid_kin[i], grid_kin_id[i], time, data)
-                work(m, vi, vb, status)
-                vi = vb
-            grid_q[i] = qi
-        grid_v[i] = vi
+                vi = apply_conditions(lat, i, m, vi, qi, time, data, status)
+            lat.q[i] = qi
+        lat.v[i] = vi
 
     return grid_update
 
@@ -332,31 +336,17 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = (),
     """The boundary conditions as a pass of their own (after contact), at the
     step's start ``control.t`` (``batched``: nothing in a skipped step)."""
     S = t.scalar
-    conditions = make_conditions(t, with_regions, colliders)
     Data = make_boundary_data(t)
-    work = make_work(t)
+    Lattice = make_lattice(t)
+    node_mass = make_node_mass(t, batched)
+    apply_conditions = make_apply_conditions(t, with_regions, colliders)
 
     @warp_kernel
-    def boundary(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
-        control: StepControl,
-        data: Data,
-        grid_kin: wp.array(dtype=S),
-        grid_kin_id: wp.array(dtype=wp.int32),
-        grid_v: wp.array(dtype=t.vec),
-        status: StepStatus,  # boundary_work += the energy the conditions gave
-    ):
-        if wp.static(batched):
-            if control.skip[0] != wp.float64(0.0):
-                return
+    def boundary(lat: Lattice, control: StepControl, data: Data, status: StepStatus):
         i = wp.tid()
-        m = grid_m[i]
+        m = node_mass(lat, control, i)
         if m <= S(0.0):
             return
-        vi = grid_v[i]
-        vb = conditions(vi, grid_q[i], m, grid_kin[i], grid_kin_id[i], S(control.t[0]), data)
-        work(m, vi, vb, status)
-        grid_v[i] = vb
+        lat.v[i] = apply_conditions(lat, i, m, lat.v[i], lat.q[i], S(control.t[0]), data, status)
 
     return boundary

@@ -34,8 +34,6 @@ particle, none under a load held still), goes to the step's ``load_work``
 (mpm.stepping.detection).
 """
 
-from __future__ import annotations
-
 import functools
 import math
 from dataclasses import dataclass, field
@@ -287,6 +285,27 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
 
 
 @functools.cache
+def make_load_data(t: Types):
+    """The struct type ``LoadData``: a :class:`LoadTable` and the loads'
+    profiles on the device."""
+    f64 = wp.float64
+
+    @wp.struct
+    class LoadData:
+        particles: wp.array(dtype=wp.int32)  # the loaded particles
+        offsets: wp.array(dtype=wp.int32)  # entries of particle j: offsets[j]:offsets[j + 1]
+        entry_load: wp.array(dtype=wp.int32)
+        entry_force: wp.array(dtype=t.vec)  # [N] at factor 1
+        entry_weight: wp.array(dtype=f64)  # 1 / (the load's particles)
+        window: wp.array(dtype=wp.vec2d)  # per load: (start, end) [s]
+        first: wp.array(dtype=wp.int32)  # per load: its first profile row (one more: the end)
+        table_t: wp.array(dtype=f64)  # per row: time after start [s]
+        table_f: wp.array(dtype=f64)  # per row: factor
+
+    return LoadData
+
+
+@functools.cache
 def make_apply_loads(t: Types):
     """``apply_loads``: per loaded particle, the body force b_p = sum_l
     s_l(t) f_lp / m_p [m/s^2] at the step's start ``control.t``, and each
@@ -294,58 +313,44 @@ def make_apply_loads(t: Types):
     the loads' work, mpm.g2p)."""
     f64 = wp.float64
     S = t.scalar
+    LoadData = make_load_data(t)
 
     @wp.func
-    def factor(l: int, time: f64, window: wp.array(dtype=wp.vec2d), first: wp.array(dtype=wp.int32),
-               table_t: wp.array(dtype=f64), table_f: wp.array(dtype=f64)):
+    def factor(loads: LoadData, l: int, time: f64):
         """Load l's profile at ``time`` [s]: 0 outside its window, else its
         table interpolated at time - start, held at both ends."""
-        w = window[l]
+        w = loads.window[l]
         if time < w[0] or time >= w[1]:
             return f64(0.0)
         tau = time - w[0]
-        a = first[l]
-        b = first[l + 1]
+        a = loads.first[l]
+        b = loads.first[l + 1]
         k = a  # the first row after tau (the times do not decrease)
         for j in range(a, b):
-            if table_t[j] <= tau:
+            if loads.table_t[j] <= tau:
                 k = j + 1
         if k == a:
-            return table_f[a]
+            return loads.table_f[a]
         if k == b:
-            return table_f[b - 1]
-        u = (tau - table_t[k - 1]) / (table_t[k] - table_t[k - 1])
-        return table_f[k - 1] + u * (table_f[k] - table_f[k - 1])
+            return loads.table_f[b - 1]
+        u = (tau - loads.table_t[k - 1]) / (loads.table_t[k] - loads.table_t[k - 1])
+        return loads.table_f[k - 1] + u * (loads.table_f[k] - loads.table_f[k - 1])
 
     @warp_kernel
-    def apply_loads(
-        particles: wp.array(dtype=wp.int32),
-        offsets: wp.array(dtype=wp.int32),
-        entry_load: wp.array(dtype=wp.int32),
-        entry_force: wp.array(dtype=t.vec),
-        entry_weight: wp.array(dtype=f64),
-        window: wp.array(dtype=wp.vec2d),
-        first: wp.array(dtype=wp.int32),
-        table_t: wp.array(dtype=f64),
-        table_f: wp.array(dtype=f64),
-        mass: wp.array(dtype=S),
-        x: wp.array(dtype=t.vec),
-        control: StepControl,
-        status: StepStatus,
-        body_force: wp.array(dtype=t.vec),
-    ):
+    def apply_loads(loads: LoadData, mass: wp.array(dtype=S), x: wp.array(dtype=t.vec), control: StepControl,
+                    status: StepStatus, body_force: wp.array(dtype=t.vec)):
         if control.skip[0] != f64(0.0):
             return
         j = wp.tid()
-        p = particles[j]
+        p = loads.particles[j]
         time = control.t[0]
         xp = x[p]
         f = t.vec()
-        for e in range(offsets[j], offsets[j + 1]):
-            l = entry_load[e]
-            f = f + S(factor(l, time, window, first, table_t, table_f)) * entry_force[e]
+        for e in range(loads.offsets[j], loads.offsets[j + 1]):
+            l = loads.entry_load[e]
+            f = f + S(factor(loads, l, time)) * loads.entry_force[e]
             for k in range(wp.static(t.dim)):
-                wp.atomic_add(status.load_position, l * wp.static(t.dim) + k, entry_weight[e] * f64(xp[k]))
+                wp.atomic_add(status.load_position, l * wp.static(t.dim) + k, loads.entry_weight[e] * f64(xp[k]))
         m = mass[p]
         b = t.vec()
         if m > S(0.0):
@@ -368,14 +373,16 @@ class Loads:
         rows = [load.rows() for load in table.loads]
         first = np.cumsum([0] + [len(r) for r in rows]).astype(np.int32)
         table_rows = np.concatenate(rows)
+        d = self.data = make_load_data(t)()
         with wp.ScopedDevice(model.device):
-            self.arrays = [
-                wp.array(table.particles, dtype=wp.int32), wp.array(table.offsets, dtype=wp.int32),
-                wp.array(table.entry_load, dtype=wp.int32), wp.array(table.entry_force.astype(S), dtype=t.vec),
-                wp.array(table.entry_weight, dtype=wp.float64),
-                wp.array(np.array([[ld.start, ld.end] for ld in table.loads], np.float64), dtype=wp.vec2d),
-                wp.array(first, dtype=wp.int32), wp.array(table_rows[:, 0].copy(), dtype=wp.float64),
-                wp.array(table_rows[:, 1].copy(), dtype=wp.float64)]
+            d.particles, d.offsets = wp.array(table.particles, dtype=wp.int32), wp.array(table.offsets, dtype=wp.int32)
+            d.entry_load = wp.array(table.entry_load, dtype=wp.int32)
+            d.entry_force = wp.array(table.entry_force.astype(S), dtype=t.vec)
+            d.entry_weight = wp.array(table.entry_weight, dtype=wp.float64)
+            d.window = wp.array(np.array([[ld.start, ld.end] for ld in table.loads], np.float64), dtype=wp.vec2d)
+            d.first = wp.array(first, dtype=wp.int32)
+            d.table_t = wp.array(table_rows[:, 0].copy(), dtype=wp.float64)
+            d.table_f = wp.array(table_rows[:, 1].copy(), dtype=wp.float64)
         self.n = len(table.particles)
 
     def kernels(self) -> list:
@@ -384,5 +391,4 @@ class Loads:
     def apply(self, state) -> None:
         """The loaded particles' body force at the device's step start."""
         b = self.buffer
-        self.launch(self.kernel, self.n, self.arrays + [self.model.mass, state.x, b.control, b.status,
-                                                        self.body_force])
+        self.launch(self.kernel, self.n, [self.data, self.model.mass, state.x, b.control, b.status, self.body_force])

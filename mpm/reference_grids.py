@@ -16,6 +16,7 @@ import numpy as np
 import warp as wp
 
 from .kernels import Kernel
+from .lattice import pack_lattice
 from .types import Types
 
 
@@ -111,12 +112,14 @@ class GridArrays:
     a region ``kin`` and the region's number ``kin_id``, and with the FLIP
     transfer the momentum transferred alone ``p0``. The arrays grow
     (by half again) when the layout no longer fits; :meth:`live` views the
-    layout's nodes."""
+    layout's nodes. With the ``layout``, ``lattice`` holds the arrays and
+    its tables as the grid kernels take them (mpm.lattice), packed anew
+    whenever the arrays are."""
 
-    def __init__(self, t: Types, device, regions: bool, flip: bool = False):
-        self.t, self.device, self.regions, self.flip = t, device, regions, flip
+    def __init__(self, t: Types, device, regions: bool, flip: bool = False, layout: GridLayout | None = None):
+        self.t, self.device, self.regions, self.flip, self.layout = t, device, regions, flip, layout
         self.capacity = 0
-        self.m = self.v = self.q = self.kin = self.kin_id = self.p0 = None
+        self.m = self.v = self.q = self.kin = self.kin_id = self.p0 = self.lattice = None
         self._views = None  # (node count, m, views) of live()
 
     def reserve(self, n: int) -> None:
@@ -133,6 +136,8 @@ class GridArrays:
             self.kin = wp.zeros(n_kin, dtype=t.scalar)
             self.kin_id = wp.zeros(n_kin, dtype=wp.int32)
             self.p0 = wp.zeros(self.capacity if self.flip else 1, dtype=t.vec)
+        if self.layout is not None:
+            self.lattice = pack_lattice(self.layout, self)
 
     def live(self, n: int) -> tuple:
         """Views (m, v, q, kin, kin_id, p0) of the first ``n`` nodes (kept while the

@@ -146,7 +146,7 @@ class Solver:
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
-        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip")
+        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout)
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
                         if nb > 1 and scene.contact == "frictionless" else None)

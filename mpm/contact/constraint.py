@@ -24,7 +24,8 @@ import functools
 
 import warp as wp
 
-from .lattice import make_nearest, make_node_body, make_outward
+from .lattice import make_bins, make_nearest, make_node_body, make_occupancy, make_outward
+from ..lattice import make_lattice
 from ..launch import warp_kernel
 from ..types import Types
 
@@ -34,10 +35,60 @@ def make_contact_constraint(t: Types):
     """Contact as constraints of the implicit solve (the module docstring):
     ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
     before its ``clear``: the node's active bin and c_i), ``sums`` and
-    ``project`` (the W-orthogonal projection onto B v = 0).
+    ``project`` (the W-orthogonal projection onto B v = 0,
+    :func:`make_projection`)."""
+    return (make_couple(t), *make_projection(t))
 
-    ``sums`` / ``project`` modes, Pi_i the node's boundary projector and
-    c~_i = Pi_i c_i:
+
+@functools.cache
+def make_couple(t: Types):
+    """``couple``: a node's constraint, if its bin is active: exactly two
+    bodies a < c fill it and approach on the predictor, (V_a - V_c) . n_a >
+    0, with n_a = outward(a) and n_c = -n_a (every node of the bin finds the
+    same)."""
+    S = t.scalar
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    nearest = make_nearest(t)
+    node_body = make_node_body(t)
+    outward = make_outward(t)
+    occupancy = make_occupancy(t)
+
+    @warp_kernel
+    def couple(
+        lat: Lattice,
+        bins: Bins,
+        cbin: wp.array(dtype=wp.int32),  # out: the node's active bin g, or -1
+        coef: wp.array(dtype=t.vec),  # out: c_i = (m_i / G) / M_bg n_b
+    ):
+        i = wp.tid()
+        cbin[i] = -1
+        if lat.m[i] <= S(0.0):
+            return
+        b = node_body(lat, i)
+        g = nearest(lat, lat.q[i])
+        present, _m, _p, volume, a, c = occupancy(lat, bins, g)  # a, c: the first and second body present
+        n_global = lat.n_global
+        if not (bins.M[b * n_global + g] > S(0.0)) or present != 2 or volume < bins.fill:
+            return
+        n = outward(lat, bins, a, g)
+        if wp.length(n) <= S(0.0):
+            return
+        if not (wp.dot(bins.P[a * n_global + g] / bins.M[a * n_global + g]
+                       - bins.P[c * n_global + g] / bins.M[c * n_global + g], n) > S(0.0)):
+            return
+        if b != a:
+            n = -n
+        cbin[i] = g
+        coef[i] = (lat.m[i] / (S(lat.n_grids) * bins.M[b * n_global + g])) * n
+
+    return couple
+
+
+@functools.cache
+def make_projection(t: Types):
+    """``sums`` and ``project``: the W-orthogonal projection onto B v = 0
+    in three modes, Pi_i the node's boundary projector and c~_i = Pi_i c_i:
       0 velocities, W = M^-1: lambda = B v / (B W B^T), v -= c~ lambda / m
         (v then satisfies the constraints; prescribed components keep);
       1 a residual r in range(Pi), W = Pi D^-1 Pi (D = ``inv_diag``^-1):
@@ -49,62 +100,6 @@ def make_contact_constraint(t: Types):
     a difference of the reaction's square would drown a converged residual)."""
     S = t.scalar
     f64 = wp.float64
-    nearest = make_nearest(t)
-    node_body = make_node_body(t)
-    outward = make_outward(t)
-
-    @warp_kernel
-    def couple(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
-        offset: wp.array(dtype=wp.int32),
-        n_bodies: int,
-        n_grids: int,
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        rest_mass: wp.array(dtype=S),
-        fill: S,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        cbin: wp.array(dtype=wp.int32),  # out: the node's active bin g, or -1
-        coef: wp.array(dtype=t.vec),  # out: c_i = (m_i / G) / M_bg n_b
-    ):
-        """A node's constraint, if its bin is active: exactly two bodies a < c
-        fill it and approach on the predictor, (V_a - V_c) . n_a > 0, with
-        n_a = outward(a) and n_c = -n_a (every node of the bin finds the same)."""
-        i = wp.tid()
-        cbin[i] = -1
-        if grid_m[i] <= S(0.0):
-            return
-        b = node_body(i, offset, n_bodies, n_grids)
-        g = nearest(grid_q[i], inv_dx, cells, strides)
-        present = int(0)
-        volume = S(0.0)
-        a = int(-1)  # the first and second body present
-        c = int(-1)
-        for d in range(n_bodies):
-            m = M[d * n_global + g]
-            if m > S(0.0):
-                present += 1
-                volume += m / rest_mass[d]
-                if a < 0:
-                    a = d
-                else:
-                    c = d
-        if not (M[b * n_global + g] > S(0.0)) or present != 2 or volume < fill:
-            return
-        n = outward(a, g, n_bodies, cells, strides, n_global, M)
-        if wp.length(n) <= S(0.0):
-            return
-        if not (wp.dot(P[a * n_global + g] / M[a * n_global + g] - P[c * n_global + g] / M[c * n_global + g], n)
-                > S(0.0)):
-            return
-        if b != a:
-            n = -n
-        cbin[i] = g
-        coef[i] = (grid_m[i] / (S(n_grids) * M[b * n_global + g])) * n
 
     @warp_kernel
     def sums(
@@ -168,4 +163,4 @@ def make_contact_constraint(t: Types):
             z[i] = zi
             wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
 
-    return couple, sums, project
+    return sums, project

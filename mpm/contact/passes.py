@@ -48,7 +48,8 @@ import functools
 import warp as wp
 
 from .constraint import make_contact_constraint
-from .lattice import make_corners, make_nearest, make_node_body, make_occupancy, make_outward
+from .lattice import make_bins, make_lattice_point, make_node_body, make_occupancy, make_outward
+from ..lattice import make_lattice, make_node_mass
 from ..launch import warp_kernel
 from ..stepping.status import StepControl, StepStatus
 from ..types import Types
@@ -61,6 +62,61 @@ from ..types import Types
 # and 0.58, one pass 0.92 and 0.62, two 1.56 and 0.69, three 1.83 and 0.71,
 # four 1.98 and 0.72 (each pass stops the disks a little earlier).
 GATHER_PASSES = 2
+
+
+@functools.cache
+def make_bin_dv(t: Types):
+    """``bin_dv(lat, bins, b, g) -> (dV_bg, in contact)``: body b's
+    correction at lattice node g (the module docstring), and whether g is
+    in contact."""
+    S = t.scalar
+    vec = t.vec
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    outward = make_outward(t)
+    occupancy = make_occupancy(t)
+
+    @wp.func
+    def correction(lat: Lattice, bins: Bins, b: int, g: int, v_cm: t.vec):
+        """Body b's dV_bg (0 unless it approaches), its momentum M_bg dV_bg, and whether it approaches."""
+        dv = vec()
+        dp = vec()
+        hit = False
+        m_b = bins.M[b * lat.n_global + g]
+        n = outward(lat, bins, b, g)
+        if wp.length(n) > S(0.0):
+            rel = wp.dot(bins.P[b * lat.n_global + g] / m_b - v_cm, n)
+            if rel > S(0.0):
+                dv = -rel * n
+                dp = (-rel * m_b) * n
+                hit = True
+        return dv, dp, hit
+
+    @wp.func
+    def bin_dv(lat: Lattice, bins: Bins, b: int, g: int):
+        dv = vec()
+        present, m_tot, p_tot, volume, _a, _c = occupancy(lat, bins, g)
+        # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
+        if not (bins.M[b * lat.n_global + g] > S(0.0)) or present < 2 or volume < bins.fill:
+            return dv, False
+        v_cm = p_tot / m_tot
+        if present == 2:
+            # the normals are opposite and the two corrections' momenta cancel (to round-off)
+            dv, _dp, _hit = correction(lat, bins, b, g, v_cm)
+        else:
+            # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
+            dp_sum = vec()
+            for c in range(lat.n_bodies):
+                if bins.M[c * lat.n_global + g] > S(0.0):
+                    dv_c, dp_c, hit_c = correction(lat, bins, c, g, v_cm)
+                    if hit_c:
+                        dp_sum += dp_c
+                    if c == b:
+                        dv = dv_c
+            dv = dv - dp_sum / m_tot
+        return dv, True
+
+    return bin_dv
 
 
 @functools.cache
@@ -77,159 +133,60 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
     ``batched``: nothing in a step the driver skips (``control.skip``)."""
     S = t.scalar
     vec = t.vec
-    nearest = make_nearest(t)
-    cell_of, corner = make_corners(t)
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    node_mass = make_node_mass(t, batched)
     node_body = make_node_body(t)
-    outward = make_outward(t)
-    occupancy = make_occupancy(t)
+    lattice_point = make_lattice_point(t, gather)
+    bin_dv = make_bin_dv(t)
     n_points = 2**t.dim if gather else 1  # the lattice nodes a body node is put on
 
-    @wp.func
-    def lattice_point(q: t.vec, k: int, inv_dx: S, cells: t.ivec, strides: t.ivec):
-        """The k-th lattice node of a body node at q and its weight: corner k
-        of q's cell with its linear weight (gather), or the nearest node."""
-        if wp.static(gather):
-            base, frac = cell_of(q, inv_dx)
-            return corner(base, frac, k, cells, strides)
-        return S(1.0), nearest(q, inv_dx, cells, strides)
-
     @warp_kernel
-    def splat(
-        grid_m: wp.array(dtype=S),
-        grid_v: wp.array(dtype=t.vec),
-        grid_q: wp.array(dtype=t.vec),
-        offset: wp.array(dtype=wp.int32),
-        n_bodies: int,
-        n_grids: int,
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        control: StepControl,
-    ):
-        if wp.static(batched):
-            if control.skip[0] != wp.float64(0.0):
-                return
+    def splat(lat: Lattice, bins: Bins, control: StepControl):
         i = wp.tid()
-        m = grid_m[i]
+        m = node_mass(lat, control, i)
         if m <= S(0.0):
             return
-        b = node_body(i, offset, n_bodies, n_grids)
-        m = m / S(n_grids)  # every kernel grid carries the body's full mass
+        b = node_body(lat, i)
+        m = m / S(lat.n_grids)  # every kernel grid carries the body's full mass
         for k in range(wp.static(n_points)):
-            w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
-            wp.atomic_add(M, b * n_global + g, w * m)
-            wp.atomic_add(P, b * n_global + g, (w * m) * grid_v[i])
-
-    @wp.func
-    def correction(b: int, g: int, n_bodies: int, cells: t.ivec, strides: t.ivec, n_global: int,
-                   M: wp.array(dtype=S), P: wp.array(dtype=t.vec), v_cm: t.vec):
-        """Body b's dV_bg (0 unless it approaches), its momentum M_bg dV_bg, and whether it approaches."""
-        dv = vec()
-        dp = vec()
-        hit = False
-        m_b = M[b * n_global + g]
-        n = outward(b, g, n_bodies, cells, strides, n_global, M)
-        if wp.length(n) > S(0.0):
-            rel = wp.dot(P[b * n_global + g] / m_b - v_cm, n)
-            if rel > S(0.0):
-                dv = -rel * n
-                dp = (-rel * m_b) * n
-                hit = True
-        return dv, dp, hit
-
-    @wp.func
-    def bin_dv(b: int, g: int, n_bodies: int, cells: t.ivec, strides: t.ivec, n_global: int,
-               rest_mass: wp.array(dtype=S), fill: S, M: wp.array(dtype=S), P: wp.array(dtype=t.vec)):
-        """Body b's correction dV_bg at lattice node g, and whether g is in contact."""
-        dv = vec()
-        present, m_tot, p_tot, volume = occupancy(g, n_bodies, n_global, rest_mass, M, P)
-        # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
-        if not (M[b * n_global + g] > S(0.0)) or present < 2 or volume < fill:
-            return dv, False
-        v_cm = p_tot / m_tot
-        if present == 2:
-            # the normals are opposite and the two corrections' momenta cancel (to round-off)
-            dv, _dp, _hit = correction(b, g, n_bodies, cells, strides, n_global, M, P, v_cm)
-        else:
-            # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
-            dp_sum = vec()
-            for c in range(n_bodies):
-                if M[c * n_global + g] > S(0.0):
-                    dv_c, dp_c, hit_c = correction(c, g, n_bodies, cells, strides, n_global, M, P, v_cm)
-                    if hit_c:
-                        dp_sum += dp_c
-                    if c == b:
-                        dv = dv_c
-            dv = dv - dp_sum / m_tot
-        return dv, True
+            w, g = lattice_point(lat, lat.q[i], k)
+            wp.atomic_add(bins.M, b * lat.n_global + g, w * m)
+            wp.atomic_add(bins.P, b * lat.n_global + g, (w * m) * lat.v[i])
 
     @warp_kernel
     def correct(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
-        offset: wp.array(dtype=wp.int32),
-        n_bodies: int,
-        n_grids: int,
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        rest_mass: wp.array(dtype=S),  # rho_b dx^d per body
-        fill: S,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        grid_v: wp.array(dtype=t.vec),
+        lat: Lattice,  # v: the corrected velocities
+        bins: Bins,
         count: int,  # 1: count the nodes in contact (the first pass)
         status: StepStatus,  # contact_nodes += 1 per node taking a correction from a lattice node in contact
         control: StepControl,
     ):
-        if wp.static(batched):
-            if control.skip[0] != wp.float64(0.0):
-                return
         i = wp.tid()
-        if grid_m[i] <= S(0.0):
+        if node_mass(lat, control, i) <= S(0.0):
             return
-        b = node_body(i, offset, n_bodies, n_grids)
+        b = node_body(lat, i)
         dv = vec()
         touching = False
         for k in range(wp.static(n_points)):  # the corrections, with the weights the node was spread with
-            w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
-            dv_g, hit_g = bin_dv(b, g, n_bodies, cells, strides, n_global, rest_mass, fill, M, P)
+            w, g = lattice_point(lat, lat.q[i], k)
+            dv_g, hit_g = bin_dv(lat, bins, b, g)
             dv += w * dv_g
             touching = touching or hit_g
         if touching and count != 0:
             wp.atomic_add(status.contact_nodes, 0, wp.float64(1.0))
-        grid_v[i] = grid_v[i] + dv
+        lat.v[i] = lat.v[i] + dv
 
     @warp_kernel
-    def clear(
-        grid_m: wp.array(dtype=S),
-        grid_q: wp.array(dtype=t.vec),
-        offset: wp.array(dtype=wp.int32),
-        n_bodies: int,
-        n_grids: int,
-        inv_dx: S,
-        cells: t.ivec,
-        strides: t.ivec,
-        n_global: int,
-        M: wp.array(dtype=S),
-        P: wp.array(dtype=t.vec),
-        control: StepControl,
-    ):
-        if wp.static(batched):
-            if control.skip[0] != wp.float64(0.0):
-                return
+    def clear(lat: Lattice, bins: Bins, control: StepControl):
         i = wp.tid()
-        if grid_m[i] <= S(0.0):
+        if node_mass(lat, control, i) <= S(0.0):
             return
-        b = node_body(i, offset, n_bodies, n_grids)
+        b = node_body(lat, i)
         for k in range(wp.static(n_points)):
-            _w, g = lattice_point(grid_q[i], k, inv_dx, cells, strides)
-            M[b * n_global + g] = S(0.0)
-            P[b * n_global + g] = vec()
+            _w, g = lattice_point(lat, lat.q[i], k)
+            bins.M[b * lat.n_global + g] = S(0.0)
+            bins.P[b * lat.n_global + g] = vec()
 
     return splat, correct, clear
 
@@ -251,45 +208,34 @@ class Contact:
         self.constraint = make_contact_constraint(t) if implicit else ()
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
-        self.cells, self.strides = t.ivec(*model.cells), t.ivec(*model.strides)
         self.fill = t.scalar(model.scene.contact_fill)
         with wp.ScopedDevice(model.device):
             self.M = wp.zeros(n_bodies * n_global, dtype=t.scalar)
             self.P = wp.zeros(n_bodies * n_global, dtype=t.vec)
             self.rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
                                       dtype=t.scalar)
+        self.bins = make_bins(t)()
+        self.bins.M, self.bins.P, self.bins.rest_mass, self.bins.fill = self.M, self.P, self.rest_mass, self.fill
 
     def kernels(self) -> list:
         return list(dict.fromkeys([self.splat, self.correct, self.clear, *self.constraint]
                                   + ([self.bin, self.unbin] if self.constraint else [])))
 
-    def common(self, layout) -> list:
-        """What every pass reads: the layout's node boxes, the body count,
-        the kernel's grids and the global lattice."""
-        m = self.model
-        return [layout.offset_d, len(m.scene.bodies), m.kernel.n_grids, self.inv_dx, self.cells,
-                self.strides, m.n_nodes]
-
     def resolve(self, grid, layout, status) -> None:
         """Frictionless contact on the grid velocities (module docstring)."""
-        common = self.common(layout)
-        ctl = self.control
-        bins = [self.M, self.P]
+        args = [grid.lattice, self.bins]
         for k in range(self.passes):
-            self.launch(self.splat, layout.n_nodes, [grid.m, grid.v, grid.q, *common, *bins, ctl])
-            self.launch(self.correct, layout.n_nodes, [
-                grid.m, grid.q, *common, self.rest_mass, self.fill, *bins, grid.v, int(k == 0), status, ctl])
-            self.launch(self.clear, layout.n_nodes, [grid.m, grid.q, *common, *bins, ctl])
+            self.launch(self.splat, layout.n_nodes, [*args, self.control])
+            self.launch(self.correct, layout.n_nodes, [*args, int(k == 0), status, self.control])
+            self.launch(self.clear, layout.n_nodes, [*args, self.control])
 
     def couple(self, grid, layout, cbin, coef) -> None:
         """The implicit solve's constraints from the predictor in ``grid.v``:
         per node its active bin ``cbin`` and coefficient ``coef``
         (:func:`make_contact_constraint`; the bins are zero again after)."""
-        common = self.common(layout)
+        args = [grid.lattice, self.bins]
         n = layout.n_nodes
         dev = self.model.device
-        bins = [self.M, self.P]
-        wp.launch(self.bin, n, device=dev, inputs=[grid.m, grid.v, grid.q, *common, *bins, self.control])
-        wp.launch(self.constraint[0], n, device=dev, inputs=[
-            grid.m, grid.q, *common, self.rest_mass, self.fill, *bins, cbin, coef])
-        wp.launch(self.unbin, n, device=dev, inputs=[grid.m, grid.q, *common, *bins, self.control])
+        wp.launch(self.bin, n, device=dev, inputs=[*args, self.control])
+        wp.launch(self.constraint[0], n, device=dev, inputs=[*args, cbin, coef])
+        wp.launch(self.unbin, n, device=dev, inputs=[*args, self.control])
