@@ -13,7 +13,7 @@ from ..params import param
 from ..types import Types
 from .base import Material, elastic_wave_speed, lame
 from .decompositions import make_rotation
-from .elasticity import make_fixed_corotated, make_fixed_corotated_hessian
+from .elasticity import make_fixed_corotated_law, on_params
 
 
 @functools.cache
@@ -35,19 +35,6 @@ def _stress_energy(t: Types):
     return stress_energy
 
 
-@functools.cache
-def _principal(t: Types):
-    law = make_fixed_corotated(t)
-    hessian = make_fixed_corotated_hessian(t)
-
-    @wp.func
-    def principal(sigma: t.vec, params: t.params, history: t.history):
-        P, psi = law(sigma, params[0], params[1])
-        return P, psi, hessian(sigma, params[0], params[1])
-
-    return principal
-
-
 @dataclass
 class FixedCorotated(Material):
     """Fixed corotated hyperelastic solid."""
@@ -55,7 +42,7 @@ class FixedCorotated(Material):
     name = "fixed_corotated"
     invertible = True  # |F - R|^2 and (J - 1)^2 hold for any F
     stress_energy = staticmethod(_stress_energy)
-    principal = staticmethod(_principal)
+    principal = staticmethod(on_params(make_fixed_corotated_law))
 
     E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
     nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
