@@ -314,11 +314,3 @@ def on_params(law, moduli=first_two):
 
     return factory
 
-
-hencky_elasticity = on_params(make_hencky)
-"""``elasticity(sigma, params, history)`` of a plastic model whose moduli are
-(mu, lam) = params[0:2] (mpm.materials.plastic)."""
-hencky_elasticity_hessian = on_params(make_hencky_hessian)
-split_elasticity = on_params(make_split)
-"""``elasticity(sigma, params, history)`` with (mu, kappa) = params[0:2]."""
-split_elasticity_hessian = on_params(make_split_hessian)

@@ -9,10 +9,9 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from ..params import param
 from ..types import Types
 from .elasticity import make_neo_hookean_law, on_params
-from .base import Material, elastic_wave_speed, lame
+from .base import Isotropic
 
 
 @functools.cache
@@ -34,18 +33,9 @@ def _stress_energy(t: Types):
 
 
 @dataclass
-class NeoHookean(Material):
+class NeoHookean(Isotropic):
     """Compressible neo-Hookean hyperelastic solid."""
 
     name = "neo_hookean"
     stress_energy = staticmethod(_stress_energy)
     principal = staticmethod(on_params(make_neo_hookean_law))
-
-    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
-
-    def packed(self):
-        return lame(self.E, self.nu)
-
-    def wave_speed(self, J: float = 1.0):
-        return elastic_wave_speed(self.E, self.nu, self.rho)
