@@ -48,6 +48,7 @@ def make_cofactors(t: Types):
 
 @functools.cache
 def make_fixed_corotated(t: Types):
+    """``fixed_corotated(sigma, mu, lam) -> (P_hat, psi)`` (the module's docstring)."""
     S = t.scalar
     cofactors = make_cofactors(t)
     ones = t.vec(*([1.0] * t.dim))
@@ -65,9 +66,8 @@ def make_fixed_corotated(t: Types):
 
 @functools.cache
 def make_hencky(t: Types):
-    S = t.scalar
-    vec = t.vec
-    dim = t.dim
+    """``hencky(sigma, mu, lam) -> (P_hat, psi)`` (the module's docstring)."""
+    S, vec, dim = t.scalar, t.vec, t.dim
 
     @wp.func
     def hencky(sigma: t.vec, mu: S, lam: S):
@@ -88,9 +88,8 @@ def make_hencky(t: Types):
 
 @functools.cache
 def make_split(t: Types):
-    S = t.scalar
-    vec = t.vec
-    dim = t.dim
+    """``split(sigma, mu, kappa) -> (P_hat, psi)`` (the module's docstring)."""
+    S, vec, dim = t.scalar, t.vec, t.dim
     cofactors = make_cofactors(t)
     MINUS_TWO_OVER_D = -2.0 / t.dim
 

@@ -70,7 +70,7 @@ import numpy as np
 import warp as wp
 
 from ..types import Types
-from .base import Material, elastic_wave_speed
+from .base import Isotropic, Material
 from .decompositions import make_svd
 from .elasticity import make_hencky, make_hencky_hessian, make_split, make_split_hessian, on_params
 
@@ -79,8 +79,9 @@ SQRT_2_3 = math.sqrt(2.0 / 3.0)
 
 
 @dataclass
-class Plastic(Material):
-    """Base of the elastoplastic models (elastic parameters E, nu in each)."""
+class Plastic(Isotropic):
+    """Base of the elastoplastic models (each with its own defaults of the
+    elastic parameters E, nu, and its own ``packed``)."""
 
     plastic: ClassVar[bool] = True
     flows: ClassVar[bool] = True
@@ -93,6 +94,8 @@ class Plastic(Material):
     log_Jp: ClassVar[bool | None] = False
     """history slot 0 is ln J_P (True), the flow keeps the volume (False), or
     the plastic volume change is not tracked (None)"""
+
+    packed = Material.packed
 
     def initial_history(self) -> tuple[float, float]:
         return (0.0, 0.0)
@@ -109,9 +112,6 @@ class Plastic(Material):
             J_P = np.exp(history[:, 0] - self.initial_history()[0]) if self.log_Jp else 1.0
             out["density_ratio"] = 1.0 / (J_E * J_P)
         return out
-
-    def wave_speed(self, J: float = 1.0) -> float:
-        return elastic_wave_speed(self.E, self.nu, self.rho)
 
 
 @dataclass

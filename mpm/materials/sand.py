@@ -82,14 +82,13 @@ def _friction(t: Types):
 @functools.cache
 def _flow(t: Types):
     S = t.scalar
-    vec = t.vec
     d = float(t.dim)
     friction = _friction(t)
     hencky_strain = make_hencky_strain(t)
     deviator = make_deviator(t)
     radial_return = make_radial_return(t)
     exp_strain = make_exp_strain(t)
-    ones = vec(*([1.0] * t.dim))
+    ones = t.vec(*([1.0] * t.dim))
 
     @wp.func
     def flow(sigma: t.vec, params: t.params, history: t.history, dt: S):
@@ -123,7 +122,6 @@ class Sand(HenckyPlastic):
 
     rho: float = param(2200.0, "rest density [kg/m^3]", gt=0.0)
     E: float = param(3.537e5, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     friction_angle: float = param(30.0, "friction angle phi0 [deg]", gt=0.0, lt=90.0)
     cohesion: float = param(0.0, "cohesion c [Pa]: the cone's apex at the tension c cot phi", ge=0.0)
     h1: float = param(0.0, "hardening: phi(q) = phi0 + (h1 q - h3) exp(-h2 q) [deg]", ge=0.0)

@@ -84,10 +84,8 @@ class Viscoplastic(SplitPlastic):
 
     name = "viscoplastic"
     flow = staticmethod(_flow)
-    history_names = ("", "plastic_strain")
 
     E: float = param(1.0e5, "Young's modulus of the elastic response [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     yield_stress: float = param(50.0, "yield stress in simple shear tau_Y [Pa]", ge=0.0)
     viscosity: float = param(10.0, "consistency K of tau = tau_Y + K gamma_dot^n [Pa s^n]", gt=0.0)
     flow_index: float = param(1.0, "n: 1 Bingham, < 1 shear-thinning, > 1 shear-thickening [-]",

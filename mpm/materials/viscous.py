@@ -50,8 +50,8 @@ def _stress_energy(t: Types):
 
 @functools.cache
 def _project(t: Types):
-    S = t.scalar
-    dim = t.dim
+    """``project(F, params) -> J^(1/d) I``: only the volume change is kept."""
+    S, dim = t.scalar, t.dim
     inv_dim = 1.0 / t.dim
 
     @wp.func

@@ -59,10 +59,8 @@ class VonMises(HenckyPlastic):
 
     name = "von_mises"
     flow = staticmethod(_flow)
-    history_names = ("", "plastic_strain")
 
     E: float = param(1.0e6, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     yield_stress: float = param(1.0e4, "uniaxial yield stress sigma_y [Pa]", ge=0.0)
     hardening: float = param(0.0, "linear hardening modulus H: sigma_y + H eps_p [Pa]", ge=0.0)
 
