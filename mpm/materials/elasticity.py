@@ -305,11 +305,11 @@ def on_params(law, moduli=first_two):
         get = moduli(t)
 
         @wp.func
-        def on_params(sigma: t.vec, params: t.params, history: t.history):
+        def at_params(sigma: t.vec, params: t.params, history: t.history):
             a, b = get(params, history)
             return f(sigma, a, b)
 
-        return on_params
+        return at_params
 
     return factory
 

@@ -57,6 +57,10 @@ the sign convention of mpm.materials.decompositions):
   Hessian (the implicit integrator's elastic predictor);
 * optionally ``stiffening(params, history) -> factor``: how much the squared
   wave speed has grown from the rest value (snow hardening), for the time step.
+
+:class:`HenckyPlastic` and :class:`SplitPlastic` give ``elasticity`` and
+``elasticity_hessian`` for the Hencky and the split energies;
+mpm.materials.return_map has the pieces the return mappings are built from.
 """
 
 from __future__ import annotations
@@ -80,8 +84,9 @@ SQRT_2_3 = math.sqrt(2.0 / 3.0)
 
 @dataclass
 class Plastic(Isotropic):
-    """Base of the elastoplastic models (each with its own defaults of the
-    elastic parameters E, nu, and its own ``packed``)."""
+    """Base of the elastoplastic models: the elastic parameters E, nu of
+    :class:`Isotropic` (a model restates the defaults it changes) and the
+    wave speed they give; each model packs its own parameters."""
 
     plastic: ClassVar[bool] = True
     flows: ClassVar[bool] = True
@@ -95,7 +100,7 @@ class Plastic(Isotropic):
     """history slot 0 is ln J_P (True), the flow keeps the volume (False), or
     the plastic volume change is not tracked (None)"""
 
-    packed = Material.packed
+    packed = Material.packed  # not Isotropic's (mu, lambda) alone
 
     def initial_history(self) -> tuple[float, float]:
         return (0.0, 0.0)
