@@ -106,6 +106,21 @@ class Material:
         return []
 
 
+@dataclass
+class Isotropic(Material):
+    """An isotropic solid of Young's modulus E and Poisson's ratio nu, its
+    params the Lamé parameters (mu, lambda) [Pa]."""
+
+    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
+    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
+
+    def packed(self) -> tuple[float, ...]:
+        return lame(self.E, self.nu)
+
+    def wave_speed(self, J: float = 1.0) -> float:
+        return elastic_wave_speed(self.E, self.nu, self.rho)
+
+
 def elastic_wave_speed(E: float, nu: float, rho: float) -> float:
     """P-wave speed sqrt((lambda + 2 mu) / rho) [m/s]."""
     mu, lam = lame(E, nu)

@@ -48,6 +48,7 @@ def make_cofactors(t: Types):
 
 @functools.cache
 def make_fixed_corotated(t: Types):
+    """``fixed_corotated(sigma, mu, lam) -> (P_hat, psi)`` (the module's docstring)."""
     S = t.scalar
     cofactors = make_cofactors(t)
     ones = t.vec(*([1.0] * t.dim))
@@ -65,9 +66,8 @@ def make_fixed_corotated(t: Types):
 
 @functools.cache
 def make_hencky(t: Types):
-    S = t.scalar
-    vec = t.vec
-    dim = t.dim
+    """``hencky(sigma, mu, lam) -> (P_hat, psi)`` (the module's docstring)."""
+    S, vec, dim = t.scalar, t.vec, t.dim
 
     @wp.func
     def hencky(sigma: t.vec, mu: S, lam: S):
@@ -88,9 +88,8 @@ def make_hencky(t: Types):
 
 @functools.cache
 def make_split(t: Types):
-    S = t.scalar
-    vec = t.vec
-    dim = t.dim
+    """``split(sigma, mu, kappa) -> (P_hat, psi)`` (the module's docstring)."""
+    S, vec, dim = t.scalar, t.vec, t.dim
     cofactors = make_cofactors(t)
     MINUS_TWO_OVER_D = -2.0 / t.dim
 
@@ -112,55 +111,6 @@ def make_split(t: Types):
         return P, psi
 
     return split
-
-
-@functools.cache
-def hencky_elasticity(t: Types):
-    """``elasticity(sigma, params, history)`` of a plastic model whose moduli
-    are (mu, lam) = params[0:2] (mpm.materials.plastic)."""
-    hencky = make_hencky(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return hencky(sigma, params[0], params[1])
-
-    return elasticity
-
-
-@functools.cache
-def hencky_elasticity_hessian(t: Types):
-    """The principal Hessian of :func:`hencky_elasticity`."""
-    hessian = make_hencky_hessian(t)
-
-    @wp.func
-    def elasticity_hessian(sigma: t.vec, params: t.params, history: t.history):
-        return hessian(sigma, params[0], params[1])
-
-    return elasticity_hessian
-
-
-@functools.cache
-def split_elasticity_hessian(t: Types):
-    """The principal Hessian of :func:`split_elasticity`."""
-    hessian = make_split_hessian(t)
-
-    @wp.func
-    def elasticity_hessian(sigma: t.vec, params: t.params, history: t.history):
-        return hessian(sigma, params[0], params[1])
-
-    return elasticity_hessian
-
-
-@functools.cache
-def split_elasticity(t: Types):
-    """``elasticity(sigma, params, history)`` with (mu, kappa) = params[0:2]."""
-    split = make_split(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        return split(sigma, params[0], params[1])
-
-    return elasticity
 
 
 # ------------------------------------------------------------------ Hessians
@@ -263,6 +213,22 @@ def make_split_hessian(t: Types):
 
 
 @functools.cache
+def make_fixed_corotated_law(t: Types):
+    """``fixed_corotated(sigma, mu, lam) -> (P_hat, psi, H)``: :func:`make_fixed_corotated`
+    with its Hessian."""
+    S = t.scalar
+    law = make_fixed_corotated(t)
+    hessian = make_fixed_corotated_hessian(t)
+
+    @wp.func
+    def fixed_corotated(sigma: t.vec, mu: S, lam: S):
+        P, psi = law(sigma, mu, lam)
+        return P, psi, hessian(sigma, mu, lam)
+
+    return fixed_corotated
+
+
+@functools.cache
 def make_neo_hookean_law(t: Types):
     """``neo_hookean(sigma, mu, lam) -> (P_hat, psi, H)`` of
     psi = mu/2 (sum sigma_i^2 - d) - mu ln J + lam/2 (ln J)^2:
@@ -309,3 +275,41 @@ def make_tait_law(t: Types):
         return d1 * c, psi, d2 * wp.outer(c, c) + d1 * dc(sigma)
 
     return tait
+
+
+# ------------------------------------------------------------------ on params
+# A material reads its moduli from the per-body vector ``params``: its
+# ``principal(sigma, params, history)``, or a plastic model's ``elasticity``
+# and ``elasticity_hessian``, is one of the laws above at two of them.
+
+
+@functools.cache
+def first_two(t: Types):
+    """``moduli(params, history) -> (params[0], params[1])``."""
+
+    @wp.func
+    def moduli(params: t.params, history: t.history):
+        return params[0], params[1]
+
+    return moduli
+
+
+def on_params(law, moduli=first_two):
+    """The factory ``types -> f(sigma, params, history)`` that evaluates the
+    principal-space ``law(types)(sigma, a, b)`` at the moduli
+    (a, b) = ``moduli(types)(params, history)`` (by default params[0:2])."""
+
+    @functools.cache
+    def factory(t: Types):
+        f = law(t)
+        get = moduli(t)
+
+        @wp.func
+        def at_params(sigma: t.vec, params: t.params, history: t.history):
+            a, b = get(params, history)
+            return f(sigma, a, b)
+
+        return at_params
+
+    return factory
+

@@ -9,11 +9,10 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from ..params import param
 from ..types import Types
-from .base import Material, elastic_wave_speed, lame
+from .base import Isotropic
 from .decompositions import make_rotation
-from .elasticity import make_fixed_corotated, make_fixed_corotated_hessian
+from .elasticity import make_fixed_corotated_law, on_params
 
 
 @functools.cache
@@ -35,33 +34,11 @@ def _stress_energy(t: Types):
     return stress_energy
 
 
-@functools.cache
-def _principal(t: Types):
-    law = make_fixed_corotated(t)
-    hessian = make_fixed_corotated_hessian(t)
-
-    @wp.func
-    def principal(sigma: t.vec, params: t.params, history: t.history):
-        P, psi = law(sigma, params[0], params[1])
-        return P, psi, hessian(sigma, params[0], params[1])
-
-    return principal
-
-
 @dataclass
-class FixedCorotated(Material):
+class FixedCorotated(Isotropic):
     """Fixed corotated hyperelastic solid."""
 
     name = "fixed_corotated"
     invertible = True  # |F - R|^2 and (J - 1)^2 hold for any F
     stress_energy = staticmethod(_stress_energy)
-    principal = staticmethod(_principal)
-
-    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
-
-    def packed(self):
-        return lame(self.E, self.nu)
-
-    def wave_speed(self, J: float = 1.0):
-        return elastic_wave_speed(self.E, self.nu, self.rho)
+    principal = staticmethod(on_params(make_fixed_corotated_law))

@@ -40,8 +40,8 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import split_elasticity, split_elasticity_hessian
-from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
+from .plastic import SplitPlastic
+from .return_map import make_isochoric_b, make_stretches_of_b
 
 JE2_FLOOR = 1.0e-4  # smallest J_E^2 a tip projection may produce
 
@@ -114,13 +114,11 @@ def _flow(t: Types):
 
 
 @dataclass
-class NACC(Plastic):
+class NACC(SplitPlastic):
     """Non-associative Cam-Clay with hardening on log J_P."""
 
     name = "nacc"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(split_elasticity)
-    elasticity_hessian = staticmethod(split_elasticity_hessian)
     history_names = ("alpha", "plastic_strain")
     log_Jp = True
 

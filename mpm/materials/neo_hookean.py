@@ -9,10 +9,9 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from ..params import param
 from ..types import Types
-from .elasticity import make_neo_hookean_law
-from .base import Material, elastic_wave_speed, lame
+from .elasticity import make_neo_hookean_law, on_params
+from .base import Isotropic
 
 
 @functools.cache
@@ -33,30 +32,10 @@ def _stress_energy(t: Types):
     return stress_energy
 
 
-@functools.cache
-def _principal(t: Types):
-    law = make_neo_hookean_law(t)
-
-    @wp.func
-    def principal(sigma: t.vec, params: t.params, history: t.history):
-        return law(sigma, params[0], params[1])
-
-    return principal
-
-
 @dataclass
-class NeoHookean(Material):
+class NeoHookean(Isotropic):
     """Compressible neo-Hookean hyperelastic solid."""
 
     name = "neo_hookean"
     stress_energy = staticmethod(_stress_energy)
-    principal = staticmethod(_principal)
-
-    E: float = param(1.0e5, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
-
-    def packed(self):
-        return lame(self.E, self.nu)
-
-    def wave_speed(self, J: float = 1.0):
-        return elastic_wave_speed(self.E, self.nu, self.rho)
+    principal = staticmethod(on_params(make_neo_hookean_law))

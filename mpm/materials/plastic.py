@@ -57,6 +57,10 @@ the sign convention of mpm.materials.decompositions):
   Hessian (the implicit integrator's elastic predictor);
 * optionally ``stiffening(params, history) -> factor``: how much the squared
   wave speed has grown from the rest value (snow hardening), for the time step.
+
+:class:`HenckyPlastic` and :class:`SplitPlastic` give ``elasticity`` and
+``elasticity_hessian`` for the Hencky and the split energies;
+mpm.materials.return_map has the pieces the return mappings are built from.
 """
 
 from __future__ import annotations
@@ -70,16 +74,19 @@ import numpy as np
 import warp as wp
 
 from ..types import Types
-from .base import Material, elastic_wave_speed
+from .base import Isotropic, Material
 from .decompositions import make_svd
+from .elasticity import make_hencky, make_hencky_hessian, make_split, make_split_hessian, on_params
 
 STRETCH_FLOOR = 1.0e-6  # |sigma| below this counts as this in logarithms
 SQRT_2_3 = math.sqrt(2.0 / 3.0)
 
 
 @dataclass
-class Plastic(Material):
-    """Base of the elastoplastic models (elastic parameters E, nu in each)."""
+class Plastic(Isotropic):
+    """Base of the elastoplastic models: the elastic parameters E, nu of
+    :class:`Isotropic` (a model restates the defaults it changes) and the
+    wave speed they give; each model packs its own parameters."""
 
     plastic: ClassVar[bool] = True
     flows: ClassVar[bool] = True
@@ -92,6 +99,8 @@ class Plastic(Material):
     log_Jp: ClassVar[bool | None] = False
     """history slot 0 is ln J_P (True), the flow keeps the volume (False), or
     the plastic volume change is not tracked (None)"""
+
+    packed = Material.packed  # not Isotropic's (mu, lambda) alone
 
     def initial_history(self) -> tuple[float, float]:
         return (0.0, 0.0)
@@ -109,8 +118,23 @@ class Plastic(Material):
             out["density_ratio"] = 1.0 / (J_E * J_P)
         return out
 
-    def wave_speed(self, J: float = 1.0) -> float:
-        return elastic_wave_speed(self.E, self.nu, self.rho)
+
+@dataclass
+class HenckyPlastic(Plastic):
+    """A plastic model with St. Venant-Kirchhoff-Hencky elasticity,
+    (mu, lam) = params[0:2] (mpm.materials.elasticity)."""
+
+    elasticity = staticmethod(on_params(make_hencky))
+    elasticity_hessian = staticmethod(on_params(make_hencky_hessian))
+
+
+@dataclass
+class SplitPlastic(Plastic):
+    """A plastic model with the deviatoric / volumetric split energy,
+    (mu, kappa) = params[0:2] (mpm.materials.elasticity)."""
+
+    elasticity = staticmethod(on_params(make_split))
+    elasticity_hessian = staticmethod(on_params(make_split_hessian))
 
 
 @functools.cache
@@ -139,86 +163,3 @@ def make_plastic_update(t: Types, cls: type[Plastic]):
         return U * wp.diag(sig_E) * Vt, U * wp.diag(P_hat) * Vt, psi, h
 
     return plastic_update
-
-
-@functools.cache
-def make_hencky_strain(t: Types):
-    """``hencky_strain(sigma) -> (eps, tr eps)``, eps_i = ln max(|sigma_i|, floor)."""
-    S = t.scalar
-    vec = t.vec
-
-    @wp.func
-    def hencky_strain(sigma: t.vec):
-        eps = vec()
-        tr = S(0.0)
-        for i in range(wp.static(t.dim)):
-            eps[i] = wp.log(wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR)))
-            tr += eps[i]
-        return eps, tr
-
-    return hencky_strain
-
-
-@functools.cache
-def make_exp_strain(t: Types):
-    """``exp_strain(eps) -> sigma``, sigma_i = exp(eps_i)."""
-    vec = t.vec
-
-    @wp.func
-    def exp_strain(eps: t.vec):
-        sigma = vec()
-        for i in range(wp.static(t.dim)):
-            sigma[i] = wp.exp(eps[i])
-        return sigma
-
-    return exp_strain
-
-
-@functools.cache
-def make_isochoric_b(t: Types):
-    """``isochoric_b(sigma) -> (stretches, J, mean, dev)``: the stretches
-    |sigma_i| (floored), J = their product, and the mean and deviator of the
-    isochoric left Cauchy-Green strain b_bar_i = J^(-2/d) sigma_i^2 (the
-    models on b_E: NACC, viscoplastic; s = mu dev)."""
-    S = t.scalar
-    vec = t.vec
-    d = float(t.dim)
-    minus_two_over_d = -2.0 / t.dim
-    ones = vec(*([1.0] * t.dim))
-
-    @wp.func
-    def isochoric_b(sigma: t.vec):
-        a = vec()
-        J = S(1.0)
-        for i in range(wp.static(t.dim)):
-            a[i] = wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))
-            J *= a[i]
-        scale = wp.pow(J, S(minus_two_over_d))
-        b = vec()
-        for i in range(wp.static(t.dim)):
-            b[i] = scale * a[i] * a[i]
-        mean = wp.dot(b, ones) / S(d)
-        return a, J, mean, b - mean * ones
-
-    return isochoric_b
-
-
-@functools.cache
-def make_stretches_of_b(t: Types):
-    """``stretches_of_b(mean, dev, J) -> sigma``: the principal stretches whose
-    isochoric strain is mean + dev and whose volume is J (an isochoric
-    return keeps the volume exactly)."""
-    S = t.scalar
-    vec = t.vec
-    one_over_d = 1.0 / t.dim
-
-    @wp.func
-    def stretches_of_b(mean: S, dev: t.vec, J: S):
-        out = vec()
-        prod = S(1.0)
-        for i in range(wp.static(t.dim)):
-            out[i] = wp.sqrt(wp.max(mean + dev[i], S(0.0)))
-            prod *= out[i]
-        return out * wp.pow(J / wp.max(prod, S(1.0e-30)), S(one_over_d))
-
-    return stretches_of_b

@@ -46,8 +46,8 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import hencky_elasticity, hencky_elasticity_hessian
-from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
+from .plastic import SQRT_2_3, HenckyPlastic
+from .return_map import make_deviator, make_exp_strain, make_hencky_strain, make_radial_return
 
 DEG = math.pi / 180.0
 INV_SQRT2 = 1.0 / math.sqrt(2.0)
@@ -82,12 +82,13 @@ def _friction(t: Types):
 @functools.cache
 def _flow(t: Types):
     S = t.scalar
-    vec = t.vec
     d = float(t.dim)
     friction = _friction(t)
     hencky_strain = make_hencky_strain(t)
+    deviator = make_deviator(t)
+    radial_return = make_radial_return(t)
     exp_strain = make_exp_strain(t)
-    ones = vec(*([1.0] * t.dim))
+    ones = t.vec(*([1.0] * t.dim))
 
     @wp.func
     def flow(sigma: t.vec, params: t.params, history: t.history, dt: S):
@@ -103,30 +104,24 @@ def _flow(t: Types):
             h[0] = tr - apex
             return exp_strain((apex / S(d)) * ones), h
         h[0] = S(0.0)
-        dev = eps - (tr / S(d)) * ones
-        norm = wp.length(dev)
+        dev, norm = deviator(eps, tr)
         dg = norm + (S(d) * lam + S(2.0) * mu) / (S(2.0) * mu) * (tr - apex) * alpha
-        if dg > S(0.0) and norm > S(0.0):
-            eps = eps - (dg / norm) * dev
-        return exp_strain(eps), h
+        return radial_return(eps, dev, norm, dg), h
 
     return flow
 
 
 @dataclass
-class Sand(Plastic):
+class Sand(HenckyPlastic):
     """Drucker-Prager sand on the Hencky strain, with volume correction."""
 
     name = "sand"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(hencky_elasticity)
-    elasticity_hessian = staticmethod(hencky_elasticity_hessian)
     history_names = ("volume_correction", "plastic_strain")
     log_Jp = None  # the volume correction is the unrecovered dilation, not ln J_P
 
     rho: float = param(2200.0, "rest density [kg/m^3]", gt=0.0)
     E: float = param(3.537e5, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     friction_angle: float = param(30.0, "friction angle phi0 [deg]", gt=0.0, lt=90.0)
     cohesion: float = param(0.0, "cohesion c [Pa]: the cone's apex at the tension c cot phi", ge=0.0)
     h1: float = param(0.0, "hardening: phi(q) = phi0 + (h1 q - h3) exp(-h2 q) [deg]", ge=0.0)

@@ -22,7 +22,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import make_fixed_corotated, make_fixed_corotated_hessian
+from .elasticity import make_fixed_corotated, make_fixed_corotated_hessian, on_params
 from .plastic import STRETCH_FLOOR, Plastic
 
 
@@ -48,34 +48,6 @@ def _flow(t: Types):
 
 
 @functools.cache
-def _elasticity(t: Types):
-    fixed_corotated = make_fixed_corotated(t)
-
-    hardening = _stiffening(t)
-
-    @wp.func
-    def elasticity(sigma: t.vec, params: t.params, history: t.history):
-        harden = hardening(params, history)
-        return fixed_corotated(sigma, harden * params[0], harden * params[1])
-
-    return elasticity
-
-
-@functools.cache
-def _elasticity_hessian(t: Types):
-    hessian = make_fixed_corotated_hessian(t)
-
-    hardening = _stiffening(t)
-
-    @wp.func
-    def elasticity_hessian(sigma: t.vec, params: t.params, history: t.history):
-        harden = hardening(params, history)
-        return hessian(sigma, harden * params[0], harden * params[1])
-
-    return elasticity_hessian
-
-
-@functools.cache
 def _stiffening(t: Types):
     """The hardening factor exp(xi (1 - J_P)) that scales the moduli (and the
     squared wave speed)."""
@@ -88,6 +60,19 @@ def _stiffening(t: Types):
     return stiffening
 
 
+@functools.cache
+def _hardened(t: Types):
+    """``moduli(params, history) -> (h mu, h lam)``, h the hardening factor."""
+    stiffening = _stiffening(t)
+
+    @wp.func
+    def hardened(params: t.params, history: t.history):
+        harden = stiffening(params, history)
+        return harden * params[0], harden * params[1]
+
+    return hardened
+
+
 @dataclass
 class Snow(Plastic):
     """Elastoplastic snow with hardening."""
@@ -95,8 +80,8 @@ class Snow(Plastic):
     name = "snow"
     invertible = True  # fixed corotated elasticity (its hardening reads the plastic J only)
     flow = staticmethod(_flow)
-    elasticity = staticmethod(_elasticity)
-    elasticity_hessian = staticmethod(_elasticity_hessian)
+    elasticity = staticmethod(on_params(make_fixed_corotated, _hardened))
+    elasticity_hessian = staticmethod(on_params(make_fixed_corotated_hessian, _hardened))
     stiffening = staticmethod(_stiffening)
     history_names = ("log_Jp", "plastic_strain")
     log_Jp = True

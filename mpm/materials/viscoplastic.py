@@ -29,8 +29,8 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import split_elasticity, split_elasticity_hessian
-from .plastic import Plastic, make_isochoric_b, make_stretches_of_b
+from .plastic import SplitPlastic
+from .return_map import make_isochoric_b, make_stretches_of_b
 
 NEWTON_ITERATIONS = 40
 SQRT2 = math.sqrt(2.0)
@@ -79,17 +79,13 @@ def _flow(t: Types):
 
 
 @dataclass
-class Viscoplastic(Plastic):
+class Viscoplastic(SplitPlastic):
     """Herschel-Bulkley / Bingham viscoplastic fluid (Yue et al. 2015)."""
 
     name = "viscoplastic"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(split_elasticity)
-    elasticity_hessian = staticmethod(split_elasticity_hessian)
-    history_names = ("", "plastic_strain")
 
     E: float = param(1.0e5, "Young's modulus of the elastic response [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     yield_stress: float = param(50.0, "yield stress in simple shear tau_Y [Pa]", ge=0.0)
     viscosity: float = param(10.0, "consistency K of tau = tau_Y + K gamma_dot^n [Pa s^n]", gt=0.0)
     flow_index: float = param(1.0, "n: 1 Bingham, < 1 shear-thinning, > 1 shear-thickening [-]",

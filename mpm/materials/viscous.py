@@ -23,7 +23,7 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import Material
-from .elasticity import make_tait_law
+from .elasticity import make_tait_law, on_params
 
 
 @functools.cache
@@ -50,8 +50,8 @@ def _stress_energy(t: Types):
 
 @functools.cache
 def _project(t: Types):
-    S = t.scalar
-    dim = t.dim
+    """``project(F, params) -> J^(1/d) I``: only the volume change is kept."""
+    S, dim = t.scalar, t.dim
     inv_dim = 1.0 / t.dim
 
     @wp.func
@@ -62,17 +62,6 @@ def _project(t: Types):
     return project
 
 
-@functools.cache
-def _principal(t: Types):
-    law = make_tait_law(t)
-
-    @wp.func
-    def principal(sigma: t.vec, params: t.params, history: t.history):
-        return law(sigma, params[0], params[1])
-
-    return principal
-
-
 @dataclass
 class Viscous(Material):
     """Weakly compressible Newtonian viscous fluid."""
@@ -80,7 +69,7 @@ class Viscous(Material):
     name = "viscous"
     stress_energy = staticmethod(_stress_energy)
     project = staticmethod(_project)
-    principal = staticmethod(_principal)
+    principal = staticmethod(on_params(make_tait_law))  # (K, gamma) = params[0:2]
     viscosity_param = 2  # params[2] is eta
     needs_velocity_gradient = True
     stiffens = True

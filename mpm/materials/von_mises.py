@@ -27,8 +27,8 @@ import warp as wp
 from ..params import param
 from ..types import Types
 from .base import lame
-from .elasticity import hencky_elasticity, hencky_elasticity_hessian
-from .plastic import SQRT_2_3, Plastic, make_exp_strain, make_hencky_strain
+from .plastic import SQRT_2_3, HenckyPlastic
+from .return_map import make_deviator, make_hencky_strain, make_radial_return
 
 TWO_THIRDS = 2.0 / 3.0  # a Python float: inside the Warp function 2.0 / 3.0 is a float32 quotient
 
@@ -36,40 +36,31 @@ TWO_THIRDS = 2.0 / 3.0  # a Python float: inside the Warp function 2.0 / 3.0 is 
 @functools.cache
 def _flow(t: Types):
     S = t.scalar
-    vec = t.vec
-    d = float(t.dim)
     hencky_strain = make_hencky_strain(t)
-    exp_strain = make_exp_strain(t)
-    ones = vec(*([1.0] * t.dim))
+    deviator = make_deviator(t)
+    radial_return = make_radial_return(t)
 
     @wp.func
     def flow(sigma: t.vec, params: t.params, history: t.history, dt: S):
         mu = params[0]
         H = params[3]
         eps, tr = hencky_strain(sigma)
-        dev = eps - (tr / S(d)) * ones
-        norm = wp.length(dev)
+        dev, norm = deviator(eps, tr)
         yield_stress = params[2] + H * history[1]
         delta = (S(2.0) * mu * norm - S(SQRT_2_3) * yield_stress) / (S(2.0) * mu + S(TWO_THIRDS) * H)
-        if delta > S(0.0):
-            eps = eps - (delta / norm) * dev
-        return exp_strain(eps), history
+        return radial_return(eps, dev, norm, delta), history
 
     return flow
 
 
 @dataclass
-class VonMises(Plastic):
+class VonMises(HenckyPlastic):
     """J2 plasticity with linear hardening on the Hencky strain."""
 
     name = "von_mises"
     flow = staticmethod(_flow)
-    elasticity = staticmethod(hencky_elasticity)
-    elasticity_hessian = staticmethod(hencky_elasticity_hessian)
-    history_names = ("", "plastic_strain")
 
     E: float = param(1.0e6, "Young's modulus [Pa]", gt=0.0)
-    nu: float = param(0.3, "Poisson's ratio [-]", gt=-1.0, lt=0.5)
     yield_stress: float = param(1.0e4, "uniaxial yield stress sigma_y [Pa]", ge=0.0)
     hardening: float = param(0.0, "linear hardening modulus H: sigma_y + H eps_p [Pa]", ge=0.0)
 
