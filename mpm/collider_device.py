@@ -62,14 +62,13 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device) -> wp.array:
 
 
 @functools.cache
-def make_sdf(t: Types, kinds: tuple[str, ...]):
-    """``sdf(c, q) -> (phi, n)``: signed distance [m] of the point ``q`` (in
-    the collider's own frame, i.e. already moved back by its displacement)
-    and the outward normal; only the shapes in ``kinds`` are compiled."""
+def make_axial(t: Types):
+    """``unit(v, fallback)``: v / |v| (``fallback`` for a null v);
+    ``along_radial(d, axis) -> (s, radial)``; ``capped(s, rho, er, axis,
+    half, radius) -> (phi, n)``: the signed distance and normal of a capped
+    cylinder in (rho, s) space."""
     S = t.scalar
     vec = t.vec
-    Data = make_collider_data(t)
-    has = set(kinds)
     tiny = S(1.0e-12)
 
     @wp.func
@@ -100,6 +99,124 @@ def make_sdf(t: Types, kinds: tuple[str, ...]):
             return dr, er
         return ds, sign_s * axis
 
+    return unit, along_radial, capped
+
+
+@functools.cache
+def make_shapes(t: Types):
+    """``wedge``, ``box``, ``cup``, ``bowl`` and (3D) ``mesh``: ``(c, d) ->
+    (phi, n)``, the signed distance [m] and outward normal of collider ``c``
+    at ``d``, the point relative to its centre (the mesh: the point itself),
+    before any inversion (:func:`make_sdf`); mesh is None in 2D."""
+    S = t.scalar
+    vec = t.vec
+    Data = make_collider_data(t)
+    unit, along_radial, capped = make_axial(t)
+
+    @wp.func
+    def wedge(c: Data, d: vec):
+        p0 = wp.dot(d, c.n0)
+        p1 = wp.dot(d, c.n1)
+        phi = p0
+        n = c.n0
+        if p1 > p0:
+            phi = p1
+            n = c.n1
+        return phi, n
+
+    @wp.func
+    def box(c: Data, d: vec):
+        e = vec()
+        out = vec()
+        big = S(-1.0e30)
+        k_max = int(0)
+        for k in range(wp.static(t.dim)):
+            e[k] = wp.abs(d[k]) - c.h[k]
+            sg = S(1.0)
+            if d[k] < S(0.0):
+                sg = S(-1.0)
+            if e[k] > S(0.0):
+                out[k] = sg * e[k]
+            if e[k] > big:
+                big = e[k]
+                k_max = k
+        phi = big
+        n = vec()
+        if big > S(0.0):
+            phi = wp.length(out)
+            n = out / phi
+        else:
+            n[k_max] = S(1.0)
+            if d[k_max] < S(0.0):
+                n[k_max] = S(-1.0)
+        return phi, n
+
+    @wp.func
+    def cup(c: Data, d: vec):
+        """The outer capped cylinder from s = -w to s = depth, minus the cavity s >= 0, rho < r."""
+        s, rad = along_radial(d, c.n0)
+        rho = wp.length(rad)
+        er = unit(rad, c.n1)
+        half = S(0.5) * (c.a + c.w)
+        phi, n = capped(s - (half - c.w), rho, er, c.n0, half, c.r + c.w)
+        cav = rho - c.r  # cavity's distance (open upwards)
+        ncav = er
+        if -s > cav:
+            cav = -s
+            ncav = -c.n0
+        if -cav > phi:
+            phi = -cav
+            n = -ncav
+        return phi, n
+
+    @wp.func
+    def bowl(c: Data, d: vec):
+        rho = wp.length(d)
+        er = unit(d, -c.n0)
+        phi = rho - (c.r + c.w)
+        n = er
+        if c.r - rho > phi:
+            phi = c.r - rho
+            n = -er
+        s = wp.dot(d, c.n0) - c.a
+        if s > phi:
+            phi = s
+            n = c.n0
+        return phi, n
+
+    if t.dim != 3:
+        return wedge, box, cup, bowl, None
+
+    @wp.func
+    def mesh(c: Data, q: vec):
+        qf = wp.vec3(wp.float32(q[0]), wp.float32(q[1]), wp.float32(q[2]))
+        hit = wp.mesh_query_point_sign_winding_number(c.mesh, qf, wp.float32(1.0e6))
+        phi = S(1.0e30)
+        n = c.n0
+        if hit.result:
+            cp = wp.mesh_eval_position(c.mesh, hit.face, hit.u, hit.v)
+            dv = vec(S(qf[0] - cp[0]), S(qf[1] - cp[1]), S(qf[2] - cp[2]))
+            L = wp.length(dv)
+            phi = S(hit.sign) * L
+            nf = wp.mesh_eval_face_normal(c.mesh, hit.face)
+            n = unit(S(hit.sign) * dv, vec(S(nf[0]), S(nf[1]), S(nf[2])))
+        return phi, n
+
+    return wedge, box, cup, bowl, mesh
+
+
+@functools.cache
+def make_sdf(t: Types, kinds: tuple[str, ...]):
+    """``sdf(c, q) -> (phi, n)``: signed distance [m] of the point ``q`` (in
+    the collider's own frame, i.e. already moved back by its displacement)
+    and the outward normal; only the shapes in ``kinds`` are compiled."""
+    S = t.scalar
+    vec = t.vec
+    Data = make_collider_data(t)
+    has = set(kinds)
+    unit, along_radial, capped = make_axial(t)
+    wedge, box, cup, bowl, mesh = make_shapes(t)
+
     @wp.func
     def sdf(c: Data, q: vec):
         d = q - c.p
@@ -110,37 +227,10 @@ def make_sdf(t: Types, kinds: tuple[str, ...]):
                 phi = wp.dot(d, c.n0)
         if wp.static("wedge" in has):
             if c.kind == WEDGE:
-                p0 = wp.dot(d, c.n0)
-                p1 = wp.dot(d, c.n1)
-                phi = p0
-                if p1 > p0:
-                    phi = p1
-                    n = c.n1
+                phi, n = wedge(c, d)
         if wp.static("box" in has):
             if c.kind == BOX:
-                e = vec()
-                out = vec()
-                big = S(-1.0e30)
-                k_max = int(0)
-                for k in range(wp.static(t.dim)):
-                    e[k] = wp.abs(d[k]) - c.h[k]
-                    sg = S(1.0)
-                    if d[k] < S(0.0):
-                        sg = S(-1.0)
-                    if e[k] > S(0.0):
-                        out[k] = sg * e[k]
-                    if e[k] > big:
-                        big = e[k]
-                        k_max = k
-                if big > S(0.0):
-                    phi = wp.length(out)
-                    n = out / phi
-                else:
-                    phi = big
-                    n = vec()
-                    n[k_max] = S(1.0)
-                    if d[k_max] < S(0.0):
-                        n[k_max] = S(-1.0)
+                phi, n = box(c, d)
         if wp.static("sphere" in has):
             if c.kind == SPHERE:
                 rho = wp.length(d)
@@ -152,46 +242,13 @@ def make_sdf(t: Types, kinds: tuple[str, ...]):
                 phi, n = capped(s, wp.length(rad), unit(rad, c.n1), c.n0, c.a, c.r)
         if wp.static("cup" in has):
             if c.kind == CUP:
-                # outer capped cylinder from s = -w to s = depth, minus the cavity s >= 0, rho < r
-                s, rad = along_radial(d, c.n0)
-                rho = wp.length(rad)
-                er = unit(rad, c.n1)
-                half = S(0.5) * (c.a + c.w)
-                phi, n = capped(s - (half - c.w), rho, er, c.n0, half, c.r + c.w)
-                cav = rho - c.r  # cavity's distance (open upwards)
-                ncav = er
-                if -s > cav:
-                    cav = -s
-                    ncav = -c.n0
-                if -cav > phi:
-                    phi = -cav
-                    n = -ncav
+                phi, n = cup(c, d)
         if wp.static("bowl" in has):
             if c.kind == BOWL:
-                rho = wp.length(d)
-                er = unit(d, -c.n0)
-                phi = rho - (c.r + c.w)
-                n = er
-                if c.r - rho > phi:
-                    phi = c.r - rho
-                    n = -er
-                s = wp.dot(d, c.n0) - c.a
-                if s > phi:
-                    phi = s
-                    n = c.n0
+                phi, n = bowl(c, d)
         if wp.static("mesh" in has and t.dim == 3):
             if c.kind == MESH:
-                qf = wp.vec3(wp.float32(q[0]), wp.float32(q[1]), wp.float32(q[2]))
-                hit = wp.mesh_query_point_sign_winding_number(c.mesh, qf, wp.float32(1.0e6))
-                if hit.result:
-                    cp = wp.mesh_eval_position(c.mesh, hit.face, hit.u, hit.v)
-                    dv = vec(S(qf[0] - cp[0]), S(qf[1] - cp[1]), S(qf[2] - cp[2]))
-                    L = wp.length(dv)
-                    phi = S(hit.sign) * L
-                    nf = wp.mesh_eval_face_normal(c.mesh, hit.face)
-                    n = unit(S(hit.sign) * dv, vec(S(nf[0]), S(nf[1]), S(nf[2])))
-                else:
-                    phi = S(1.0e30)
+                phi, n = mesh(c, q)
         if c.invert != 0:
             return -phi, -n
         return phi, n
