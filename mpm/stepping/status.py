@@ -22,7 +22,6 @@ step's whole buffer is one row of the history the host reads every k steps
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
