@@ -16,8 +16,26 @@ from dataclasses import dataclass
 import numpy as np
 
 
+class _CosineMode:
+    """The n-th cosine mode (``mode``) of a free layer: k = n pi / extent,
+    across the initial coordinate xi = X[:, across] - lo; ``_layer`` names
+    the extent's and the coordinate's fields."""
+
+    _layer: tuple[str, str]
+    has_body_force = False
+
+    @property
+    def k(self) -> float:
+        return self.mode * math.pi / getattr(self, self._layer[0])
+
+    def _profile(self, X):
+        """cos(k xi), sin(k xi)."""
+        xi = X[:, getattr(self, self._layer[1])] - self.lo
+        return np.cos(self.k * xi), np.sin(self.k * xi)
+
+
 @dataclass(frozen=True)
-class VibratingBar:
+class VibratingBar(_CosineMode):
     """Free-free elastic bar vibrating along ``axis`` in its n-th mode, small
     amplitude, Poisson's ratio 0 (so the bar is one-dimensional):
 
@@ -29,27 +47,19 @@ class VibratingBar:
     the finite-strain material adds an error of order (v0 / c)^2.
     """
 
+    name = "vibrating_bar"
+    _layer = ("length", "axis")
     lo: float  # [m] the bar's end at the lower coordinate
     length: float  # [m]
     wave_speed: float  # [m/s]
     amplitude: float  # [m/s] v0
     mode: int = 1
     axis: int = 0
-    name = "vibrating_bar"
-    has_body_force = False
-
-    @property
-    def k(self) -> float:
-        return self.mode * math.pi / self.length
 
     @property
     def omega(self) -> float:
         """Angular frequency [rad/s]."""
         return self.k * self.wave_speed
-
-    def _profile(self, X):
-        xi = X[:, self.axis] - self.lo
-        return np.cos(self.k * xi), np.sin(self.k * xi)
 
     def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
         u = np.zeros_like(X, dtype=np.float64)
@@ -167,7 +177,7 @@ class Vortex:
 
 
 @dataclass(frozen=True)
-class ShearWave:
+class ShearWave(_CosineMode):
     """A decaying shear wave in a free slab of Newtonian viscous fluid
     (no gravity), velocity along ``axis``, varying across ``normal``:
 
@@ -182,6 +192,8 @@ class ShearWave:
     The kinetic energy decays as exp(-2 nu k^2 t): the decay rate measures
     the viscosity."""
 
+    name = "shear_wave"
+    _layer = ("thickness", "normal")
     lo: float  # [m] the slab's face at the lower ``normal`` coordinate
     thickness: float  # [m] H
     kinematic_viscosity: float  # [m^2/s] nu
@@ -189,21 +201,11 @@ class ShearWave:
     mode: int = 1
     axis: int = 0
     normal: int = 1
-    name = "shear_wave"
-    has_body_force = False
-
-    @property
-    def k(self) -> float:
-        return self.mode * math.pi / self.thickness
 
     @property
     def rate(self) -> float:
         """Decay rate nu k^2 of the velocity [1/s]."""
         return self.kinematic_viscosity * self.k**2
-
-    def _profile(self, X):
-        eta = X[:, self.normal] - self.lo
-        return np.cos(self.k * eta), np.sin(self.k * eta)
 
     def displacement(self, X: np.ndarray, t: float) -> np.ndarray:
         u = np.zeros_like(X, dtype=np.float64)

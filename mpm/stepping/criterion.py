@@ -35,18 +35,14 @@ from ..types import Types
 
 
 @functools.cache
-def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flight: bool, commits: bool,
-                   device_moves: bool, batched: bool):
-    """The decision kernel (module docstring), one thread; ``kind``: the
-    scheme's rule (mpm.schemes.rule_kind); ``free_flight``: walls alone (the
-    positions test runs); ``commits``: G2P has moved the references (fused
-    EMPM), only the grids may have to follow; ``device_moves``: the update
-    kernels run on the device where the grids cover the new reference (else
-    the host refits and moves every updated body); ``batched``: nothing in a
-    step the driver skips."""
+def make_bounds(t: Types, kernel: Kernel):
+    """``covered(status, b, lo, shape, inv_dx, shifts, last)``: whether body
+    b's grids hold every stencil of its new positions; ``near_wall(status,
+    b, reach, band, domain, closed_lo, closed_hi)``: whether its nodes can
+    reach the wall band of a closed face (arguments: :func:`make_criterion`'s
+    kernel)."""
     f64 = wp.float64
     dim, G, support = t.dim, kernel.n_grids, kernel.support
-    updates = make_update_rule(kind)
     Fv = wp.types.vector(G, f64)
     Dv = wp.types.vector(dim, f64)
 
@@ -75,15 +71,46 @@ def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flig
         return True
 
     @wp.func
-    def near_wall(status: StepStatus, b: int, reach: f64, band: f64, domain: Dv, closed_lo: t.ivec,
-                  closed_hi: t.ivec):
-        """Whether body b's nodes can reach the wall band of a closed face."""
+    def near_box(status: StepStatus, b: int, reach: f64, band: f64, domain: Dv, closed_lo: t.ivec,
+                 closed_hi: t.ivec):
+        """Whether body b's box grown by ``reach`` [m] meets the wall band of a closed face."""
         for d in range(wp.static(dim)):
             lo = status.box_lo[b * dim + d] - reach
             hi = status.box_hi[b * dim + d] + reach
             if (lo < band and closed_lo[d] != 0) or (hi > domain[d] - band and closed_hi[d] != 0):
                 return True
         return False
+
+    @wp.func
+    def near_wall(status: StepStatus, b: int, reach: f64, band: f64, domain: Dv, closed_lo: t.ivec,
+                  closed_hi: t.ivec):
+        """Whether body b's nodes can reach the wall band of a closed face: its
+        box grown by the stencil's ``reach`` [m] times max(|F^sn|_inf, 1)."""
+        norm = status.max_F_norm[b]  # max(|F^sn|_inf, 1), NaN kept
+        if not (norm > f64(1.0)) and not wp.isnan(norm):
+            norm = f64(1.0)
+        r = reach * norm
+        return not wp.isfinite(r) or near_box(status, b, r, band, domain, closed_lo, closed_hi)
+
+    return covered, near_wall
+
+
+@functools.cache
+def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flight: bool, commits: bool,
+                   device_moves: bool, batched: bool):
+    """The decision kernel (module docstring), one thread; ``kind``: the
+    scheme's rule (mpm.schemes.rule_kind); ``free_flight``: walls alone (the
+    positions test runs); ``commits``: G2P has moved the references (fused
+    EMPM), only the grids may have to follow; ``device_moves``: the update
+    kernels run on the device where the grids cover the new reference (else
+    the host refits and moves every updated body); ``batched``: nothing in a
+    step the driver skips."""
+    f64 = wp.float64
+    dim, G = t.dim, kernel.n_grids
+    updates = make_update_rule(kind)
+    covered, near_wall = make_bounds(t, kernel)
+    Fv = wp.types.vector(G, f64)
+    Dv = wp.types.vector(dim, f64)
 
     @warp_kernel
     def criterion(
@@ -128,11 +155,7 @@ def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flig
                     host = f64(1.0)
             if wp.static(free_flight):
                 if alive > f64(0.0):
-                    norm = status.max_F_norm[b]  # max(|F^sn|_inf, 1), NaN kept
-                    if not (norm > f64(1.0)) and not wp.isnan(norm):
-                        norm = f64(1.0)
-                    r = reach * norm
-                    if not wp.isfinite(r) or near_wall(status, b, r, band, domain, closed_lo, closed_hi):
+                    if near_wall(status, b, reach, band, domain, closed_lo, closed_hi):
                         near = True
         control.host_update[0] = host
         if wp.static(free_flight):

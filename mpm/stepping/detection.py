@@ -47,6 +47,8 @@ import numpy as np
 import warp as wp
 
 from ..params import param, violations
+from .status import TRIP_SIZE, StepControl, StepStatus
+from .timestep import BodyLaws, pymax, pymin, wave_speed
 
 DETECTION_ACTIONS = ("stop", "warn", "off")
 """what a tripped criterion does: stop the run (unstable), warn (an event, the run goes on) or nothing"""
@@ -258,20 +260,10 @@ def detect_params(detector: Detector, device) -> DetectParams:
 
 
 @functools.cache
-def make_detection(energy_on: bool):
-    """``energy(control, status, params) -> tripped`` and ``step(control,
-    status, laws, params, n_bodies) -> tripped``: :meth:`Detector.energy` and
-    :meth:`Detector.step` on the device, the same float64 arithmetic, their
-    running state in the control block (mpm.stepping.status) and every new trip
-    recorded in the step's status (TRIP_SIZE values: the criterion's code -
-    0 energy, 1 speed, 2 inversion by det F, 3 by a singular value - the
-    body, the value, the limit, the energy scale, the boundaries' work) for
-    the host's messages (:meth:`Detector.trip`)."""
-    from .status import TRIP_SIZE, StepControl, StepStatus
-    from .timestep import BodyLaws, pymax, pymin, wave_speed
-
+def make_record():
+    """``record(status, control, criterion, body, value, limit, scale) ->
+    recorded``: a trip into the step's status (:func:`make_detection`)."""
     f64 = wp.float64
-    inf = f64(math.inf)
 
     @wp.func
     def record(status: StepStatus, control: StepControl, criterion: int, body: f64, value: f64, limit: f64,
@@ -292,6 +284,16 @@ def make_detection(energy_on: bool):
             status.trip[k + 5] = control.work[0]
             status.trips[0] = f64(n + 1)
         return True
+
+    return record
+
+
+@functools.cache
+def make_energy_check(energy_on: bool):
+    """``energy(control, status, params) -> tripped``: :meth:`Detector.energy` on the device."""
+    f64 = wp.float64
+    inf = f64(math.inf)
+    record = make_record()
 
     @wp.func
     def energy(control: StepControl, status: StepStatus, params: DetectParams):
@@ -318,6 +320,15 @@ def make_detection(energy_on: bool):
         control.kinetic_last[0] = status.kinetic[0]
         control.potential_last[0] = status.potential[0]
         return tripped
+
+    return energy
+
+
+@functools.cache
+def make_step_check():
+    """``step(control, status, laws, params, n_bodies) -> tripped``: :meth:`Detector.step` on the device."""
+    f64 = wp.float64
+    record = make_record()
 
     @wp.func
     def step(control: StepControl, status: StepStatus, laws: BodyLaws, params: DetectParams, n_bodies: int):
@@ -353,4 +364,17 @@ def make_detection(energy_on: bool):
         control.fired[0] = f64(int(control.fired[0]) | fired)
         return tripped
 
-    return energy, step
+    return step
+
+
+@functools.cache
+def make_detection(energy_on: bool):
+    """``energy(control, status, params) -> tripped`` and ``step(control,
+    status, laws, params, n_bodies) -> tripped``: :meth:`Detector.energy` and
+    :meth:`Detector.step` on the device, the same float64 arithmetic, their
+    running state in the control block (mpm.stepping.status) and every new trip
+    recorded in the step's status (TRIP_SIZE values: the criterion's code -
+    0 energy, 1 speed, 2 inversion by det F, 3 by a singular value - the
+    body, the value, the limit, the energy scale, the boundaries' work) for
+    the host's messages (:meth:`Detector.trip`)."""
+    return make_energy_check(energy_on), make_step_check()

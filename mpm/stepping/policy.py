@@ -61,30 +61,71 @@ class PolicyParams:
 
 
 @functools.cache
-def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on: bool, stop: bool,
-                measured: bool, batched: bool):
-    """The policy kernel (module docstring) and the ``initial`` kernel that
-    chooses the first step from the fastest initial particle ``v0`` [m/s];
-    ``detect``: the detection runs (``stop``: a trip halts, else it is a
-    warning); ``measured``: the diagnostics are summed every step;
-    ``batched``: nothing in a step the driver skips."""
+def make_rule(dim: int, n_bodies: int, implicit: bool):
+    """``rule(control, status, laws, params, first, v0) -> (dt, fresh,
+    factor, binding)``: the rule's next step [s], the step a fresh reference
+    allows, the reference factor and the binding term, from this step's
+    figures or (``first``) the fastest initial particle ``v0`` [m/s]: the
+    implicit displacement limit times the halvings' factor, or the explicit
+    rule of every body."""
     f64 = wp.float64
     inf = f64(math.inf)
     limits = make_step_rule(dim)
-    energy, step_trips = make_detection(energy_on)
-    iC = diagnostic_names(dim).index("center_of_mass_x")
+
+    @wp.func
+    def body_limits(status: StepStatus, laws: BodyLaws, params: PolicyParams, b: int, first: bool, speed: f64):
+        """Body b's wave, viscous and strain limits and its fresh step [s]."""
+        J = f64(1.0)
+        s = f64(1.0)
+        stiffening = f64(1.0)
+        rate = f64(0.0)
+        if not first:
+            if wp.isfinite(status.min_J[b]):
+                J = status.min_J[b]
+            s2 = wp.sqrt(status.min_stretch2[b])
+            if wp.isfinite(s2):
+                s = s2
+            if status.stiffening[b] > f64(0.0) and wp.isfinite(status.stiffening[b]):
+                stiffening = status.stiffening[b]
+            rate = wp.sqrt(status.max_rate2[b])
+        c = wave_speed(laws, b, pymin(pymax(J, f64(1.0e-3)), f64(1.0))) * wp.sqrt(stiffening)
+        wave, viscous, strain, fresh = limits(params.dx, pymin(pymax(s, f64(1.0e-3)), f64(1.0)), c, speed,
+                                              params.cfl, laws.nu[b], rate)
+        return wave, viscous, strain, fresh
+
+    @wp.func
+    def explicit(status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool, speed: f64):
+        """The smallest body limit, its fresh step and term; the reference factor."""
+        best = f64(inf)
+        best_fresh = f64(inf)
+        binding = int(WAVE)
+        fresh = f64(inf)
+        factor = f64(1.0)
+        for b in range(n_bodies):
+            wave, viscous, strain, fresh_b = body_limits(status, laws, params, b, first, speed)
+            dt_b = pymin(pymin(wave, viscous), strain)
+            if b == 0 or dt_b < best:
+                best = dt_b
+                best_fresh = fresh_b
+                binding = int(WAVE)
+                if viscous < wave:
+                    binding = int(VISCOUS)
+                if strain < pymin(wave, viscous):
+                    binding = int(STRAIN)
+            fresh = wp.where(b == 0, fresh_b, pymin(fresh, fresh_b))
+        if best_fresh > f64(0.0):
+            factor = best / best_fresh
+        fresh = pymin(params.dt_max, fresh)
+        return best, fresh, factor, binding
 
     @wp.func
     def rule(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,
              v0: f64):
-        """The rule's next step [s], the step a fresh reference allows, the
-        reference factor and the binding term (explicit or implicit)."""
         speed = v0
         if not first:
             speed = wp.sqrt(status.max_v2[0])
         speed = pymax(speed, params.collider_speed)
         best = f64(inf)
-        best_fresh = f64(inf)
         binding = int(WAVE)
         fresh = f64(inf)
         factor = f64(1.0)
@@ -96,42 +137,25 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
             fresh = best
             binding = int(DISPLACEMENT)
         else:
-            for b in range(n_bodies):
-                J = f64(1.0)
-                s = f64(1.0)
-                stiffening = f64(1.0)
-                rate = f64(0.0)
-                if not first:
-                    if wp.isfinite(status.min_J[b]):
-                        J = status.min_J[b]
-                    s2 = wp.sqrt(status.min_stretch2[b])
-                    if wp.isfinite(s2):
-                        s = s2
-                    if status.stiffening[b] > f64(0.0) and wp.isfinite(status.stiffening[b]):
-                        stiffening = status.stiffening[b]
-                    rate = wp.sqrt(status.max_rate2[b])
-                c = wave_speed(laws, b, pymin(pymax(J, f64(1.0e-3)), f64(1.0))) * wp.sqrt(stiffening)
-                wave, viscous, strain, fresh_b = limits(params.dx, pymin(pymax(s, f64(1.0e-3)), f64(1.0)), c,
-                                                        speed, params.cfl, laws.nu[b], rate)
-                dt_b = pymin(pymin(wave, viscous), strain)
-                if b == 0 or dt_b < best:
-                    best = dt_b
-                    best_fresh = fresh_b
-                    binding = int(WAVE)
-                    if viscous < wave:
-                        binding = int(VISCOUS)
-                    if strain < pymin(wave, viscous):
-                        binding = int(STRAIN)
-                fresh = wp.where(b == 0, fresh_b, pymin(fresh, fresh_b))
-            if best_fresh > f64(0.0):
-                factor = best / best_fresh
-            fresh = pymin(params.dt_max, fresh)
+            best, fresh, factor, binding = explicit(status, laws, params, first, speed)
         return best, fresh, factor, binding
+
+    return rule
+
+
+@functools.cache
+def make_choose(dim: int, n_bodies: int, implicit: bool):
+    """``choose(control, status, laws, params, first, v0) -> collapsed``: the
+    next step into the control block (the rule's, :func:`make_rule`, capped
+    by ``dt_max``, or the fixed one, landing on the end); True when the run
+    cannot take it (COLLAPSE)."""
+    f64 = wp.float64
+    inf = f64(math.inf)
+    rule = make_rule(dim, n_bodies, implicit)
 
     @wp.func
     def choose(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,
                v0: f64):
-        """The next step into the control block; True when the run cannot take it (COLLAPSE)."""
         limit, fresh, factor, binding = rule(control, status, laws, params, first, v0)
         dt = params.dt_fixed
         if params.dt_fixed > f64(0.0):
@@ -159,6 +183,64 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
             collapsed = True
         return collapsed
 
+    return choose
+
+
+@functools.cache
+def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on: bool, stop: bool,
+                measured: bool, batched: bool):
+    """The policy kernel (module docstring) and the ``initial`` kernel that
+    chooses the first step from the fastest initial particle ``v0`` [m/s];
+    ``detect``: the detection runs (``stop``: a trip halts, else it is a
+    warning); ``measured``: the diagnostics are summed every step;
+    ``batched``: nothing in a step the driver skips."""
+    f64 = wp.float64
+    choose = make_choose(dim, n_bodies, implicit)
+    energy, step_trips = make_detection(energy_on)
+    iC = diagnostic_names(dim).index("center_of_mass_x")
+
+    @wp.func
+    def failure(control: StepControl, status: StepStatus, laws: BodyLaws, detection: DetectParams):
+        """Why the step failed (DETECTION, NONFINITE, OUTSIDE), or 0."""
+        nonfinite = status.nonfinite[0] > f64(0.0)
+        halt = int(0)
+        if wp.static(detect):
+            energy(control, status, detection)
+            if nonfinite:
+                status.trips[0] = f64(0.0)  # the failure names the cause
+            else:
+                step_trips(control, status, laws, detection, n_bodies)
+                if wp.static(stop):
+                    if status.trips[0] > f64(0.0):
+                        halt = DETECTION
+        if halt == 0 and nonfinite:
+            halt = NONFINITE
+        if halt == 0 and status.outside[0] > f64(0.0):
+            halt = OUTSIDE
+        return halt
+
+    @wp.func
+    def going_on(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, n: f64, t: f64):
+        """After a sound step: DONE at the end, else the next step is chosen
+        (COLLAPSE), REGRID for the host, PAUSE for an observer, or 0."""
+        halt = int(0)
+        done = bool(False)
+        if wp.isfinite(params.steps_end):
+            done = n >= params.steps_end
+        else:
+            done = t >= params.t_end * f64(1.0 - 1e-12)
+        if done:
+            halt = DONE
+        elif choose(control, status, laws, params, False, f64(0.0)):
+            halt = COLLAPSE
+        else:
+            for b in range(n_bodies):
+                if control.regrid[b] != f64(0.0):
+                    halt = REGRID
+            if halt == 0 and (n >= control.stop_step[0] or t >= control.stop_time[0] * f64(1.0 - 1e-9)):
+                halt = PAUSE
+        return halt
+
     @warp_kernel
     def initial(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, v0: f64):
         control.halt[0] = f64(0.0)
@@ -181,37 +263,9 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
         control.fresh_step[0] = control.dt_fresh[0]
         control.factor_step[0] = control.factor[0]
         control.landing_step[0] = wp.where(control.dt_request[0] < control.dt_limit[0], f64(1.0), f64(0.0))
-        nonfinite = status.nonfinite[0] > f64(0.0)
-        halt = int(0)
-        if wp.static(detect):
-            energy(control, status, detection)
-            if nonfinite:
-                status.trips[0] = f64(0.0)  # the failure names the cause
-            else:
-                step_trips(control, status, laws, detection, n_bodies)
-                if wp.static(stop):
-                    if status.trips[0] > f64(0.0):
-                        halt = DETECTION
-        if halt == 0 and nonfinite:
-            halt = NONFINITE
-        if halt == 0 and status.outside[0] > f64(0.0):
-            halt = OUTSIDE
+        halt = failure(control, status, laws, detection)
         if halt == 0:
-            done = bool(False)
-            if wp.isfinite(params.steps_end):
-                done = n >= params.steps_end
-            else:
-                done = t >= params.t_end * f64(1.0 - 1e-12)
-            if done:
-                halt = DONE
-            elif choose(control, status, laws, params, False, f64(0.0)):
-                halt = COLLAPSE
-            else:
-                for b in range(n_bodies):
-                    if control.regrid[b] != f64(0.0):
-                        halt = REGRID
-                if halt == 0 and (n >= control.stop_step[0] or t >= control.stop_time[0] * f64(1.0 - 1e-9)):
-                    halt = PAUSE
+            halt = going_on(control, status, laws, params, n, t)
         control.halt[0] = f64(halt)
         if wp.static(measured):  # (a failed step's state is not measured on the host either)
             if control.host_update[0] == f64(0.0) and halt != DETECTION and halt != NONFINITE and halt != OUTSIDE:

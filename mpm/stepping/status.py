@@ -22,7 +22,6 @@ step's whole buffer is one row of the history the host reads every k steps
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,72 +45,87 @@ class Field:
     doc: str
 
 
-FIELDS = (
-    Field("max_v2", STEP, 0.0, "largest |v_p|^2 of the new state [m^2/s^2]"),
-    Field("nonfinite", STEP, 0.0, "particles with a non-finite position, velocity or F^sn"),
-    Field("outside", STEP, 0.0, "particles that left the domain interior"),
-    Field("boundary_work", STEP, 0.0, "positive work of the boundary conditions on the grid, all grids [J]"),
-    Field("load_work", STEP, 0.0, "work of the external loads over the step [J] (mpm.loads)"),
-    Field("boundary_impulse", AXIS, 0.0, "momentum the boundary conditions gave the grid in the step, "
-                                         "sum m_i (v_bc - v_i) per axis, all grids [N s] (mpm.grid)"),
-    Field("kinetic", STEP, 0.0, "kinetic energy of the new state [J] (track_energy)"),
-    Field("potential", STEP, 0.0, "its gravitational potential energy -sum m g . x [J] (track_energy)"),
-    Field("elastic", STEP, 0.0, "elastic energy of the state the step started from [J] (P2G)"),
-    Field("contact_nodes", STEP, 0.0, "body nodes whose bin was in contact (mpm.contact)"),
-    Field("trips", STEP, 0.0, "detection trips recorded in this step"),
-    Field("positioned", STEP, 0.0, "1: P2G summed the node positions in this step"),
-    Field("removed", BODY, 0.0, "particles removed at open faces in this step"),
-    Field("marked", BODY, 0.0, "particles with dJ >= epsilon (A-ULMPM)"),
-    Field("max_dJ", BODY, 0.0, "the largest dJ = |det F^sn - 1|"),
-    Field("min_J", BODY, math.inf, "the smallest det F (compression)"),
-    Field("min_stretch2", BODY, math.inf, "the smallest singular value of F^sn, squared (Lagrangian schemes)"),
-    Field("max_rate2", BODY, 0.0, "the largest |L|^2 of the velocity gradient [1/s^2]"),
-    Field("stiffening", BODY, 0.0, "the largest growth of the squared wave speed (hardening; 0: none)"),
-    Field("max_speed2", BODY, 0.0, "the largest |v_p|^2 [m^2/s^2] (track_energy)"),
-    Field("min_F_stretch2", BODY, math.inf, "the smallest singular value of F, squared (track_J)"),
-    Field("max_F_norm", BODY, 0.0, "the largest |F^sn|_inf (walls-only Lagrangian scenes)"),
-    Field("box_lo", BOX, math.inf, "bounding box of the new positions, lower corner [m]"),
-    Field("box_hi", BOX, -math.inf, "upper corner [m]"),
-    Field("load_position", LOAD, 0.0, "mean position of each load's particles at the step's start [m] (mpm.loads)"),
-    Field("trip", TRIP, 0.0, "the trips' records (TRIP_SIZE values each, mpm.stepping.detection)"),
-    Field("diagnostics", DIAG, 0.0, "the new state's diagnostics as summed (mpm.diagnostics)"),
-)
+def _fields(table: str) -> tuple[Field, ...]:
+    """The fields of a table: one a line, ``name per reset doc`` (``reset`` a
+    float: 0, 1, inf, nan...); an indented line goes on with the doc above."""
+    out: list[list] = []
+    for line in table.strip("\n").split("\n"):
+        if line[:1].isspace():
+            out[-1][3] += " " + line.strip()
+            continue
+        name, per, reset, doc = line.split(maxsplit=3)
+        if per not in (STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD):
+            raise ValueError(f"unknown extent {per!r} of field {name!r}")
+        out.append([name, per, float(reset), doc])
+    return tuple(Field(*f) for f in out)
 
-CONTROL = (
-    Field("t", STEP, 0.0, "time of the state [s]"),
-    Field("dt", STEP, math.inf, "the next step [s]"),
-    Field("step", STEP, 0.0, "steps completed"),
-    Field("halt", STEP, 0.0, "0: the next step runs; else why not (HALTS)"),
-    Field("skip", STEP, 0.0, "1: the kernels of this step do nothing (the steps halted before it)"),
-    Field("positions", STEP, 1.0, "1: P2G sums the node positions in the next step"),
-    Field("host_update", STEP, 0.0, "1: a body's configuration update waits for the host (mpm.stepping.criterion)"),
-    Field("dt_step", STEP, 0.0, "the step just taken [s]"),
-    Field("fresh_step", STEP, math.nan, "the step a fresh reference would have allowed it [s]"),
-    Field("factor_step", STEP, 1.0, "its reference factor, dt / fresh of the binding body"),
-    Field("landing_step", STEP, 0.0, "1: it was shortened to land on the end"),
-    Field("dt_limit", STEP, math.inf, "the rule's next step before landing on the end [s]"),
-    Field("dt_request", STEP, math.inf, "the next step after landing on the end, before any halving [s]"),
-    Field("dt_fresh", STEP, math.nan, "the step a fresh reference would allow [s]"),
-    Field("factor", STEP, 1.0, "the next step's reference factor"),
-    Field("binding", STEP, -1.0, "the term that bound the next step (mpm.stepping.timestep.BINDINGS)"),
-    Field("dt0", STEP, 0.0, "the first adaptive step [s]"),
-    Field("dt0_set", STEP, 0.0, "1 once dt0 is taken"),
-    Field("scale", STEP, 1.0, "the implicit step's factor after halvings"),
-    Field("stop_step", STEP, math.inf, "pause (PAUSE) once this many steps are done"),
-    Field("stop_time", STEP, math.inf, "pause once this time is reached [s]"),
-    Field("e0", STEP, 0.0, "detection: the total energy of the first state checked [J]"),
-    Field("e0_set", STEP, 0.0, "detection: 1 once e0 is taken"),
-    Field("work", STEP, 0.0, "detection: the boundaries' work so far [J]"),
-    Field("escale", STEP, 0.0, "detection: the energy scale [J]"),
-    Field("growth", STEP, -math.inf, "detection: the largest relative growth seen"),
-    Field("kinetic_last", STEP, 0.0, "detection: kinetic energy of the last state [J]"),
-    Field("potential_last", STEP, 0.0, "detection: its potential energy [J]"),
-    Field("fired", STEP, 0.0, "detection: criteria reported so far (bits of mpm.stepping.detection.CRITERIA)"),
-    Field("alive", BODY, 0.0, "particles not removed"),
-    Field("update", BODY, 0.0, "1: the body's reference configuration moves after this step"),
-    Field("regrid", BODY, 0.0, "1: it must, but its grid does not cover it: the host refits"),
-    Field("center", AXIS, 0.0, "centre of the angular momentum scale [m] (mpm.diagnostics)"),
-)
+
+FIELDS = _fields("""
+max_v2            step  0     largest |v_p|^2 of the new state [m^2/s^2]
+nonfinite         step  0     particles with a non-finite position, velocity or F^sn
+outside           step  0     particles that left the domain interior
+boundary_work     step  0     positive work of the boundary conditions on the grid, all grids [J]
+load_work         step  0     work of the external loads over the step [J] (mpm.loads)
+boundary_impulse  axis  0     momentum the boundary conditions gave the grid in the step,
+                              sum m_i (v_bc - v_i) per axis, all grids [N s] (mpm.grid)
+kinetic           step  0     kinetic energy of the new state [J] (track_energy)
+potential         step  0     its gravitational potential energy -sum m g . x [J] (track_energy)
+elastic           step  0     elastic energy of the state the step started from [J] (P2G)
+contact_nodes     step  0     body nodes whose bin was in contact (mpm.contact)
+trips             step  0     detection trips recorded in this step
+positioned        step  0     1: P2G summed the node positions in this step
+removed           body  0     particles removed at open faces in this step
+marked            body  0     particles with dJ >= epsilon (A-ULMPM)
+max_dJ            body  0     the largest dJ = |det F^sn - 1|
+min_J             body  inf   the smallest det F (compression)
+min_stretch2      body  inf   the smallest singular value of F^sn, squared (Lagrangian schemes)
+max_rate2         body  0     the largest |L|^2 of the velocity gradient [1/s^2]
+stiffening        body  0     the largest growth of the squared wave speed (hardening; 0: none)
+max_speed2        body  0     the largest |v_p|^2 [m^2/s^2] (track_energy)
+min_F_stretch2    body  inf   the smallest singular value of F, squared (track_J)
+max_F_norm        body  0     the largest |F^sn|_inf (walls-only Lagrangian scenes)
+box_lo            box   inf   bounding box of the new positions, lower corner [m]
+box_hi            box   -inf  upper corner [m]
+load_position     load  0     mean position of each load's particles at the step's start [m] (mpm.loads)
+trip              trip  0     the trips' records (TRIP_SIZE values each, mpm.stepping.detection)
+diagnostics       diag  0     the new state's diagnostics as summed (mpm.diagnostics)
+""")
+
+CONTROL = _fields("""
+t               step  0     time of the state [s]
+dt              step  inf   the next step [s]
+step            step  0     steps completed
+halt            step  0     0: the next step runs; else why not (HALTS)
+skip            step  0     1: the kernels of this step do nothing (the steps halted before it)
+positions       step  1     1: P2G sums the node positions in the next step
+host_update     step  0     1: a body's configuration update waits for the host (mpm.stepping.criterion)
+dt_step         step  0     the step just taken [s]
+fresh_step      step  nan   the step a fresh reference would have allowed it [s]
+factor_step     step  1     its reference factor, dt / fresh of the binding body
+landing_step    step  0     1: it was shortened to land on the end
+dt_limit        step  inf   the rule's next step before landing on the end [s]
+dt_request      step  inf   the next step after landing on the end, before any halving [s]
+dt_fresh        step  nan   the step a fresh reference would allow [s]
+factor          step  1     the next step's reference factor
+binding         step  -1    the term that bound the next step (mpm.stepping.timestep.BINDINGS)
+dt0             step  0     the first adaptive step [s]
+dt0_set         step  0     1 once dt0 is taken
+scale           step  1     the implicit step's factor after halvings
+stop_step       step  inf   pause (PAUSE) once this many steps are done
+stop_time       step  inf   pause once this time is reached [s]
+e0              step  0     detection: the total energy of the first state checked [J]
+e0_set          step  0     detection: 1 once e0 is taken
+work            step  0     detection: the boundaries' work so far [J]
+escale          step  0     detection: the energy scale [J]
+growth          step  -inf  detection: the largest relative growth seen
+kinetic_last    step  0     detection: kinetic energy of the last state [J]
+potential_last  step  0     detection: its potential energy [J]
+fired           step  0     detection: criteria reported so far (bits of mpm.stepping.detection.CRITERIA)
+alive           body  0     particles not removed
+update          body  0     1: the body's reference configuration moves after this step
+regrid          body  0     1: it must, but its grid does not cover it: the host refits
+center          axis  0     centre of the angular momentum scale [m] (mpm.diagnostics)
+""")
 
 
 def _struct(name: str, fields: tuple[Field, ...], doc: str):
