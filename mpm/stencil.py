@@ -268,6 +268,35 @@ def make_node(t: Types, kernel: Kernel):
 
 
 @functools.cache
+def make_walk(t: Types, kernel: Kernel, with_gradients: bool, visit, Args):
+    """``walk(p, b, shape, cache, dx, acc, args) -> acc``: particle p's
+    stencils on the G grids (:func:`make_cached`, not fused), node by node
+    in the nested order (a, b, c, c fastest): ``acc = visit(acc, a, b, c, w,
+    r, i, W, dW, args)`` (``visit`` a Warp function, ``acc`` a matrix,
+    ``args`` an ``Args`` struct: what the visit reads and writes)."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    node = make_node(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
+    reference, cached = make_cached(t, kernel, with_gradients)
+
+    @wp.func
+    def walk(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, dx: S, acc: t.mat, args: Args):
+        out = acc
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        out = visit(out, a, bb, c, w, r, i, W, dW, args)
+        return out
+
+    return walk
+
+
+@functools.cache
 def make_node_gradient(t: Types, kernel: Kernel):
     """``node_gradient(a, b, c, W, dW, inv_dx) -> grad w_ip`` [1/m]: the
     gradient of the node's weight with respect to the particle's reference
