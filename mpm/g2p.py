@@ -74,7 +74,7 @@ import functools
 
 import warp as wp
 
-from .g2p_stages import (make_advance, make_affine, make_commit, make_figures, make_grow_box, make_removal,
+from .g2p_stages import (make_advance, make_affine, make_commit, make_figures, make_removal,
                          make_velocity_sums, transfer_flags)
 from .kernels import Kernel
 from .launch import warp_kernel
@@ -100,12 +100,11 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     inv_G = 1.0 / kernel.n_grids
     sums = make_velocity_sums(t, kernel, transfer, fused)
     affine_C = make_affine(t, kernel, transfer)
-    advance = make_advance(t, compensate, compensate and not commit)
+    advance, store = make_advance(t, compensate, commit)
     commit_reference, commit_compensated = make_commit(t, kernel, transfer, project)
-    remove = make_removal(t, kernel, transfer, project, commit)
+    remove, parked = make_removal(t, kernel, transfer, project, commit)
     deformation, motion = make_figures(t, record_dJ, count_marked, lagrangian, track_compression, track_energy,
                                        track_inversion, bound_reach)
-    grow_box = make_grow_box(t)
 
     @warp_kernel
     def g2p(
@@ -156,10 +155,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         p = wp.tid()
         b = body[p]
         if wp.static(removal):
-            if mass[p] == S(0.0):  # removed: parked inside, still in its body's reference box
-                grow_box(status, b, x[p])
-                if wp.static(commit):
-                    commit_reference(p, x[p], Fsn[p], F0s[p], body_params[b], F0s, Fsn, cache, dx)
+            if parked(p, b, x, mass, status, body_params, F0s, Fsn, cache, dx):
                 return
         vp, v_transferred, B, grad_v = sums(p, b, shape, cache, grid_v, grid_m, grid_p0, dx)
         vp = S(inv_G) * vp
@@ -175,15 +171,7 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         if wp.static(loads):
             work = S(0.5) * dt * mass[p] * wp.dot(body_force[p], v[p] + v_new)
             wp.atomic_add(status.load_work, 0, f64(work))
-        x[p] = xp
-        if wp.static(compensate):
-            xc[p] = xc_new
-        v[p] = v_new
-        C[p] = Cp
-        if wp.static(not commit):
-            Fsn[p] = Fs
-            if wp.static(compensate):
-                Fc[p] = Fc_new
+        store(p, xp, xc_new, v_new, Cp, Fs, Fc_new, x, xc, v, C, Fsn, Fc)
         deformation(p, b, Fs, Fsn_old, grad_v, epsilon, F0s, dJ, status)
         motion(p, b, mass, xp, v_new, Fs, gravity, inside_lo, inside_hi, status)
         if wp.static(commit):

@@ -157,13 +157,17 @@ def make_affine(t: Types, kernel: Kernel, transfer: str):
 
 
 @functools.cache
-def make_advance(t: Types, compensate_x: bool, compensate_F: bool):
+def make_advance(t: Types, compensate: bool, commit: bool):
     """``advance(p, dt, v, grad_v, x, xc, Fsn, Fc) -> (x', xc', F^sn, F^sn',
-    Fc')``: x' = x + dt v, F^sn' = F^sn + dt grad v, each plain or a
-    compensated sum with its running error (mpm.g2p); the errors are zero
-    where not compensated."""
+    Fc')``: x' = x + dt v, F^sn' = F^sn + dt grad v, each plain or (F^sn's
+    unless ``commit``) a compensated sum with its running error (mpm.g2p);
+    the errors are zero where not compensated. ``store(p, x', xc', v', C',
+    F^sn', Fc', x, xc, v, C, Fsn, Fc)`` writes the new state (F^sn with
+    ``commit`` is the commit's)."""
     vec, mat = t.vec, t.mat
     S = t.scalar
+    compensate_x = compensate
+    compensate_F = compensate and not commit
 
     @wp.func
     def advance(p: int, dt: S, vp: vec, grad_v: mat, x: wp.array(dtype=vec), xc: wp.array(dtype=vec),
@@ -184,7 +188,21 @@ def make_advance(t: Types, compensate_x: bool, compensate_F: bool):
             Fc_new = (Fs - Fsn_old) - yF
         return xp, xc_new, Fsn_old, Fs, Fc_new
 
-    return advance
+    @wp.func
+    def store(p: int, xp: vec, xc_new: vec, v_new: vec, Cp: mat, Fs: mat, Fc_new: mat, x: wp.array(dtype=vec),
+              xc: wp.array(dtype=vec), v: wp.array(dtype=vec), C: wp.array(dtype=mat), Fsn: wp.array(dtype=mat),
+              Fc: wp.array(dtype=mat)):
+        x[p] = xp
+        if wp.static(compensate_x):
+            xc[p] = xc_new
+        v[p] = v_new
+        C[p] = Cp
+        if wp.static(not commit):
+            Fsn[p] = Fs
+            if wp.static(compensate_F):
+                Fc[p] = Fc_new
+
+    return advance, store
 
 
 @functools.cache
@@ -246,7 +264,9 @@ def make_grow_box(t: Types):
 
 @functools.cache
 def make_removal(t: Types, kernel: Kernel, transfer: str, project, commit: bool):
-    """``remove(p, b, x', F^sn, bounds..., arrays...) -> bool``: whether the
+    """``parked(p, b, x, mass, ...) -> bool``: whether the particle was
+    removed in an earlier step; ``remove(p, b, x', F^sn, bounds..., arrays...)
+    -> bool``: whether the
     particle crossed the interior's bound on an open face; if so it is
     removed (mpm.g2p: massless, clamped inside, at rest, counted), with
     ``commit`` its reference moved there (F^sn was not advanced)."""
@@ -283,7 +303,20 @@ def make_removal(t: Types, kernel: Kernel, transfer: str, project, commit: bool)
             return True
         return False
 
-    return remove
+    @wp.func
+    def parked(p: int, b: int, x: wp.array(dtype=vec), mass: wp.array(dtype=S), status: StepStatus,
+               body_params: wp.array(dtype=t.params), F0s: wp.array(dtype=mat), Fsn: wp.array(dtype=mat),
+               cache: Cache, dx: S):
+        """Whether the particle was removed before (massless): parked inside,
+        still in its body's reference box (with ``commit`` committed in place)."""
+        if mass[p] == S(0.0):
+            grow_box(status, b, x[p])
+            if wp.static(commit):
+                commit_reference(p, x[p], Fsn[p], F0s[p], body_params[b], F0s, Fsn, cache, dx)
+            return True
+        return False
+
+    return remove, parked
 
 
 @functools.cache

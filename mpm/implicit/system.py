@@ -249,7 +249,16 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
 
 @functools.cache
 def make_node_kernels(t: Types):
-    """The per-node halves of the solve (all float64 sums in ``acc``)."""
+    """The per-node halves of the solve (all float64 sums in ``acc``):
+    Newton's (:func:`make_newton_node_kernels`) and conjugate gradients'
+    (:func:`make_cg_node_kernels`)."""
+    return (*make_newton_node_kernels(t), *make_cg_node_kernels(t))
+
+
+@functools.cache
+def make_newton_node_kernels(t: Types):
+    """``finish_residual``, ``finish_apply``: the per-node halves of the
+    residual and of A's action."""
     f64 = wp.float64
     S = t.scalar
     vec = t.vec
@@ -304,6 +313,17 @@ def make_node_kernels(t: Types):
         out[i] = Ad
         wp.atomic_add(acc, DOT_A, f64(wp.dot(dv[i], Ad)))
 
+    return finish_residual, finish_apply
+
+
+@functools.cache
+def make_cg_node_kernels(t: Types):
+    """``cg_start``, ``cg_step``, ``cg_direction``, ``trial``: conjugate
+    gradients' per-node passes and the line search's trial point."""
+    f64 = wp.float64
+    S = t.scalar
+    vec = t.vec
+
     @warp_kernel
     def cg_start(residual: wp.array(dtype=vec), free: wp.array(dtype=t.mat), inv_diag: wp.array(dtype=vec),
                  delta: wp.array(dtype=vec), r: wp.array(dtype=vec), z: wp.array(dtype=vec),
@@ -350,7 +370,7 @@ def make_node_kernels(t: Types):
         out[i] = v[i] + alpha * delta[i]
         wp.atomic_add(acc, DOT_A, f64(wp.dot(residual[i], delta[i])))
 
-    return finish_residual, finish_apply, cg_start, cg_step, cg_direction, trial
+    return cg_start, cg_step, cg_direction, trial
 
 
 @functools.cache
