@@ -6,6 +6,7 @@ and the commit of the reference configuration (EMPM).
 """
 
 import functools
+from typing import Any
 
 import warp as wp
 
@@ -21,6 +22,15 @@ def transfer_flags(kernel: Kernel, transfer: str):
     FLIP), FLIP's blend."""
     mls = transfer == "mls" and not kernel.gradient_affine
     return mls, transfer not in ("pic", "flip"), transfer == "flip"
+
+
+@wp.func
+def compensated_add(s: Any, inc: Any, c: Any):
+    """``(s', c')``: s + inc as a compensated (Kahan) sum whose running error
+    is c (mpm.g2p): y = inc - c, s' = s + y, c' = (s' - s) - y."""
+    y = inc - c
+    s_new = s + y
+    return s_new, (s_new - s) - y
 
 
 @functools.cache
@@ -176,16 +186,12 @@ def make_advance(t: Types, compensate: bool, commit: bool):
         xp = x_old + dt * vp
         xc_new = vec()
         if wp.static(compensate_x):
-            yx = dt * vp - xc[p]
-            xp = x_old + yx
-            xc_new = (xp - x_old) - yx
+            xp, xc_new = compensated_add(x_old, dt * vp, xc[p])
         Fsn_old = Fsn[p]
         Fs = Fsn_old + dt * grad_v
         Fc_new = mat()
         if wp.static(compensate_F):
-            yF = dt * grad_v - Fc[p]
-            Fs = Fsn_old + yF
-            Fc_new = (Fs - Fsn_old) - yF
+            Fs, Fc_new = compensated_add(Fsn_old, dt * grad_v, Fc[p])
         return xp, xc_new, Fsn_old, Fs, Fc_new
 
     @wp.func
@@ -238,9 +244,8 @@ def make_commit(t: Types, kernel: Kernel, transfer: str, project):
     @wp.func
     def commit_compensated(p: int, Xp: vec, D: mat, F0: mat, F0s: wp.array(dtype=mat),
                            Fsn: wp.array(dtype=mat), Fc: wp.array(dtype=mat), cache: Cache, dx: S):
-        y = D * F0 - Fc[p]
-        F0n = F0 + y
-        Fc[p] = (F0n - F0) - y
+        F0n, c = compensated_add(F0, D * F0, Fc[p])
+        Fc[p] = c
         F0s[p] = F0n
         move_reference(p, Xp, Fsn, cache, dx)
 
