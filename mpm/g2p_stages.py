@@ -143,24 +143,26 @@ def make_affine(t: Types, kernel: Kernel, transfer: str):
     Cache = make_stencil_cache(t, kernel)
 
     @wp.func
+    def from_B(p: int, B: mat, K: S, cache: Cache):
+        """C = 1/G B K_p."""
+        if wp.static(per_particle_K):
+            return S(inv_G) * B * cache.K[p]
+        else:
+            return (S(inv_G) * K) * B
+
+    @wp.func
     def affine_C(p: int, B: mat, grad_v: mat, K: S, cache: Cache):
         Cp = mat()
         L = grad_v
         if wp.static(mls):
-            if wp.static(per_particle_K):
-                Cp = S(inv_G) * B * cache.K[p]
-            else:
-                Cp = (S(inv_G) * K) * B
+            Cp = from_B(p, B, K, cache)
             L = Cp
         else:
             L = S(inv_G) * grad_v
             if wp.static(affine_from_gradient):
                 Cp = L
             elif wp.static(affine):
-                if wp.static(per_particle_K):
-                    Cp = S(inv_G) * B * cache.K[p]
-                else:
-                    Cp = (S(inv_G) * K) * B
+                Cp = from_B(p, B, K, cache)
         return Cp, L
 
     return affine_C
