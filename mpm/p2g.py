@@ -66,35 +66,10 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
     skips (``control.skip``, mpm.stepping.driver)."""
     f64 = wp.float64
     S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    node = make_node(t, kernel)
-    node_gradient = make_node_gradient(t, kernel)
     Cache = make_stencil_cache(t, kernel)
-    needs_L = material.needs_velocity_gradient
-    per_particle_K = kernel.moment is None
-    mls = transfer == "mls" and not kernel.gradient_affine
-    affine = transfer not in ("pic", "flip")
-    flip = transfer == "flip"
-    reference, cached = make_cached(t, kernel, not mls, fused)
-    plastic = material.plastic
-    plastic_update = stiffening = stress_energy = None
-    if plastic:
-        plastic_update = make_plastic_update(t, material)
-        stiffening = material.stiffening(t) if material.stiffening is not None else None
-    else:
-        stress_energy = material.stress_energy(t)
-
-    @wp.func
-    def next_index(p: t.vec, q: t.vec, dCT: t.mat, dFT: t.mat, k: int):
-        """The affine momentum p and the position term q one stencil index
-        further along axis k (dCT, dFT: the transposed steps)."""
-        p_next = p
-        q_next = q
-        if wp.static(affine):
-            p_next = p + dCT[k]
-        if wp.static(positions):
-            q_next = q + dFT[k]
-        return p_next, q_next
+    stress_of = make_stress(t, material, lagrangian)
+    momentum = make_momentum(t, kernel, transfer, with_body_force, positions)
+    scatter = make_scatter(t, kernel, transfer, with_regions, positions, fused)
 
     @warp_kernel
     def p2g(
@@ -144,9 +119,45 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         xp = x[p]
         Cp = C[p]
         Fs = Fsn[p]
-        F0 = F0s[p]
+        P, psi, F0 = stress_of(p, b, dt, write, Fs, F0s[p], Cp, body_params, history, F0s, status)
+        wp.atomic_add(status.elastic, 0, f64(volume[p] * psi))
+        stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
+        if wp.static(not with_stress):
+            stress = t.mat()
+        mv, mv0, mCdx, mFdx = momentum(p, m, v[p], Cp, Fs, stress, dt, body_force, cache, K, dx)
+        rid = int(0)
+        if wp.static(with_regions):
+            rid = region[p]
+        scatter(p, b, shape, cache, dx, m, xp, mv, mv0, mCdx, mFdx, stress, sum_positions, rid, grid_m, grid_mv,
+                grid_mq, grid_p0, grid_kin, grid_kin_id)
+
+    return p2g
+
+
+@functools.cache
+def make_stress(t: Types, material, lagrangian: bool):
+    """``stress(p, b, dt, write, F^sn, F^0s, C, params, history, F0s, status)
+    -> (P, psi, F^0s)``: a plastic model's return mapping (storing F^0s and
+    the history when ``write`` is set, the stiffening in ``status``) or an
+    elastic model's stress; the first Piola-Kirchhoff stress P of F^{0n} =
+    F^sn F^0s, the energy density psi and the F^0s to take P's transpose by."""
+    f64 = wp.float64
+    needs_L = material.needs_velocity_gradient
+    plastic = material.plastic
+    plastic_update = stiffening = stress_energy = None
+    if plastic:
+        plastic_update = make_plastic_update(t, material)
+        stiffening = material.stiffening(t) if material.stiffening is not None else None
+    else:
+        stress_energy = material.stress_energy(t)
+
+    @wp.func
+    def stress(p: int, b: int, dt: t.scalar, write: int, Fs: t.mat, F0_in: t.mat, Cp: t.mat,
+               body_params: wp.array(dtype=t.params), history: wp.array(dtype=t.history),
+               F0s: wp.array(dtype=t.mat), status: StepStatus):
+        F0 = F0_in
         P = t.mat()
-        psi = S(0.0)
+        psi = t.scalar(0.0)
         if wp.static(plastic):
             FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
             if wp.static(lagrangian):
@@ -163,11 +174,27 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
             if wp.static(needs_L):
                 L = Cp * wp.inverse(Fs)
             P, psi = stress_energy(Fs * F0, L, body_params[b])
-        wp.atomic_add(status.elastic, 0, f64(volume[p] * psi))
-        stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
-        if wp.static(not with_stress):
-            stress = t.mat()
-        mv = m * v[p]
+        return P, psi, F0
+
+    return stress
+
+
+@functools.cache
+def make_momentum(t: Types, kernel: Kernel, transfer: str, with_body_force: bool, positions: bool):
+    """``momentum(p, m, v, C, F^sn, stress, dt, body_force, cache, K, dx) ->
+    (m v', m v, dx mC, m dx F^sn)``: the particle's momentum (with a body
+    force's impulse), and the steps of the affine momentum and of the node
+    position term per stencil index (MLS: mC with the stress fused in)."""
+    S = t.scalar
+    mls = transfer == "mls" and not kernel.gradient_affine
+    affine = transfer not in ("pic", "flip")
+    per_particle_K = kernel.moment is None
+    Cache = make_stencil_cache(t, kernel)
+
+    @wp.func
+    def momentum(p: int, m: S, vp: t.vec, Cp: t.mat, Fs: t.mat, stress: t.mat, dt: S,
+                 body_force: wp.array(dtype=t.vec), cache: Cache, K: S, dx: S):
+        mv = m * vp
         mv0 = mv
         if wp.static(with_body_force):
             mv = mv + (m * dt) * body_force[p]
@@ -177,22 +204,54 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                 mC = mC - stress * cache.K[p]
             else:
                 mC = mC - K * stress
-        rid = int(0)
-        if wp.static(with_regions):
-            rid = region[p]
+        mCdx = t.mat()
+        if wp.static(affine):
+            mCdx = dx * mC
+        mFdx = t.mat()
+        if wp.static(positions):
+            mFdx = (m * dx) * Fs
+        return mv, mv0, mCdx, mFdx
+
+    return momentum
+
+
+@functools.cache
+def make_scatter(t: Types, kernel: Kernel, transfer: str, with_regions: bool, positions: bool, fused: bool):
+    """``scatter(p, b, shape, cache, dx, m, x, mv, mv0, dx mC, m dx F^sn,
+    stress, sum_positions, region, grid arrays...)``: the particle's share
+    of every node of its stencils on the G grids (module docstring)."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    node = make_node(t, kernel)
+    node_gradient = make_node_gradient(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
+    mls = transfer == "mls" and not kernel.gradient_affine
+    affine = transfer not in ("pic", "flip")
+    flip = transfer == "flip"
+    reference, cached = make_cached(t, kernel, not mls, fused)
+
+    @wp.func
+    def next_index(p: t.vec, q: t.vec, dCT: t.mat, dFT: t.mat, k: int):
+        """The affine momentum p and the position term q one stencil index
+        further along axis k (dCT, dFT: the transposed steps)."""
+        p_next = p
+        q_next = q
+        if wp.static(affine):
+            p_next = p + dCT[k]
+        if wp.static(positions):
+            q_next = q + dFT[k]
+        return p_next, q_next
+
+    @wp.func
+    def scatter(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, dx: S, m: S, xp: t.vec,
+                mv: t.vec, mv0: t.vec, mCdx: t.mat, mFdx: t.mat, stress: t.mat, sum_positions: int, rid: int,
+                grid_m: wp.array(dtype=S), grid_mv: wp.array(dtype=t.vec), grid_mq: wp.array(dtype=t.vec),
+                grid_p0: wp.array(dtype=t.vec), grid_kin: wp.array(dtype=S), grid_kin_id: wp.array(dtype=wp.int32)):
         # the affine momentum mv + mC r and the mass-weighted node position m (x_p + F^sn r) are
         # linear in the offset r = (index - fx) dx: evaluated at the stencil's first node, then
         # stepped by a column of dx mC (or m dx F^sn) per index step (no matrix product per node)
-        mCdx = t.mat()
-        dCT = t.mat()
-        if wp.static(affine):
-            mCdx = dx * mC
-            dCT = wp.transpose(mCdx)
-        mFdx = t.mat()
-        dFT = t.mat()
-        if wp.static(positions):
-            mFdx = (m * dx) * Fs
-            dFT = wp.transpose(mFdx)
+        dCT = wp.transpose(mCdx)
+        dFT = wp.transpose(mFdx)
         u0, ph = reference(p, cache)
         for g in range(G):
             st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
@@ -229,4 +288,4 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
                     pb, qb = next_index(pb, qb, dCT, dFT, 1)
                 pa, qa = next_index(pa, qa, dCT, dFT, 0)
 
-    return p2g
+    return scatter

@@ -111,6 +111,8 @@ def make_weigh(t: Types, kernel: Kernel, with_gradients: bool, clamped: bool):
         weights, gradients = kernel.weights_at(t), kernel.gradients_at(t)
     else:
         weights, gradients = kernel.weights(t), kernel.gradients(t)
+    fill_weights = make_fill_row(t, kernel, weights, shared)
+    fill_gradients = make_fill_row(t, kernel, gradients, shared)
     k_offset = kernel.offset
     support = kernel.support
     vec = t.vec
@@ -128,22 +130,34 @@ def make_weigh(t: Types, kernel: Kernel, with_gradients: bool, clamped: bool):
                 b = wp.clamp(b, lo[d], lo[d] + shape[d] - support)
             first[d] = b
             fx[d] = u - S(b)
-            if wp.static(shared):
-                w = weights(fx[d], P[d], g)
-            else:
-                w = weights(fx[d])
-            for s in range(wp.static(support)):
-                W[d, s] = w[s]
+            W = fill_weights(W, d, fx[d], P[d], g)
             if wp.static(with_gradients):
-                if wp.static(shared):
-                    dw = gradients(fx[d], P[d], g)
-                else:
-                    dw = gradients(fx[d])
-                for s in range(wp.static(support)):
-                    dW[d, s] = dw[s]
+                dW = fill_gradients(dW, d, fx[d], P[d], g)
         return first, fx, W, dW
 
     return weigh
+
+
+@functools.cache
+def make_fill_row(t: Types, kernel: Kernel, f, shared: bool):
+    """``fill(M, d, u, P_d, g) -> M`` with row d set to the 1-D values f(u)
+    (``shared``: f(u, P_d, g) on grid g, from the shared phase P_d)."""
+    S = t.scalar
+    Wm = weight_matrix_type(t, kernel)
+    support = kernel.support
+
+    @wp.func
+    def fill(M: Wm, d: int, u: S, Pd: wp.types.vector(3, S), g: int):
+        if wp.static(shared):
+            w = f(u, Pd, g)
+        else:
+            w = f(u)
+        out = M
+        for s in range(wp.static(support)):
+            out[d, s] = w[s]
+        return out
+
+    return fill
 
 
 @functools.cache
@@ -265,6 +279,35 @@ def make_node(t: Types, kernel: Kernel):
         return w, r, i
 
     return node
+
+
+@functools.cache
+def make_walk(t: Types, kernel: Kernel, with_gradients: bool, visit, Args):
+    """``walk(p, b, shape, cache, dx, acc, args) -> acc``: particle p's
+    stencils on the G grids (:func:`make_cached`, not fused), node by node
+    in the nested order (a, b, c, c fastest): ``acc = visit(acc, a, b, c, w,
+    r, i, W, dW, args)`` (``visit`` a Warp function, ``acc`` a matrix,
+    ``args`` an ``Args`` struct: what the visit reads and writes)."""
+    S = t.scalar
+    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
+    node = make_node(t, kernel)
+    Cache = make_stencil_cache(t, kernel)
+    reference, cached = make_cached(t, kernel, with_gradients)
+
+    @wp.func
+    def walk(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, dx: S, acc: t.mat, args: Args):
+        out = acc
+        u0, ph = reference(p, cache)
+        for g in range(G):
+            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
+            for a in range(Ks):
+                for bb in range(Ks):
+                    for c in range(wp.static(Ks if dim == 3 else 1)):
+                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
+                        out = visit(out, a, bb, c, w, r, i, W, dW, args)
+        return out
+
+    return walk
 
 
 @functools.cache

@@ -16,68 +16,110 @@ from ..launch import warp_kernel
 from ..stepping.status import StepStatus
 from ..materials.differential import (make_principal_stress, make_tangent_action, make_tangent_quadratic,
                                      make_tangent_type)
-from ..stencil import (make_cached, make_node, make_node_gradient, make_stencil_cache,
-                      weight_matrix_type)
+from ..stencil import make_node_gradient, make_stencil_cache, make_walk, weight_matrix_type
 from ..types import Types
 
 ENERGY, RESIDUAL2, DOT_A, DOT_B, MOMENTUM2, STIFFNESS2 = range(6)  # slots of the float64 accumulator
 
 
 @functools.cache
-def make_weight_gradient(t: Types, kernel: Kernel, mls: bool):
-    """``weight_gradient(a, b, c, W, dW, r, w, Kp, K, inv_dx) -> g_ip`` [1/m]."""
-    node_gradient = make_node_gradient(t, kernel)
-    per_particle_K = kernel.moment is None
-    Wm = weight_matrix_type(t, kernel)
+def make_walk_args(t: Types):
+    """What the stencil walks of :func:`make_walks` read and write per
+    particle: K_p [1/m^2] (a kernel whose moment varies), K, 1/dx, the nodal
+    field gathered from or scattered into (``field``), the step dt, M (the
+    matrix scattered as M g_ip), and for evaluate's scatter of A's diagonal
+    ``diag`` with the tangent T, V^T F^0s,T, F^sn,-T, V^0 and the viscous
+    factor."""
     S = t.scalar
+    Tangent = make_tangent_type(t)
 
-    @wp.func
-    def weight_gradient(a: int, b: int, c: int, W: Wm, dW: Wm, r: t.vec, w: S, Kp: t.mat, K: S,
-                        inv_dx: S):
-        if wp.static(mls):
-            if wp.static(per_particle_K):
-                return w * (Kp * r)
-            else:
-                return (w * K) * r
-        else:
-            return node_gradient(a, b, c, W, dW, inv_dx)
+    @wp.struct
+    class WalkArgs:
+        Kp: t.mat
+        K: S
+        inv_dx: S
+        field: wp.array(dtype=t.vec)
+        dt: S
+        M: t.mat
+        diag: wp.array(dtype=t.vec)
+        T: Tangent
+        VF0T: t.mat
+        FinvT: t.mat
+        V0: S
+        k_visc: S
 
-    return weight_gradient
-
-
-def _specialisation(t: Types, kernel: Kernel, transfer: str):
-    mls = transfer == "mls" and not kernel.gradient_affine
-    return mls, *make_cached(t, kernel, not mls), make_node(t, kernel), make_weight_gradient(t, kernel, mls)
+    return WalkArgs
 
 
 @functools.cache
-def make_gather(t: Types, kernel: Kernel, transfer: str):
-    """``gather(p, body, shape, cache, v, dx, K, Kp) -> D_p(v) = 1/G sum_g sum_i
-    v_i g_ip^T``: the velocity gradient in the reference configuration that
-    G2P will take (F^sn += dt D), for grid velocities (or a direction) v."""
+def make_walks(t: Types, kernel: Kernel, transfer: str, viscous: bool = False):
+    """``args_at(p, cache, K, dx) -> args`` (:func:`make_walk_args`, K_p and
+    the scales set) and the walks over particle p's stencils
+    (mpm.stencil.make_walk) with the weight gradient g_ip [1/m] (MLS: K_p r
+    w_ip; otherwise the kernel's own): ``gather(...) -> sum_g sum_i v_i
+    g_ip^T`` of ``args.field``; ``scatter``: ``args.field`` takes in M g_ip;
+    ``evaluate``: the residual ``args.field`` takes in dt (M g_ip) and
+    ``args.diag`` A's diagonal, (dt^2 / G) V0 e_k . dP(e_k wv^T) wv with wv =
+    F0^T g, in the principal frames (u_k = U^T e_k, row k of U, z = V^T wv),
+    plus the viscous part."""
     S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
+    mls = transfer == "mls" and not kernel.gradient_affine
+    node_gradient = make_node_gradient(t, kernel)
+    per_particle_K = kernel.moment is None
+    Wm = weight_matrix_type(t, kernel)
     Cache = make_stencil_cache(t, kernel)
-    inv_G = 1.0 / G
-    mat = t.mat
+    Args = make_walk_args(t)
+    quadratic = make_tangent_quadratic(t)
+    inv_G = 1.0 / kernel.n_grids
+    half_inv_G = 0.5 / kernel.n_grids
+    dim = t.dim
 
     @wp.func
-    def gather(p: int, b: int, shape: wp.array(dtype=t.ivec), cache: Cache, v: wp.array(dtype=t.vec),
-               dx: S, K: S, Kp: t.mat):
-        inv_dx = S(1.0) / dx
-        D = mat()
-        u0, ph = reference(p, cache)
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            for a in range(Ks):
-                for bb in range(Ks):
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        D += wp.outer(v[i], weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
-        return S(inv_G) * D
+    def args_at(p: int, cache: Cache, K: S, dx: S):
+        args = Args()
+        if wp.static(per_particle_K):
+            args.Kp = cache.K[p]
+        args.K = K
+        args.inv_dx = S(1.0) / dx
+        return args
 
-    return gather
+    @wp.func
+    def weight_gradient(a: int, b: int, c: int, W: Wm, dW: Wm, r: t.vec, w: S, args: Args):
+        if wp.static(mls):
+            if wp.static(per_particle_K):
+                return w * (args.Kp * r)
+            else:
+                return (w * args.K) * r
+        else:
+            return node_gradient(a, b, c, W, dW, args.inv_dx)
+
+    @wp.func
+    def gather_node(D: t.mat, a: int, b: int, c: int, w: S, r: t.vec, i: int, W: Wm, dW: Wm, args: Args):
+        return D + wp.outer(args.field[i], weight_gradient(a, b, c, W, dW, r, w, args))
+
+    @wp.func
+    def scatter_node(D: t.mat, a: int, b: int, c: int, w: S, r: t.vec, i: int, W: Wm, dW: Wm, args: Args):
+        wp.atomic_add(args.field, i, args.M * weight_gradient(a, b, c, W, dW, r, w, args))
+        return D
+
+    @wp.func
+    def evaluate_node(D: t.mat, a: int, b: int, c: int, w: S, r: t.vec, i: int, W: Wm, dW: Wm, args: Args):
+        gi = weight_gradient(a, b, c, W, dW, r, w, args)
+        dt = args.dt
+        wp.atomic_add(args.field, i, dt * (args.M * gi))
+        z = args.VF0T * gi
+        y = args.FinvT * gi
+        dg = t.vec()
+        for k in range(wp.static(dim)):
+            dg[k] = (dt * dt * S(inv_G) * args.V0) * quadratic(args.T, args.T.U[k], z)
+            if wp.static(viscous):
+                dg[k] += dt * args.k_visc * (wp.dot(y, y) + y[k] * y[k]) * S(half_inv_G)
+        wp.atomic_add(args.diag, i, dg)
+        return D
+
+    gradients = not mls
+    return (args_at, make_walk(t, kernel, gradients, gather_node, Args),
+            make_walk(t, kernel, gradients, scatter_node, Args), make_walk(t, kernel, gradients, evaluate_node, Args))
 
 
 @functools.cache
@@ -88,20 +130,15 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
     viscous parts of A's diagonal."""
     f64 = wp.float64
     S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     principal_stress = make_principal_stress(t, material, psd)
-    quadratic = make_tangent_quadratic(t)
-    gather = make_gather(t, kernel, transfer)
-    per_particle_K = kernel.moment is None
     viscous = material.viscosity_param is not None
+    args_at, gather, _, scatter = make_walks(t, kernel, transfer, viscous)
     eta_index = material.viscosity_param or 0
-    inv_G = 1.0 / G
-    half_inv_G = 0.5 / G
-    n_grids = float(G)
-    vec, mat = t.vec, t.mat
+    inv_G = 1.0 / kernel.n_grids
+    n_grids = float(kernel.n_grids)
+    mat = t.mat
 
     @warp_kernel
     def evaluate(
@@ -129,11 +166,9 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
         Fs = Fsn[p]
         F0 = F0s[p]
         V0 = volume[p]
-        inv_dx = S(1.0) / dx
-        Kp = mat()
-        if wp.static(per_particle_K):
-            Kp = cache.K[p]
-        D = gather(p, b, shape, cache, v, dx, K, Kp)
+        args = args_at(p, cache, K, dx)
+        args.field = v
+        D = S(inv_G) * gather(p, b, shape, cache, dx, mat(), args)
         P, psi, T = principal_stress((Fs + dt * D) * F0, body_params[b], history[p])
         tangent[p] = T
         stress = V0 * P * wp.transpose(F0)
@@ -152,26 +187,16 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
             e += dt * J * eta * wp.ddot(symL, symL)
             visc[p] = k_visc
         wp.atomic_add(acc, ENERGY, f64(S(n_grids) * V0 * e))
-        # A's diagonal, (dt^2 / G) V0 e_k . dP(e_k wv^T) wv with wv = F0^T g, in the
-        # principal frames: u_k = U^T e_k (row k of U), z = V^T wv
-        VF0T = wp.transpose(T.V) * wp.transpose(F0)
-        u0, ph = reference(p, cache)
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            for a in range(Ks):
-                for bb in range(Ks):
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        gi = weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx)
-                        wp.atomic_add(residual, i, dt * (stress * gi))
-                        z = VF0T * gi
-                        y = FinvT * gi
-                        dg = vec()
-                        for k in range(wp.static(dim)):
-                            dg[k] = (dt * dt * S(inv_G) * V0) * quadratic(T, T.U[k], z)
-                            if wp.static(viscous):
-                                dg[k] += dt * k_visc * (wp.dot(y, y) + y[k] * y[k]) * S(half_inv_G)
-                        wp.atomic_add(diag, i, dg)
+        args.field = residual
+        args.diag = diag
+        args.dt = dt
+        args.M = stress
+        args.T = T
+        args.VF0T = wp.transpose(T.V) * wp.transpose(F0)
+        args.FinvT = FinvT
+        args.V0 = V0
+        args.k_visc = k_visc
+        scatter(p, b, shape, cache, dx, mat(), args)
 
     return evaluate
 
@@ -181,13 +206,11 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
     """Per particle: the scatter of dt dS_p g_ip for the direction dv (A's
     stress part; the mass part is added per node by :func:`make_node_kernels`)."""
     S = t.scalar
-    dim, Ks, G = t.dim, kernel.support, kernel.n_grids
-    mls, reference, cached, node, weight_gradient = _specialisation(t, kernel, transfer)
     Cache = make_stencil_cache(t, kernel)
     Tangent = make_tangent_type(t)
     action = make_tangent_action(t)
-    gather = make_gather(t, kernel, transfer)
-    per_particle_K = kernel.moment is None
+    args_at, gather, scatter, _ = make_walks(t, kernel, transfer)
+    inv_G = 1.0 / kernel.n_grids
     mat = t.mat
 
     @warp_kernel
@@ -209,32 +232,33 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
         p = wp.tid()
         b = body[p]
         F0 = F0s[p]
-        inv_dx = S(1.0) / dx
-        Kp = mat()
-        if wp.static(per_particle_K):
-            Kp = cache.K[p]
-        D = gather(p, b, shape, cache, dv, dx, K, Kp)
+        args = args_at(p, cache, K, dx)
+        args.field = dv
+        D = S(inv_G) * gather(p, b, shape, cache, dx, mat(), args)
         dS = volume[p] * action(tangent[p], dt * D * F0) * wp.transpose(F0)
         if wp.static(viscous):
             Finv = wp.inverse(Fsn[p])
             L = D * Finv
             dS += visc[p] * S(0.5) * (L + wp.transpose(L)) * wp.transpose(Finv)
-        dS = dt * dS
-        u0, ph = reference(p, cache)
-        for g in range(G):
-            st, flat, fx, W, dW = cached(p, g, b, shape, cache, u0, ph)
-            for a in range(Ks):
-                for bb in range(Ks):
-                    for c in range(wp.static(Ks if dim == 3 else 1)):
-                        w, r, i = node(a, bb, c, flat, fx, W, st, dx)
-                        wp.atomic_add(out, i, dS * weight_gradient(a, bb, c, W, dW, r, w, Kp, K, inv_dx))
+        args.field = out
+        args.M = dt * dS
+        scatter(p, b, shape, cache, dx, mat(), args)
 
     return apply
 
 
 @functools.cache
 def make_node_kernels(t: Types):
-    """The per-node halves of the solve (all float64 sums in ``acc``)."""
+    """The per-node halves of the solve (all float64 sums in ``acc``):
+    Newton's (:func:`make_newton_node_kernels`) and conjugate gradients'
+    (:func:`make_cg_node_kernels`)."""
+    return (*make_newton_node_kernels(t), *make_cg_node_kernels(t))
+
+
+@functools.cache
+def make_newton_node_kernels(t: Types):
+    """``finish_residual``, ``finish_apply``: the per-node halves of the
+    residual and of A's action."""
     f64 = wp.float64
     S = t.scalar
     vec = t.vec
@@ -289,6 +313,17 @@ def make_node_kernels(t: Types):
         out[i] = Ad
         wp.atomic_add(acc, DOT_A, f64(wp.dot(dv[i], Ad)))
 
+    return finish_residual, finish_apply
+
+
+@functools.cache
+def make_cg_node_kernels(t: Types):
+    """``cg_start``, ``cg_step``, ``cg_direction``, ``trial``: conjugate
+    gradients' per-node passes and the line search's trial point."""
+    f64 = wp.float64
+    S = t.scalar
+    vec = t.vec
+
     @warp_kernel
     def cg_start(residual: wp.array(dtype=vec), free: wp.array(dtype=t.mat), inv_diag: wp.array(dtype=vec),
                  delta: wp.array(dtype=vec), r: wp.array(dtype=vec), z: wp.array(dtype=vec),
@@ -335,7 +370,7 @@ def make_node_kernels(t: Types):
         out[i] = v[i] + alpha * delta[i]
         wp.atomic_add(acc, DOT_A, f64(wp.dot(residual[i], delta[i])))
 
-    return finish_residual, finish_apply, cg_start, cg_step, cg_direction, trial
+    return cg_start, cg_step, cg_direction, trial
 
 
 @functools.cache

@@ -112,28 +112,25 @@ def _gradients_at(t: Types):
     return gradients_at
 
 
-@functools.cache
-def _weights(t: Types):
-    """(g(1 - u), g(u)) on its own: one sine."""
-    phase, weights_at = _phase(t, False), _weights_at(t)
+def _on_grid0(at, with_gradients: bool):
+    """The factory of ``at``'s function (``_weights_at`` or ``_gradients_at``)
+    on its own, at grid 0: one sine, (g(1 - u), g(u)) or K'(u)."""
 
-    @wp.func
-    def weights(u: t.scalar):
-        return weights_at(u, phase(u), 0)
+    @functools.cache
+    def factory(t: Types):
+        phase, f_at = _phase(t, with_gradients), at(t)
 
-    return weights
+        @wp.func
+        def on_grid0(u: t.scalar):
+            return f_at(u, phase(u), 0)
+
+        return on_grid0
+
+    return factory
 
 
-@functools.cache
-def _gradients(t: Types):
-    """K'(u) on its own."""
-    phase, gradients_at = _phase(t, True), _gradients_at(t)
-
-    @wp.func
-    def gradients(u: t.scalar):
-        return gradients_at(u, phase(u), 0)
-
-    return gradients
+_weights = _on_grid0(_weights_at, False)
+_gradients = _on_grid0(_gradients_at, True)
 
 
 COMPACT = Kernel(name="compact", support=2, offset=0.0, moment=None, margin=1.0,

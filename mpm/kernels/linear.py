@@ -6,38 +6,25 @@ the affine matrix and the force come from the kernel gradient instead (APIC
 paper, multilinear case), and MLS and APIC coincide.
 """
 
-import functools
+from typing import Any
 
 import warp as wp
 
-from ..types import Types
 from .base import Kernel
+from .spline import per_precision
 
 
-@functools.cache
-def _weights(t: Types):
-    S = t.scalar
-    W = wp.types.vector(2, S)
-
-    @wp.func
-    def weights(u: S):
-        return W(S(1.0) - u, u)
-
-    return weights
+@wp.func
+def linear_weights(u: Any):
+    return wp.vector(type(u)(1.0) - u, u)
 
 
-@functools.cache
-def _gradients(t: Types):
-    S = t.scalar
-    W = wp.types.vector(2, S)
-
-    @wp.func
-    def gradients(u: S):
-        return W(S(-1.0), S(1.0))
-
-    return gradients
+@wp.func
+def linear_gradients(u: Any):
+    return wp.vector(type(u)(-1.0), type(u)(1.0))
 
 
 LINEAR = Kernel(name="linear", support=2, offset=0.0, moment=None, margin=1.0,
-                weights=_weights, gradients=_gradients, gradient_affine=True)
+                weights=per_precision(linear_weights), gradients=per_precision(linear_gradients),
+                gradient_affine=True)
 """the linear (tent) B-spline: support 2, C^0, one grid"""
