@@ -30,7 +30,6 @@ from ..launch import warp_kernel
 from ..types import Types
 
 
-@functools.cache
 def make_contact_constraint(t: Types):
     """Contact as constraints of the implicit solve (the module docstring):
     ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and

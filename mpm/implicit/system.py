@@ -247,7 +247,6 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
     return apply
 
 
-@functools.cache
 def make_node_kernels(t: Types):
     """The per-node halves of the solve (all float64 sums in ``acc``):
     Newton's (:func:`make_newton_node_kernels`) and conjugate gradients'

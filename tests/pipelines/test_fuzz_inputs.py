@@ -242,8 +242,9 @@ TOOLS = {
     "pipelines.bench": ([], {
         "--steps": ["--steps 0", "--steps abc"], "--cold": ["--cold=1"], "--json": ["--json {dir}", "--json {file}"],
         "--paper": ["--paper=1"], "--scaling": ["--scaling=1"], "--only": ["--only abc", "--only speed,abc"],
+        "--large": ["--large=1"], "--sweep": ["--sweep=1"], "--no-recording": ["--no-recording=1"],
         "--device": ["--device tpu"], **{f"--no-{t}": [f"--no-{t}=1"] for t in (
-            "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile",
+            "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile",
             "precision")},
     }),
     "pipelines.cfl_bound": ([], {
