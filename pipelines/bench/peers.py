@@ -29,7 +29,7 @@ STEPS = 400
 DT = 1.0e-4  # Taichi's fixed step [s] (the cost of a step does not depend on it)
 
 
-def taichi_ball(device: str, steps: int = STEPS, rounds: int = ROUNDS):
+def taichi_ball(device: str, steps: int = STEPS):
     """A callable timing ``steps`` Taichi steps (median ms per step over
     blocks of 20), or None when taichi is not installed."""
     try:
@@ -144,15 +144,15 @@ def bench_peers(workdir: Path, device: str, rounds: int = ROUNDS) -> list[dict]:
         t = run_taichi()
         theirs = t if theirs is None else min(theirs, t)
     return [{"peer": "taichi", "missing": False, "particles": n, "ours_ms": ours, "taichi_ms": theirs,
-             "ratio": theirs / ours, "threads": 1 if device == "cpu" else None}]
+             "ratio": theirs / ours, "threads": 1 if device == "cpu" else None, "rounds": rounds}]
 
 
 def print_peers(rows: list[dict], device: str) -> None:
     print(f"\npeers: the 2D elastic ball (128^2, EMPM MLS, fixed corotated) against Taichi's MLS-MPM "
-          f"({'one CPU thread' if device == 'cpu' else device}), fastest median of {ROUNDS} interleaved rounds")
+          f"({'one CPU thread' if device == 'cpu' else device}), fastest median of interleaved rounds")
     for r in rows:
         if r["missing"]:
             print("taichi is not installed (pip install taichi==1.7.4): no comparison")
             continue
-        print(f"{'particles':>9} {'ours ms':>8} {'taichi ms':>9} {'taichi / ours':>13}")
-        print(f"{r['particles']:>9,} {r['ours_ms']:>8.3f} {r['taichi_ms']:>9.3f} {r['ratio']:>12.2f}x")
+        print(f"{'particles':>9} {'ours ms':>8} {'taichi ms':>9} {'taichi / ours':>13} {'rounds':>6}")
+        print(f"{r['particles']:>9,} {r['ours_ms']:>8.3f} {r['taichi_ms']:>9.3f} {r['ratio']:>12.2f}x {r['rounds']:>6}")
