@@ -20,8 +20,8 @@ from .materials import (MATERIALS, NACC, FixedCorotated, Fluid, Material, NeoHoo
                         Viscoplastic, Viscous, VonMises, register_material)
 from .meshes import MeshShape
 from .model import Model, SceneError, State, build
-from .scene import (CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, Cylinder, KinematicRegion, Rotated, Scene, Sphere,
-                    rotation_matrix)
+from .scene import (CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, ContactPair, Cylinder, KinematicRegion, Rotated,
+                    Scene, Sphere, rotation_matrix)
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
 from .solver import Solver, SolverOptions
 from .stepping.detection import DETECTION_ACTIONS, Detection, Detector
@@ -34,7 +34,7 @@ from .transfer import TRANSFERS
 __all__ = [
     # scenes
     "Scene", "Body", "Box", "Sphere", "Cylinder", "Bowl", "Compound", "MeshShape", "Rotated", "rotation_matrix",
-    "KinematicRegion",
+    "KinematicRegion", "ContactPair",
     "Collider", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES", "CONTACT_TYPES",
     # materials
     "Material", "MATERIALS", "FixedCorotated", "NeoHookean", "Fluid", "Viscous", "Plastic", "Snow", "Sand",

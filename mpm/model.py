@@ -18,7 +18,7 @@ from .materials import Material
 from .params import violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
-from .scene import WALL_TYPES, Scene, skew
+from .scene import CONTACT_TYPES, WALL_TYPES, Scene, skew
 from .types import Types, make_types
 
 
@@ -182,6 +182,26 @@ class State:
 MIN_INITIAL_STRETCH = 1e-3
 
 
+def check_contact(scene: Scene) -> None:
+    """Raise :class:`SceneError` for a contact setting out of range."""
+    if scene.contact not in CONTACT_TYPES:
+        raise SceneError("contact", f"{scene.contact!r}; accepted: {', '.join(CONTACT_TYPES)}")
+    if not 0.0 < scene.contact_fill <= 1.0:
+        raise SceneError("contact_fill", f"{scene.contact_fill}; accepted: 0 < contact_fill <= 1")
+    if not (np.isfinite(scene.contact_friction) and scene.contact_friction >= 0.0):
+        raise SceneError("contact_friction", f"{scene.contact_friction}; accepted: a finite number >= 0")
+    n = len(scene.bodies)
+    for i, p in enumerate(scene.contact_pairs):
+        if not (0 <= p.a < n and 0 <= p.b < n and p.a != p.b):
+            raise SceneError(f"contact_pairs[{i}]", f"bodies {p.a}, {p.b}; accepted: two different bodies, "
+                                                    f"0 to {n - 1}")
+        if not (np.isfinite(p.friction) and p.friction >= 0.0):
+            raise SceneError(f"contact_pairs[{i}].friction", f"{p.friction}; accepted: a finite number >= 0")
+    if (scene.contact_pairs or scene.contact_friction > 0.0) and scene.contact != "friction":
+        raise SceneError("contact", f"{scene.contact!r} with a friction coefficient set; accepted: friction "
+                                    "(or contact_friction 0 and no contact_pairs)")
+
+
 def check_scene(scene: Scene, kernel: Kernel) -> None:
     """Raise :class:`SceneError` for anything that would make the scene unbuildable."""
     d = scene.dim
@@ -218,6 +238,7 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
                                  f"singular value >= {MIN_INITIAL_STRETCH:g} (no inverted or degenerate start)")
     if not scene.bodies:
         raise SceneError("bodies", "empty; accepted: at least one body")
+    check_contact(scene)
     for r, reg in enumerate(scene.regions):
         if not 0 <= reg.body < len(scene.bodies):
             raise SceneError(f"regions[{r}].body", f"{reg.body}; accepted: 0 to {len(scene.bodies) - 1}")

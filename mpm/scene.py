@@ -14,9 +14,11 @@ import numpy as np
 from .colliders import Collider
 from .materials import Material
 
-CONTACT_TYPES = ("frictionless", "none", "shared")
-"""between bodies (Scene.contact): frictionless (mpm.contact), none (they
-pass through each other) or shared (EMPM only: one grid for all bodies)"""
+CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
+"""between bodies (Scene.contact): frictionless (mpm.contact), friction
+(Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
+(they pass through each other) or shared (EMPM only: one grid for all
+bodies)"""
 WALL_TYPES = ("sticky", "slip", "open")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
@@ -257,6 +259,19 @@ class Body:
     deformation: Sequence[Sequence[float]] | None = None
 
 
+@dataclass(frozen=True)
+class ContactPair:
+    """Two bodies (indices into ``Scene.bodies``) and the Coulomb coefficient
+    mu of their contact (``Scene.contact = "friction"``)."""
+
+    a: int
+    """the first body [index]"""
+    b: int
+    """the second body [index]"""
+    friction: float
+    """Coulomb mu of their contact"""
+
+
 @dataclass
 class Scene:
     """Domain, grid, walls, gravity and bodies of a run. The domain is the
@@ -293,6 +308,11 @@ class Scene:
     MPM, where bodies whose stencils overlap move together)"""
     contact_fill: float = 0.5
     """volume fraction of a global node that the bodies present must fill for contact"""
+    contact_friction: float = 0.0
+    """Coulomb coefficient mu between bodies (``contact="friction"``): every pair's, unless ``contact_pairs``
+    names it"""
+    contact_pairs: list[ContactPair] = field(default_factory=list)
+    """pairs of bodies with their own Coulomb coefficient (``contact="friction"``)"""
     regions: list[KinematicRegion] = field(default_factory=list)
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
     colliders: list[Collider] = field(default_factory=list)
@@ -322,3 +342,12 @@ class Scene:
     @property
     def cells(self) -> tuple[int, ...]:
         return tuple(int(round(L / self.dx)) for L in self.domain)
+
+    def friction_table(self) -> np.ndarray:
+        """mu between bodies a and b at [a, b] (symmetric): ``contact_friction``
+        unless ``contact_pairs`` names the pair."""
+        n = len(self.bodies)
+        mu = np.full((n, n), float(self.contact_friction))
+        for p in self.contact_pairs:
+            mu[p.a, p.b] = mu[p.b, p.a] = p.friction
+        return mu

@@ -149,7 +149,7 @@ class Solver:
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout)
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
-                        if nb > 1 and scene.contact == "frictionless" else None)
+                        if nb > 1 and scene.contact in ("frictionless", "friction") else None)
         # the conditions act in the grid update, or after contact or the implicit solve
         self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
                                      separate=self.contact is not None or implicit, batched=batched)
@@ -273,7 +273,7 @@ class Solver:
         return self.implicit.solve(state, self.model.types.scalar(self.dt))
 
     def _resolve_contact(self) -> None:
-        """Frictionless contact between bodies (mpm.contact)."""
+        """Contact between bodies (mpm.contact)."""
         if self.contact is not None:
             self.contact.resolve(self.grid, self.layout, self.buffer.status)
 

@@ -18,6 +18,15 @@ constraint's impulse B^T lambda gives the two bodies lambda n_a and
 lambda n_b = -lambda n_a: momentum is exchanged, not created. Bins with
 three or more bodies, and bins that start approaching during the solve, are
 left to the explicit pass after it.
+
+Coulomb friction between the bodies (``Scene.contact = "friction"``) acts
+after the solve, as the colliders' does (mpm.implicit.system
+``make_friction``): with the normal impulse lambda that the predictor's
+projection took (mode 0: body b's normal velocity change
+dn_b = lambda / (G M_bg)), the tangential velocity of body b relative to the
+bin's centre of mass, u_t, loses min(|u_t|, mu dn_b) (:func:`make_rub`).
+M_a dn_a = M_c dn_c and M_a u_t,a = -M_c u_t,c, so momentum is kept; the
+energy taken goes into ``contact_work``.
 """
 
 import functools
@@ -27,6 +36,7 @@ import warp as wp
 from .lattice import make_bins, make_nearest, make_node_body, make_occupancy, make_outward
 from ..lattice import make_lattice
 from ..launch import warp_kernel
+from ..stepping.status import StepStatus
 from ..types import Types
 
 
@@ -82,6 +92,51 @@ def make_couple(t: Types):
         coef[i] = (lat.m[i] / (S(lat.n_grids) * bins.M[b * n_global + g])) * n
 
     return couple
+
+
+@functools.cache
+def make_rub(t: Types):
+    """``rub``: Coulomb friction on the solved velocities of a constrained
+    node (the module docstring), between ``bin`` (the solution binned) and
+    ``unbin``; ``num`` and ``den`` the predictor's projection sums per bin
+    (lambda = num / den)."""
+    S = t.scalar
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    node_body = make_node_body(t)
+    outward = make_outward(t)
+    occupancy = make_occupancy(t)
+
+    @warp_kernel
+    def rub(lat: Lattice, bins: Bins, cbin: wp.array(dtype=wp.int32), num: wp.array(dtype=S),
+            den: wp.array(dtype=S), status: StepStatus):
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0 or lat.m[i] <= S(0.0) or not (den[g] > S(0.0)):
+            return
+        b = node_body(lat, i)
+        present, m_tot, p_tot, _volume, a, c = occupancy(lat, bins, g)
+        n_global = lat.n_global
+        m_b = bins.M[b * n_global + g]
+        if present != 2 or not (m_b > S(0.0)):
+            return
+        n = outward(lat, bins, a, g)  # as make_couple's
+        if b != a:
+            n = -n
+        dn = (num[g] / den[g]) / (S(lat.n_grids) * m_b)  # the normal velocity change the constraint gave b
+        u = bins.P[b * n_global + g] / m_b - p_tot / m_tot
+        ut = u - wp.dot(u, n) * n
+        lt = wp.length(ut)
+        if not (lt > S(0.0)) or not (dn > S(0.0)):
+            return
+        v = lat.v[i]
+        v_new = v - ut * wp.min(S(1.0), bins.mu[a * lat.n_bodies + c] * dn / lt)
+        m = wp.float64(lat.m[i]) / wp.float64(lat.n_grids)
+        wp.atomic_add(status.contact_work, 0, wp.float64(0.5) * m
+                      * (wp.float64(wp.dot(v_new, v_new)) - wp.float64(wp.dot(v, v))))
+        lat.v[i] = v_new
+
+    return rub
 
 
 @functools.cache

@@ -26,6 +26,7 @@ def make_bins(t: Types):
         P: wp.array(dtype=t.vec)  # [kg m/s]
         rest_mass: wp.array(dtype=S)  # per body: rho_b dx^d [kg]
         fill: S  # the volume fraction of a lattice node in contact
+        mu: wp.array(dtype=S)  # Coulomb mu between bodies a and b at a * n_bodies + b (friction; else unused)
 
     return Bins
 

@@ -1,5 +1,5 @@
 """Contact between bodies through a global Eulerian grid (multi-velocity
-field, frictionless, separation free).
+field, separation free, frictionless or with Coulomb friction).
 
 Every body has its own reference grid (mpm.reference_grids), so bodies do not see each
 other in the transfers. After the grid update, each body node i (mass m_i,
@@ -38,6 +38,19 @@ are equal and opposite; where three or more meet, the mass-weighted mean
 correction is taken off every body present. Each lattice node hands exactly
 that momentum to its nodes.
 
+With Coulomb friction (Bardenhagen, Brackbill and Sulsky 2000, Comput.
+Methods Appl. Mech. Eng. 187, 529-541) an approaching body also loses
+tangential velocity relative to v_cm, u_t = (v_b - v_cm) - rel n_b with
+rel = (v_b - v_cm) . n_b > 0, up to mu times the normal change:
+    dV_bg = -rel n_b - min(1, mu rel / |u_t|) u_t,
+so the body sticks (moves with v_cm) while |u_t| <= mu rel and slides
+otherwise. For two bodies mu is their pair's (Scene.friction_table) and
+M_a u_a = -M_b u_b, so the two tangential impulses cancel as the normal ones
+do; with three or more, mu is the mass-weighted mean over the others present
+and the mean correction keeps momentum. Every correction takes kinetic
+energy relative to v_cm only: the contact's work (``contact_work``,
+mpm.stepping.status) is never positive but for round-off.
+
 Under the implicit integrator contact is also a constraint of the system
 (mpm.contact.constraint); the lattice reads shared by both are in
 mpm.contact.lattice.
@@ -45,9 +58,10 @@ mpm.contact.lattice.
 
 import functools
 
+import numpy as np
 import warp as wp
 
-from .constraint import make_contact_constraint
+from .constraint import make_contact_constraint, make_rub
 from .lattice import make_bins, make_lattice_point, make_node_body, make_occupancy, make_outward
 from ..lattice import make_lattice, make_node_mass
 from ..launch import warp_kernel
@@ -65,10 +79,11 @@ GATHER_PASSES = 2
 
 
 @functools.cache
-def make_bin_dv(t: Types):
+def make_bin_dv(t: Types, friction: bool = False):
     """``bin_dv(lat, bins, b, g) -> (dV_bg, in contact)``: body b's
     correction at lattice node g (the module docstring), and whether g is
-    in contact."""
+    in contact. ``friction``: Coulomb friction on the tangential part (the
+    module docstring); frictionless code otherwise."""
     S = t.scalar
     vec = t.vec
     Lattice = make_lattice(t)
@@ -77,7 +92,7 @@ def make_bin_dv(t: Types):
     occupancy = make_occupancy(t)
 
     @wp.func
-    def correction(lat: Lattice, bins: Bins, b: int, g: int, v_cm: t.vec):
+    def correction(lat: Lattice, bins: Bins, b: int, g: int, v_cm: t.vec, mu: S):
         """Body b's dV_bg (0 unless it approaches), its momentum M_bg dV_bg, and whether it approaches."""
         dv = vec()
         dp = vec()
@@ -85,34 +100,56 @@ def make_bin_dv(t: Types):
         m_b = bins.M[b * lat.n_global + g]
         n = outward(lat, bins, b, g)
         if wp.length(n) > S(0.0):
-            rel = wp.dot(bins.P[b * lat.n_global + g] / m_b - v_cm, n)
+            u = bins.P[b * lat.n_global + g] / m_b - v_cm
+            rel = wp.dot(u, n)
             if rel > S(0.0):
                 dv = -rel * n
                 dp = (-rel * m_b) * n
+                if wp.static(friction):
+                    ut = u - rel * n  # the tangential velocity relative to the bin's centre of mass
+                    lt = wp.length(ut)
+                    if lt > S(0.0):
+                        dv = dv - ut * wp.min(S(1.0), mu * rel / lt)  # stick, or slide with |dV_t| = mu |dV_n|
+                        dp = m_b * dv
                 hit = True
         return dv, dp, hit
 
     @wp.func
+    def friction_of(lat: Lattice, bins: Bins, b: int, g: int, m_tot: S):
+        """mu of body b against the others present at g, weighted by their mass there."""
+        num = S(0.0)
+        for c in range(lat.n_bodies):
+            m_c = bins.M[c * lat.n_global + g]
+            if c != b and m_c > S(0.0):
+                num += m_c * bins.mu[b * lat.n_bodies + c]
+        return num / (m_tot - bins.M[b * lat.n_global + g])
+
+    @wp.func
     def bin_dv(lat: Lattice, bins: Bins, b: int, g: int):
         dv = vec()
-        present, m_tot, p_tot, volume, _a, _c = occupancy(lat, bins, g)
+        present, m_tot, p_tot, volume, a, c = occupancy(lat, bins, g)
         # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
         if not (bins.M[b * lat.n_global + g] > S(0.0)) or present < 2 or volume < bins.fill:
             return dv, False
         v_cm = p_tot / m_tot
+        mu = S(0.0)
         if present == 2:
+            if wp.static(friction):
+                mu = bins.mu[a * lat.n_bodies + c]  # the pair's (symmetric)
             # the normals are opposite and the two corrections' momenta cancel (to round-off)
-            dv, _dp, _hit = correction(lat, bins, b, g, v_cm)
+            dv, _dp, _hit = correction(lat, bins, b, g, v_cm, mu)
         else:
             # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
             dp_sum = vec()
-            for c in range(lat.n_bodies):
-                if bins.M[c * lat.n_global + g] > S(0.0):
-                    dv_c, dp_c, hit_c = correction(lat, bins, c, g, v_cm)
-                    if hit_c:
-                        dp_sum += dp_c
-                    if c == b:
-                        dv = dv_c
+            for k in range(lat.n_bodies):
+                if bins.M[k * lat.n_global + g] > S(0.0):
+                    if wp.static(friction):
+                        mu = friction_of(lat, bins, k, g, m_tot)
+                    dv_k, dp_k, hit_k = correction(lat, bins, k, g, v_cm, mu)
+                    if hit_k:
+                        dp_sum += dp_k
+                    if k == b:
+                        dv = dv_k
             dv = dv - dp_sum / m_tot
         return dv, True
 
@@ -120,7 +157,7 @@ def make_bin_dv(t: Types):
 
 
 @functools.cache
-def make_contact(t: Types, batched: bool = False, gather: bool = False):
+def make_contact(t: Types, batched: bool = False, gather: bool = False, friction: bool = False):
     """The three contact passes, each over the body nodes (never over the
     whole lattice, which a scene of small bodies in a large domain would pay
     for every step): ``splat`` bins the nodes, ``correct`` gives each node
@@ -130,7 +167,8 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
     ``gather`` (Lagrangian nodes): each node is spread over the 2^d lattice
     nodes around it and takes back their corrections with the same weights
     (the module docstring) instead of being binned at the nearest one.
-    ``batched``: nothing in a step the driver skips (``control.skip``)."""
+    ``batched``: nothing in a step the driver skips (``control.skip``).
+    ``friction``: Coulomb friction between the bodies (:func:`make_bin_dv`)."""
     S = t.scalar
     vec = t.vec
     Lattice = make_lattice(t)
@@ -138,7 +176,7 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
     node_mass = make_node_mass(t, batched)
     node_body = make_node_body(t)
     lattice_point = make_lattice_point(t, gather)
-    bin_dv = make_bin_dv(t)
+    bin_dv = make_bin_dv(t, friction)
     n_points = 2**t.dim if gather else 1  # the lattice nodes a body node is put on
 
     @warp_kernel
@@ -159,11 +197,13 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
         lat: Lattice,  # v: the corrected velocities
         bins: Bins,
         count: int,  # 1: count the nodes in contact (the first pass)
-        status: StepStatus,  # contact_nodes += 1 per node taking a correction from a lattice node in contact
+        status: StepStatus,  # contact_nodes += 1 per node taking a correction from a lattice node in contact;
+        # contact_work += (m_i / G) (|v_i + dv_i|^2 - |v_i|^2) / 2 [J]
         control: StepControl,
     ):
         i = wp.tid()
-        if node_mass(lat, control, i) <= S(0.0):
+        m = node_mass(lat, control, i)
+        if m <= S(0.0):
             return
         b = node_body(lat, i)
         dv = vec()
@@ -175,7 +215,13 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False):
             touching = touching or hit_g
         if touching and count != 0:
             wp.atomic_add(status.contact_nodes, 0, wp.float64(1.0))
-        lat.v[i] = lat.v[i] + dv
+        v = lat.v[i]
+        v_new = v + dv
+        if touching:
+            m_body = wp.float64(m) / wp.float64(lat.n_grids)  # every kernel grid carries the body's full mass
+            wp.atomic_add(status.contact_work, 0, wp.float64(0.5) * m_body
+                          * (wp.float64(wp.dot(v_new, v_new)) - wp.float64(wp.dot(v, v))))
+        lat.v[i] = v_new
 
     @warp_kernel
     def clear(lat: Lattice, bins: Bins, control: StepControl):
@@ -196,16 +242,21 @@ class Contact:
     and P per body on the global lattice, zero between steps) and the passes
     over the body nodes (:meth:`resolve`; :meth:`couple` for the implicit
     solve's constraints, mpm.implicit). ``lagrangian``: the body nodes move
-    with the bodies (TLMPM, A-ULMPM) and are spread with linear weights."""
+    with the bodies (TLMPM, A-ULMPM) and are spread with linear weights.
+    Coulomb friction is compiled in only where a pair of bodies has mu > 0
+    (``Scene.contact = "friction"``)."""
 
     def __init__(self, model, launch, implicit: bool, control, batched: bool = False, lagrangian: bool = False):
         t = model.types
         self.model, self.launch, self.control = model, launch, control
-        self.splat, self.correct, self.clear = make_contact(t, batched, gather=lagrangian)
+        mu = model.scene.friction_table() if model.scene.contact == "friction" else np.zeros((1, 1))
+        self.friction = bool(mu.max() > 0.0)
+        self.splat, self.correct, self.clear = make_contact(t, batched, gather=lagrangian, friction=self.friction)
         self.passes = GATHER_PASSES if lagrangian else 1
         # the implicit solve's constraints bin every node to one lattice node (disjoint rows)
         self.bin, _, self.unbin = make_contact(t, batched) if implicit else (None, None, None)
         self.constraint = make_contact_constraint(t) if implicit else ()
+        self._rub = make_rub(t) if implicit and self.friction else None
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
         self.fill = t.scalar(model.scene.contact_fill)
@@ -214,15 +265,18 @@ class Contact:
             self.P = wp.zeros(n_bodies * n_global, dtype=t.vec)
             self.rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
                                       dtype=t.scalar)
+            self.mu = wp.array(mu.ravel() if self.friction else [0.0], dtype=t.scalar)
         self.bins = make_bins(t)()
         self.bins.M, self.bins.P, self.bins.rest_mass, self.bins.fill = self.M, self.P, self.rest_mass, self.fill
+        self.bins.mu = self.mu
 
     def kernels(self) -> list:
         return list(dict.fromkeys([self.splat, self.correct, self.clear, *self.constraint]
-                                  + ([self.bin, self.unbin] if self.constraint else [])))
+                                  + ([self.bin, self.unbin] if self.constraint else [])
+                                  + ([self._rub] if self._rub is not None else [])))
 
     def resolve(self, grid, layout, status) -> None:
-        """Frictionless contact on the grid velocities (module docstring)."""
+        """Contact on the grid velocities (module docstring)."""
         args = [grid.lattice, self.bins]
         for k in range(self.passes):
             self.launch(self.splat, layout.n_nodes, [*args, self.control])
@@ -238,4 +292,17 @@ class Contact:
         dev = self.model.device
         wp.launch(self.bin, n, device=dev, inputs=[*args, self.control])
         wp.launch(self.constraint[0], n, device=dev, inputs=[*args, cbin, coef])
+        wp.launch(self.unbin, n, device=dev, inputs=[*args, self.control])
+
+    def rub(self, grid, layout, cbin, num, den, status) -> None:
+        """Coulomb friction on the implicit solve's velocities at its
+        constrained nodes, from the predictor's projection sums ``num`` and
+        ``den`` (mpm.contact.constraint ``make_rub``); nothing without friction."""
+        if self._rub is None:
+            return
+        args = [grid.lattice, self.bins]
+        n = layout.n_nodes
+        dev = self.model.device
+        wp.launch(self.bin, n, device=dev, inputs=[*args, self.control])
+        wp.launch(self._rub, n, device=dev, inputs=[*args, cbin, num, den, status])
         wp.launch(self.unbin, n, device=dev, inputs=[*args, self.control])

@@ -106,6 +106,8 @@ class ImplicitSolve:
             if self.contact is not None:
                 self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
+                k = m.n_nodes if self.contact.friction else 1  # the predictor's sums, for the friction after
+                self.contact_lam = (wp.zeros(k, dtype=t.scalar), wp.zeros(k, dtype=t.scalar))
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
             self.visc = wp.zeros(m.n_particles if self.viscous else 1, dtype=t.scalar)
             self.acc = wp.zeros(6, dtype=wp.float64)
@@ -258,6 +260,9 @@ class ImplicitSolve:
         if self.contact is not None:
             self._activate()
             self._project(0, s.grid.v)
+            if self.contact.friction:
+                wp.copy(self.contact_lam[0], self.contact_num)  # per bin of the global lattice
+                wp.copy(self.contact_lam[1], self.contact_den)
 
     def finish(self) -> None:
         """The constraints' work (:func:`make_boundary_work`), then Coulomb
@@ -269,6 +274,8 @@ class ImplicitSolve:
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, s.buffer.status])
+        if self.contact is not None:  # friction between bodies (mpm.contact.constraint make_rub)
+            self.contact.rub(s.grid, s.layout, self.cbin, *self.contact_lam, s.buffer.status)
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,

@@ -72,6 +72,8 @@ kinetic           step  0     kinetic energy of the new state [J] (track_energy)
 potential         step  0     its gravitational potential energy -sum m g . x [J] (track_energy)
 elastic           step  0     elastic energy of the state the step started from [J] (P2G)
 contact_nodes     step  0     body nodes whose bin was in contact (mpm.contact)
+contact_work      step  0     work of the contact between bodies on the grid velocities over the step, the
+                              kinetic energy its corrections changed (never > 0 but for round-off) [J]
 trips             step  0     detection trips recorded in this step
 positioned        step  0     1: P2G summed the node positions in this step
 removed           body  0     particles removed at open faces in this step
@@ -260,6 +262,8 @@ class StepReport:
     """per body: the largest |F^sn|_inf (walls-only Lagrangian scenes)"""
     contact_nodes: int = 0
     """body nodes whose bin was in contact in this step (mpm.contact)"""
+    contact_work: float = 0.0
+    """[J] the kinetic energy the contact between bodies changed in this step (mpm.contact; <= 0)"""
     positioned: bool = True
     """the node positions were available (False: not summed)"""
     regrid: list[int] = field(default_factory=list)
@@ -309,6 +313,7 @@ class StepReport:
             boundary_work=float(v["boundary_work"][0]), load_work=float(v["load_work"][0]),
             boundary_impulse=v["boundary_impulse"].copy(),
             load_position=v["load_position"].reshape(-1, dim).copy(), contact_nodes=int(v["contact_nodes"][0]),
+            contact_work=float(v["contact_work"][0]),
             removed=removed.astype(np.int64) if removed.any() else None,
             kinetic=float(v["kinetic"][0]) if energy else float("nan"),
             potential=float(v["potential"][0]) if energy else float("nan"),

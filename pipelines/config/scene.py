@@ -61,6 +61,21 @@ def body_ref(key: str, value, ctx: Context):
     return value if isinstance(value, str) else number(key, value, int, {"keyed": True, "ge": 0})
 
 
+def body_pair(key: str, value, ctx: Context):
+    """Two bodies, each an index or a name (checked against the scene's bodies later)."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ConfigError(key, f"{plain(value)}; accepted: two bodies, each an index or a name")
+    return [body_ref(f"{key}[{i}]", v, ctx) for i, v in enumerate(value)]
+
+
+@dataclass
+class ContactPairConfig:
+    """Two bodies and the Coulomb coefficient of their contact (scene.contact=friction)."""
+
+    bodies: List[Any] = setting([], "the two bodies: indices or names", parse=body_pair)
+    friction: float = setting(0.0, "Coulomb mu of their contact", ge=0.0)
+
+
 @dataclass
 class BodyConfig:
     """One body: a shape filled with particles of one material."""
@@ -252,10 +267,14 @@ class SceneConfig:
     particle_volume: str = setting("shape", "the particles' volumes: shape (a body's exact volume shared "
                                             "equally; its cells' where the shape has no closed form) or cells "
                                             "(dx^d / ppc each)", choices=PARTICLE_VOLUMES)
-    contact: str = setting("frictionless", "between bodies: frictionless, none, or shared (one grid; EMPM)",
-                           choices=CONTACT_TYPES)
+    contact: str = setting("frictionless", "between bodies: frictionless, friction (Coulomb: contact_friction, "
+                                           "contact_pairs), none, or shared (one grid; EMPM)", choices=CONTACT_TYPES)
     contact_fill: float = setting(0.5, "the node volume fraction the bodies must fill for contact",
                                   gt=0.0, le=1.0)
+    contact_friction: float = setting(0.0, "Coulomb mu between bodies (contact=friction): every pair's unless "
+                                           "contact_pairs names it", ge=0.0)
+    contact_pairs: List[ContactPairConfig] = setting([], "pairs of bodies with their own Coulomb mu "
+                                                         "(contact=friction): [{bodies: [a, b], friction: mu}]")
     bodies: List[BodyConfig] = setting([], "the bodies", nonempty="at least one body")
     regions: List[RegionConfig] = setting([], "kinematic boundary regions")
     loads: List[LoadConfig] = setting([], "external loads: point loads, tractions, body forces")
@@ -332,12 +351,24 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
     scene = mpm.Scene(dim=dim, domain=sc.domain, resolution=sc.resolution, bodies=bodies, gravity=sc.gravity,
                       walls=sc.walls, wall_cells=sc.wall_cells, ppc=sc.ppc, jitter=sc.jitter,
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
-                      contact_fill=sc.contact_fill,
+                      contact_fill=sc.contact_fill, contact_friction=sc.contact_friction,
+                      contact_pairs=[_pair(f"{key}.contact_pairs[{i}]", p, body_index)
+                                     for i, p in enumerate(sc.contact_pairs)],
                       regions=regions, particle_resolution=sc.particle_resolution,
                       colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)],
                       loads=[_load(f"{key}.loads[{i}]", ld, body_index, ctx) for i, ld in enumerate(sc.loads)])
     scene.solution = _solution(sc.solution, f"{key}.solution", scene)
     return scene, sc
+
+
+def _pair(key: str, p: ContactPairConfig, body_index) -> mpm.ContactPair:
+    """The contact pair of ``p``, its bodies as indices."""
+    if len(p.bodies) != 2:
+        raise ConfigError(f"{key}.bodies", f"{plain(p.bodies)}; accepted: two bodies, each an index or a name")
+    a, b = (body_index(f"{key}.bodies[{i}]", v) for i, v in enumerate(p.bodies))
+    if a == b:
+        raise ConfigError(f"{key}.bodies", f"{plain(p.bodies)}: one body twice; accepted: two different bodies")
+    return mpm.ContactPair(a, b, p.friction)
 
 
 def _load(key: str, ld: LoadConfig, body_index, ctx: Context) -> Load:

@@ -114,7 +114,7 @@ def memory_estimate(scene: mpm.Scene, kernel: mpm.Kernel, precision: str) -> tup
         particles += float(np.prod(np.maximum(hi - lo, 0.0) + scene.particle_dx)) / cell * (b.ppc or scene.ppc)
     per_particle = s * (3 * d + 4 * d * d + 8 + G * (d + 2 * d * K)) + 4 * (2 + G) + 8 * (4 * d + 2 * d * d)
     nodes = float(np.prod([c + 1 for c in scene.cells]))
-    contact = len(scene.bodies) if len(scene.bodies) > 1 and scene.contact == "frictionless" else 0
+    contact = len(scene.bodies) if len(scene.bodies) > 1 and scene.contact in ("frictionless", "friction") else 0
     per_node = s * ((1 + 2 * d) * 2 * G + (1 + d) * contact) + 8  # the grids; contact's M and P per body
     return particles * per_particle + nodes * per_node, particles, nodes
 

@@ -29,6 +29,7 @@ _UNITS = {
     "potential_energy": ("J", "J/m"), "total_energy": ("J", "J/m"),
     "momentum": ("kg m/s", "kg/s"), "angular_momentum": ("kg m²/s", "kg m/s"),
     "boundary_impulse": ("N s", "N s/m"),
+    "contact_work": ("J", "J/m"),
     "center_of_mass": ("m", "m"), "dt": ("s", "s"), "dt_fresh": ("s", "s"), "max_speed": ("m/s", "m/s"),
     "step_time_ms": ("ms", "ms"), "update_ms": ("ms", "ms"),
     "error/displacement": ("m", "m"), "error/velocity": ("m/s", "m/s"),

@@ -125,6 +125,7 @@ class Recorder(mpm.Observer):
         self.stretch_names = per_body("min_stretch")
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
+        self.contact_work = 0.0  # [J] the contact's work on the grid so far (mpm.contact; <= 0)
         self.metrics["sync_every"] = self.driver.k
         self.built = True
 
@@ -180,6 +181,7 @@ class Recorder(mpm.Observer):
         if report.removed is not None:
             self.record_removed(report)
         self.record_updates(report)
+        self.contact_work += report.contact_work
         row = self.loads.add(report) if self.loads is not None else None  # the step's start: load, load point
         if row and log.scalars:
             self.sink.scalars(max(report.step - 1, 0), report.time - report.dt, row)
@@ -270,6 +272,7 @@ class Recorder(mpm.Observer):
             extra.update({f"boundary_impulse_{a}": float(j) for a, j in zip("xyz", J)})
         if self.solver.contact is not None:  # body nodes in contact in this step (mpm.contact)
             extra["contact_nodes"] = float(report.contact_nodes)
+            extra["contact_work"] = self.contact_work  # [J] so far: the kinetic energy the contact took
         if self.solver.conditions.open:
             extra["removed"] = float(self.solver.removals.removed.sum())
         if (n := report.newton) is not None:
@@ -442,6 +445,8 @@ class Recorder(mpm.Observer):
         if self.scheme.name == "aulmpm":
             m.update(epsilon=self.scheme.epsilon, eta=self.scheme.eta, affine=self.scheme.affine)
         m["integrator"] = self.spec.integrator.name
+        if self.solver.contact is not None:  # [J] the kinetic energy the contact between bodies took (<= 0)
+            m["contact_work"] = self.contact_work
         if self.implicit:
             m["implicit"] = run_metrics.implicit_summary(self.spec.integrator, self.newton, self.driver.halved)
         m.update(self.drift.summary())

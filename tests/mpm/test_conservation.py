@@ -1,5 +1,7 @@
 """Conservation and closed-form motion of the Eulerian scheme."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -32,10 +34,16 @@ def colliding_scene(dim):
                      gravity=(0.0, 0.0, 0.0), walls=("open",) * 6, ppc=8, particle_volume="cells")
 
 
+@pytest.mark.parametrize("contact", ["frictionless", "friction"])
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_mass_momentum_angular_momentum_conserved(dim, precision, device):
+def test_mass_momentum_angular_momentum_conserved(dim, precision, contact, device):
+    """Mass, momentum and angular momentum of colliding bodies, with the
+    frictionless contact and with Coulomb friction (mu = 0.5: the tangential
+    impulses cancel at every lattice node as the normal ones do)."""
     scene = colliding_scene(dim)
+    if contact == "friction":
+        scene = dataclasses.replace(scene, contact="friction", contact_friction=0.5)
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], precision, device)
     solver = mpm.Solver(model)
     solver.prepare(state)

@@ -3,6 +3,8 @@ rule, evaluated bin by bin over the whole global lattice: the solver's
 passes run over the body nodes only and must give every node the same
 correction."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -46,7 +48,7 @@ def lattice_weights(q, inv_dx, cells, strides, gather):
     return np.stack(flats, 1), np.stack(weights, 1)
 
 
-def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass, fill, gather=False):
+def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass, fill, gather=False, mu=None):
     """The corrected node velocities, the nodes taking a correction from a
     lattice node in contact and the number of lattice nodes in contact with
     three or more bodies: M_bg = sum w_ig m_i / G, P_bg = sum w_ig m_i v_i /
@@ -54,7 +56,11 @@ def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass,
     or more bodies fill a node (sum M_bg / (rho_b dx^d) >= fill), dV_bg =
     -((v_b - v_cm) . n_b) n_b for a body approaching (> 0), less the
     mass-weighted mean correction with three or more; node i takes
-    sum_g w_ig dV_bg."""
+    sum_g w_ig dV_bg. ``mu`` (a table per pair of bodies): Coulomb friction,
+    dV_bg -= min(1, mu_b rel / |u_t|) u_t with u_t = (v_b - v_cm) - rel n_b
+    and mu_b the pair's (two bodies) or the mass-weighted mean over the
+    others present. Also returns the kinetic energy the correction changed,
+    sum_i (m_i / G) (|v_i'|^2 - |v_i|^2) / 2."""
     nb, n_global = len(rest_mass), int(np.prod(np.asarray(cells) + 1))
     live = m > 0
     g, w = lattice_weights(q, inv_dx, cells, strides, gather)
@@ -75,30 +81,49 @@ def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass,
         v_cm = P[present, gg].sum(0) / M[present, gg].sum()
         for b in present:
             n = outward(M, b, gg, present, cells, strides)
-            rel = (P[b, gg] / M[b, gg] - v_cm) @ n
+            u = P[b, gg] / M[b, gg] - v_cm
+            rel = u @ n
             if rel > 0:
                 dV[b, gg] = -rel * n
+                others = present[present != b]
+                if mu is not None and np.linalg.norm(u - rel * n) > 0:
+                    mu_b = (M[others, gg] * mu[b, others]).sum() / M[others, gg].sum()
+                    ut = u - rel * n
+                    dV[b, gg] -= min(1.0, mu_b * rel / np.linalg.norm(ut)) * ut
         if len(present) > 2:
             crowded += 1
             dV[present, gg] -= (M[present, gg, None] * dV[present, gg]).sum(0) / M[present, gg].sum()
     out = v.copy()
     for k in range(g.shape[1]):
         out[live] += w[live, k, None] * dV[body[live], g[live, k]]
-    return out, live & hit[g].any(axis=1), crowded
+    work = 0.5 * (m[live] / n_grids * ((out[live] ** 2).sum(1) - (v[live] ** 2).sum(1))).sum()
+    return out, live & hit[g].any(axis=1), crowded, work
 
 
+FRICTION = dict(contact="friction", contact_friction=0.6, contact_pairs=[mpm.ContactPair(0, 1, 0.25)])
+"""Coulomb friction between the three colliding bodies: 0.25 between the
+first two, 0.6 for the other pairs (a pair's own mu and the mass-weighted
+mean where three meet)."""
+
+
+@pytest.mark.parametrize("friction", [False, True], ids=["frictionless", "friction"])
 @pytest.mark.parametrize("scheme,kernel", [(mpm.EMPM(), "quadratic"), (mpm.TLMPM(), "quadratic"),
                                            (mpm.EMPM(), "compact"), (mpm.TLMPM(), "compact")],
                          ids=lambda x: getattr(x, "name", x))
-def test_contact_matches_the_lattice_rule(scheme, kernel):
-    """Three bodies of three materials collide (2D, float64): in every step,
+def test_contact_matches_the_lattice_rule(scheme, kernel, friction):
+    """Three bodies of three materials collide (2D, float64), frictionless
+    or with Coulomb friction: in every step,
     each node's corrected velocity equals the reference's (Eulerian nodes
     binned at their lattice node, Lagrangian ones spread, GATHER_PASSES
     times) to round-off, 16 eps
     of the largest (the two sum the bins in different orders; the old lattice-wide passes gave
     the solver's results bit for bit), the status counts the nodes of bins
-    in contact, and the lattice bins are all zero again after the step."""
+    in contact and the kinetic energy the contact changed (the reference's
+    to round-off of the energy's sum, never above it), and the lattice bins
+    are all zero again after the step."""
     scene = colliding_scene(2)
+    if friction:
+        scene = dataclasses.replace(scene, **FRICTION)
     model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64", DEVICE)
     solver = mpm.Solver(model, scheme)
     solver.prepare(state)
@@ -111,19 +136,27 @@ def test_contact_matches_the_lattice_rule(scheme, kernel):
     def checked():
         n = solver.layout.n_nodes
         m, v, q = (a.numpy()[:n].copy() for a in (solver.grid.m, solver.grid.v, solver.grid.q))
-        before = solver.buffer.read()["contact_nodes"][0]
+        read = solver.buffer.read()
+        before, work_before = read["contact_nodes"][0], read["contact_work"][0]
         resolve()
         offset = solver.layout.offset
         body = (np.searchsorted(offset, np.arange(n), side="right") - 1) // G
         gather = scheme.name != "empm"
-        args = (body, G, inv_dx, cells, strides, rest_mass, float(solver.contact.fill), gather)
-        want, in_contact, crowded = reference_contact(m, v, q, *args)
+        args = (body, G, inv_dx, cells, strides, rest_mass, float(solver.contact.fill), gather,
+                scene.friction_table() if friction else None)
+        want, in_contact, crowded, work = reference_contact(m, v, q, *args)
         for _ in range(contact.GATHER_PASSES - 1 if gather else 0):  # each from the last pass's velocities
-            want = reference_contact(m, want, q, *args)[0]
+            want, _, _, more = reference_contact(m, want, q, *args)
+            work += more
         got = solver.grid.v.numpy()[:n]
         scale = np.abs(v).max()
         np.testing.assert_allclose(got, want, rtol=0, atol=16 * np.finfo(np.float64).eps * scale)  # measured 1 eps
-        assert solver.buffer.read()["contact_nodes"][0] - before == in_contact.sum()
+        read = solver.buffer.read()
+        assert read["contact_nodes"][0] - before == in_contact.sum()
+        # the kinetic energy changed: sums of m |v|^2 over the nodes, round-off 64 eps of the energy's scale
+        energy = 0.5 * (m / G * (v**2).sum(1)).sum()
+        assert abs(read["contact_work"][0] - work_before - work) <= 64 * np.finfo(np.float64).eps * energy
+        assert work <= 64 * np.finfo(np.float64).eps * energy  # the contact never gains energy
         assert not solver.contact.M.numpy().any() and not solver.contact.P.numpy().any()
         seen.append((int(in_contact.sum()), int((np.abs(want - v) > 0).any(axis=1).sum()), crowded))
 
