@@ -5,7 +5,10 @@ Serves the recording (and its timings file) with ``rerun --serve-web`` on
 the loopback interface, opens the viewer in headless Chromium (software GL)
 and takes the screenshot through the DevTools protocol once the viewer has
 had ``--wait`` seconds to load (its wasm takes about a minute on two cores).
-Needs Chromium (``apt-get install chromium``) and ``aiohttp``.
+Needs Chromium (``apt-get install chromium``) and ``aiohttp`` (``pip install
+-e ".[screenshot]"``), both checked before anything starts. The server and
+the browser run in process groups of their own, ended on every way out
+(success, failure, Ctrl-C, SIGTERM): nothing is left running.
 """
 
 from __future__ import annotations
@@ -14,11 +17,15 @@ import argparse
 import asyncio
 import base64
 import json
+import importlib.util
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -49,7 +56,61 @@ def _wait_for(url: str, seconds: float) -> None:
             time.sleep(0.5)
 
 
-async def _capture(port: int, url: str, out: Path, wait: float) -> None:
+def requirements(chromium: str | None = None) -> tuple[str, list[str]]:
+    """The Chromium executable, and what is missing (one phrase each: what
+    to install); nothing is started."""
+    chromium = chromium or shutil.which("chromium") or shutil.which("chromium-browser") or ""
+    missing = [] if chromium else ["chromium (apt-get install chromium)"]
+    if importlib.util.find_spec("aiohttp") is None:
+        missing.append('aiohttp (pip install -e ".[screenshot]")')
+    return chromium, missing
+
+
+def _start(cmd: list[str]) -> subprocess.Popen:
+    """``cmd`` in a process group of its own (the group's id is its pid)."""
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+def _end(p: subprocess.Popen) -> None:
+    """End ``p``'s whole process group (a wrapper's children too, e.g. the
+    venv's ``rerun`` script and the viewer binary it starts): SIGTERM, then
+    SIGKILL to what is left after 5 s."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(p.pid, sig)
+        except ProcessLookupError:
+            break
+        end = time.monotonic() + 5.0
+        while group_members(p.pid) and time.monotonic() < end:
+            p.poll()  # reap the leader
+            time.sleep(0.05)
+        if not group_members(p.pid):
+            break
+    p.wait()
+
+
+def group_members(pgid: int) -> list[int]:
+    """The live (not zombie) processes of process group ``pgid`` (Linux:
+    from /proc; elsewhere [pgid] while the group exists)."""
+    if not os.path.isdir("/proc"):
+        try:
+            os.killpg(pgid, 0)
+            return [pgid]
+        except ProcessLookupError:
+            return []
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pgid and fields[0] != "Z":  # fields: state, ppid, pgrp, ...
+                out.append(int(entry))
+    return out
+
+
+async def _capture(port: int, url: str, out: Path, wait: float, size: tuple[int, int]) -> None:
     import aiohttp
 
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=5) as r:
@@ -67,41 +128,52 @@ async def _capture(port: int, url: str, out: Path, wait: float) -> None:
                         return data.get("result", {})
 
             await call("Page.enable")
+            # the page's size is the picture's (the window's would lose the browser's own frame)
+            await call("Emulation.setDeviceMetricsOverride", width=size[0], height=size[1], deviceScaleFactor=1,
+                       mobile=False)
             await call("Page.navigate", url=url)
             await asyncio.sleep(wait)
             shot = await call("Page.captureScreenshot", format="png")
             out.write_bytes(base64.b64decode(shot["data"]))
 
 
-def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900)) -> Path:
-    """``out``: the web viewer's picture of ``recording`` after ``wait`` seconds [s]."""
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    if chromium is None:
-        raise RuntimeError("no chromium here (apt-get install chromium)")
+def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900), chromium: str | None = None,
+               start_timeout: float = 60.0) -> Path:
+    """``out``: the web viewer's picture of ``recording`` after ``wait``
+    seconds [s], ``size`` pixels (width, height); the server and the browser
+    each get ``start_timeout`` seconds to answer."""
+    chromium, missing = requirements(chromium)
+    if missing:
+        raise RuntimeError(f"the screenshot needs {' and '.join(missing)}")
     web, grpc, devtools = _free_port(), _free_port(), _free_port()
     files = [str(recording)] + ([str(timings_path(recording))] if timings_path(recording).is_file() else [])
-    server = subprocess.Popen([rerun_executable(), "--serve-web", "--web-viewer-port", str(web), "--port", str(grpc),
-                               *files], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     profile = tempfile.mkdtemp(prefix="chromium-")
-    browser = None
+    started: list[subprocess.Popen] = []
+    previous = signal.getsignal(signal.SIGTERM)
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        signal.signal(signal.SIGTERM, _terminated)  # SIGTERM unwinds through the finally below
     try:
-        _wait_for(f"http://127.0.0.1:{web}/", 60)
+        started.append(_start([rerun_executable(), "--serve-web", "--web-viewer-port", str(web), "--port", str(grpc),
+                               *files]))
+        _wait_for(f"http://127.0.0.1:{web}/", start_timeout)
         url = f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
-        browser = subprocess.Popen([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
-                                    f"--window-size={size[0]},{size[1]}", f"--remote-debugging-port={devtools}",
-                                    "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        _wait_for(f"http://127.0.0.1:{devtools}/json/version", 60)
-        asyncio.run(_capture(devtools, url, Path(out), wait))
+        started.append(_start([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                               f"--window-size={size[0]},{size[1]}", f"--remote-debugging-port={devtools}",
+                               "about:blank"]))
+        _wait_for(f"http://127.0.0.1:{devtools}/json/version", start_timeout)
+        asyncio.run(_capture(devtools, url, Path(out), wait, size))
     finally:
-        for p in (browser, server):
-            if p is not None:
-                p.terminate()
-                try:
-                    p.wait(10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+        for p in reversed(started):
+            _end(p)
         shutil.rmtree(profile, ignore_errors=True)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     return Path(out)
+
+
+def _terminated(signum, frame):
+    raise SystemExit(128 + signum)
 
 
 def main(argv=None) -> int:
@@ -117,10 +189,24 @@ def main(argv=None) -> int:
         return 2
     try:
         w, h = (int(v) for v in args.size.split("x"))
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise ValueError
     except ValueError:
-        print(f"error: --size: {args.size!r}; accepted: WIDTHxHEIGHT in pixels, e.g. 1600x900", file=sys.stderr)
+        print(f"error: --size: {args.size!r}; accepted: WIDTHxHEIGHT in pixels (16 to 8192), e.g. 1600x900",
+              file=sys.stderr)
         return 2
-    print(screenshot(rec, args.out, args.wait, (w, h)))
+    if not (args.wait >= 0.0 and args.wait < float("inf")):
+        print(f"error: --wait: {args.wait}; accepted: a finite number of seconds >= 0", file=sys.stderr)
+        return 2
+    _, missing = requirements()
+    if missing:
+        print(f"error: the screenshot needs {' and '.join(missing)}", file=sys.stderr)
+        return 2
+    try:
+        print(screenshot(rec, args.out, args.wait, (w, h)))
+    except (OSError, RuntimeError) as e:
+        print(f"error: screenshot: {e}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,0 +1,65 @@
+"""A stand-in for Chromium in the screenshot tests: it answers the DevTools
+calls the screenshot makes (``/json/version``, ``/json/list`` and a page's
+WebSocket) and returns, for ``Page.captureScreenshot``, a PNG of the size
+``Emulation.setDeviceMetricsOverride`` set. It starts a child process of its
+own (``sleep``), as a browser does, so that a test sees whether the whole
+process group ends. ``FAKE_CHROMIUM=silent``: it never answers."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+
+
+def png(width: int, height: int) -> bytes:
+    import numpy as np
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.zeros((height, width, 3), np.uint8)).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def main() -> None:
+    port = next(int(a.split("=", 1)[1]) for a in sys.argv[1:] if a.startswith("--remote-debugging-port="))
+    subprocess.Popen(["sleep", "300"])  # a child, as the browser's renderer
+    if os.environ.get("FAKE_CHROMIUM") == "silent":
+        time.sleep(300)
+        return
+    from aiohttp import web
+
+    size = [800, 600]
+    ws_url = f"ws://127.0.0.1:{port}/devtools/page/1"
+
+    async def version(request):
+        return web.json_response({"Browser": "fake"})
+
+    async def pages(request):
+        return web.json_response([{"type": "page", "webSocketDebuggerUrl": ws_url}])
+
+    async def page(request):
+        ws = web.WebSocketResponse(max_msg_size=0)
+        await ws.prepare(request)
+        async for msg in ws:
+            call = json.loads(msg.data)
+            result = {}
+            if call["method"] == "Emulation.setDeviceMetricsOverride":
+                size[:] = [call["params"]["width"], call["params"]["height"]]
+            if call["method"] == "Page.captureScreenshot":
+                result = {"data": base64.b64encode(png(*size)).decode()}
+            await ws.send_str(json.dumps({"id": call["id"], "result": result}))
+        return ws
+
+    app = web.Application()
+    app.add_routes([web.get("/json/version", version), web.get("/json/list", pages),
+                    web.get("/devtools/page/1", page)])
+    web.run_app(app, host="127.0.0.1", port=port, print=None)
+
+
+if __name__ == "__main__":
+    main()

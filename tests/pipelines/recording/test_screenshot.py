@@ -1,0 +1,92 @@
+"""``python -m pipelines.recording.screenshot``: what it needs is checked
+before anything starts, the picture has the size asked for, and no process
+it started (the viewer's server, the browser, their children) outlives it,
+after success and after a failure. A stand-in browser
+(tests/pipelines/recording/fake_chromium.py) speaks the DevTools calls, so
+the tests run without Chromium; the server is Rerun's own."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun as rr
+from PIL import Image
+
+from pipelines.recording import screenshot as shot
+
+FAKE = Path(__file__).with_name("fake_chromium.py")
+
+
+@pytest.fixture
+def recording(tmp_path) -> Path:
+    path = tmp_path / "recording.rrd"
+    rec = rr.RecordingStream("screenshot_test")
+    rec.save(str(path))
+    rec.log("points", rr.Points2D(np.zeros((3, 2))))
+    rec.flush()
+    rec.disconnect()
+    return path
+
+
+@pytest.fixture
+def chromium(tmp_path, monkeypatch) -> Path:
+    """An executable that runs the stand-in browser with this Python."""
+    exe = tmp_path / "chromium"
+    exe.write_text(f"#!/bin/sh\nexec {sys.executable} {FAKE} \"$@\"\n")
+    exe.chmod(0o755)
+    return exe
+
+
+@pytest.fixture
+def groups(monkeypatch) -> list[subprocess.Popen]:
+    """The processes the screenshot starts (each leads a group of its own)."""
+    started, start = [], shot._start
+
+    def record(cmd):
+        p = start(cmd)
+        started.append(p)
+        return p
+
+    monkeypatch.setattr(shot, "_start", record)
+    return started
+
+
+def test_the_picture_has_the_size_asked_for_and_nothing_is_left(recording, chromium, groups, tmp_path):
+    out = shot.screenshot(recording, tmp_path / "out.png", wait=0.0, size=(640, 360), chromium=str(chromium))
+    assert Image.open(out).size == (640, 360)
+    assert len(groups) == 2  # the server, the browser
+    assert all(p.returncode is not None and shot.group_members(p.pid) == [] for p in groups)
+
+
+def test_a_failed_screenshot_leaves_no_process(recording, chromium, groups, tmp_path, monkeypatch):
+    """The browser never answers: the screenshot fails after its start
+    timeout, and the server, the browser and the browser's child are gone
+    (twice, so that a second use finds nothing of the first)."""
+    monkeypatch.setenv("FAKE_CHROMIUM", "silent")
+    for _ in range(2):
+        with pytest.raises(OSError):
+            shot.screenshot(recording, tmp_path / "out.png", wait=0.0, chromium=str(chromium), start_timeout=2.0)
+    assert len(groups) == 4
+    assert all(shot.group_members(p.pid) == [] for p in groups)
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_missing_requirements_stop_it_before_anything_starts(recording, monkeypatch, capsys):
+    monkeypatch.setattr(shot.shutil, "which", lambda name: None)
+    monkeypatch.setattr(shot, "_start", lambda cmd: pytest.fail(f"started {cmd}"))
+    assert shot.main([str(recording), "out.png"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: the screenshot needs chromium (apt-get install chromium)")
+
+
+@pytest.mark.parametrize("args,key", [(["--size", "1600"], "--size"), (["--size", "0x900"], "--size"),
+                                      (["--wait", "nan"], "--wait"), (["--wait", "-1"], "--wait")])
+def test_bad_arguments_are_one_line(recording, args, key, monkeypatch, capsys):
+    monkeypatch.setattr(shot, "_start", lambda cmd: pytest.fail(f"started {cmd}"))
+    assert shot.main([str(recording), "out.png", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: {key}: ") and "accepted: " in err
