@@ -20,7 +20,7 @@ import numpy as np
 import mpm
 from mpm import analytic
 
-from . import run_metrics
+from . import announce, run_metrics
 from .progress import Progress
 from .load_track import LoadTrack
 from .run_metrics import Drift, median, particle_fields, peak_rss_mb
@@ -357,31 +357,9 @@ class Recorder(mpm.Observer):
                             body=name, marked_fraction=float(frac), update_step=self.step, update_time=self.t)
 
     def announce_scheme(self) -> None:
-        s = self.scheme
-        if s.name == "empm":
-            text = ("empm: every body's reference configuration is updated at every step (s = n); "
-                    "the cumulative count is the scalar config_updates")
-        elif s.name == "tlmpm":
-            text = "tlmpm: the reference configuration is the initial one (s = 0), never updated"
-        else:
-            text = (f"aulmpm ({s.criterion} criterion): a body is updated when the fraction of its "
-                    f"particles with dJ >= {s.epsilon:g} reaches {s.eta:g}")
-            if s.criterion == "distortion":
-                text += (f", or a particle has dJ >= {max(s.dJ_max, s.epsilon):g} or a reference cell "
-                         f"is squeezed below {s.stretch_min:g} of its width")
-            text += f"; affine matrix: {s.affine}"
-        params = {k: v for k, v in vars(s).items() if isinstance(v, (int, float, str))}
-        self.sink.event(0, 0.0, text, scheme=s.name, **params)
-        if self.implicit:
-            i = self.spec.integrator
-            step = (f"fixed step {self.spec.run.dt:g} s" if self.spec.run.dt is not None else
-                    f"adaptive step: at most {i.displacement:g} cell per step, halved up to {i.halvings} "
-                    "times after a failed solve")
-            kind = ("the semi-implicit update (one Newton step)" if i.newton_max == 1 else
-                    f"Newton to {i.newton_tol:g} of the initial residual in at most {i.newton_max} iterations")
-            self.sink.event(0, 0.0, f"implicit: backward Euler, {kind}; CG to {i.cg_tol:g} in at most "
-                                    f"{i.cg_max} iterations; {step}",
-                            **{k: v for k, v in vars(i).items() if isinstance(v, (int, float, str))})
+        for text, params in announce.opening_events(self.scheme, self.spec.integrator if self.implicit else None,
+                                                    self.spec.run.dt):
+            self.sink.event(0, 0.0, text, **params)
 
     # ------------------------------------------------------------ fracture
     def log_fracture(self) -> np.ndarray:
