@@ -20,8 +20,8 @@ from .materials import (MATERIALS, NACC, FixedCorotated, Fluid, Material, NeoHoo
                         Viscoplastic, Viscous, VonMises, register_material)
 from .meshes import MeshShape
 from .model import Model, SceneError, State, build
-from .scene import (CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, ContactPair, Cylinder, KinematicRegion, Rotated,
-                    Scene, Sphere, rotation_matrix)
+from .scene import (CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, ContactPair, Cylinder,
+                    KinematicRegion, Rotated, Scene, Sphere, rotation_matrix)
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
 from .solver import Solver, SolverOptions
 from .stepping.detection import DETECTION_ACTIONS, Detection, Detector
@@ -36,6 +36,7 @@ __all__ = [
     "Scene", "Body", "Box", "Sphere", "Cylinder", "Bowl", "Compound", "MeshShape", "Rotated", "rotation_matrix",
     "KinematicRegion", "ContactPair",
     "Collider", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES", "CONTACT_TYPES",
+    "CONTACT_NORMALS",
     # materials
     "Material", "MATERIALS", "FixedCorotated", "NeoHookean", "Fluid", "Viscous", "Plastic", "Snow", "Sand",
     "VonMises", "NACC", "Viscoplastic", "register_material",

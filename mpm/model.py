@@ -18,7 +18,7 @@ from .materials import Material
 from .params import violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
-from .scene import CONTACT_TYPES, WALL_TYPES, Scene, skew
+from .scene import CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
 from .types import Types, make_types
 
 
@@ -190,6 +190,10 @@ def check_contact(scene: Scene) -> None:
         raise SceneError("contact_fill", f"{scene.contact_fill}; accepted: 0 < contact_fill <= 1")
     if not (np.isfinite(scene.contact_friction) and scene.contact_friction >= 0.0):
         raise SceneError("contact_friction", f"{scene.contact_friction}; accepted: a finite number >= 0")
+    if scene.contact_normal not in CONTACT_NORMALS:
+        raise SceneError("contact_normal", f"{scene.contact_normal!r}; accepted: {', '.join(CONTACT_NORMALS)}")
+    if not 0.0 <= scene.contact_share < 1.0:
+        raise SceneError("contact_share", f"{scene.contact_share}; accepted: 0 <= contact_share < 1")
     n = len(scene.bodies)
     for i, p in enumerate(scene.contact_pairs):
         if not (0 <= p.a < n and 0 <= p.b < n and p.a != p.b):

@@ -15,6 +15,13 @@ from .colliders import Collider
 from .materials import Material
 
 CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
+CONTACT_NORMALS = ("difference", "max_gradient")
+"""How a body's outward normal at a lattice node is taken (``Scene.contact_normal``):
+"difference", normalize(grad(M_others - M_b)), the bisector of the bodies'
+own normals; "max_gradient", the normal of the body present whose volume
+gradient |grad M_c| / (rho_c dx^d) is the largest (Nairn 2013, Comput.
+Model. Eng. Sci. 92, 271-299): a flat face keeps its own normal where the
+corner of another body rests on it."""
 """between bodies (Scene.contact): frictionless (mpm.contact), friction
 (Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
 (they pass through each other) or shared (EMPM only: one grid for all
@@ -313,6 +320,14 @@ class Scene:
     names it"""
     contact_pairs: list[ContactPair] = field(default_factory=list)
     """pairs of bodies with their own Coulomb coefficient (``contact="friction"``)"""
+    contact_normal: str = "difference"
+    """how the bodies' normals at a lattice node are taken (CONTACT_NORMALS): "difference"
+    (the bisector of the bodies' own normals) or "max_gradient" (the normal of the body with the largest
+    volume gradient there)"""
+    contact_share: float = 0.0
+    """the volume fraction a body must fill at a lattice node to take part in contact there (0: any mass);
+    above the fraction a stencil's fringe leaves beside a body (about 0.02), a body's side does not touch
+    a face it slides along"""
     regions: list[KinematicRegion] = field(default_factory=list)
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
     colliders: list[Collider] = field(default_factory=list)

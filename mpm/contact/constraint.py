@@ -21,10 +21,14 @@ left to the explicit pass after it.
 
 Coulomb friction between the bodies (``Scene.contact = "friction"``) acts
 after the solve, as the colliders' does (mpm.implicit.system
-``make_friction``): with the normal impulse lambda that the predictor's
-projection took (mode 0: body b's normal velocity change
-dn_b = lambda / (G M_bg)), the tangential velocity of body b relative to the
-bin's centre of mass, u_t, loses min(|u_t|, mu dn_b) (:func:`make_rub`).
+``make_friction``): with the constraint's whole normal impulse over the
+step, the reaction left in the residual at the solution,
+R = m (v - v*) + dt f = -c~ lambda at a constrained node (v* the predictor
+before its projection; mode 1 of :func:`make_projection` gives
+lambda = -B W R / (B W B^T), the stresses' share of the load included, which
+the predictor alone misses), body b's normal velocity change is
+dn_b = lambda / (G M_bg), and the tangential velocity of body b relative to
+the bin's centre of mass, u_t, loses min(|u_t|, mu dn_b) (:func:`make_rub`).
 M_a dn_a = M_c dn_c and M_a u_t,a = -M_c u_t,c, so momentum is kept; the
 energy taken goes into ``contact_work``.
 """
@@ -33,24 +37,24 @@ import functools
 
 import warp as wp
 
-from .lattice import make_bins, make_nearest, make_node_body, make_occupancy, make_outward
+from .lattice import make_bins, make_nearest, make_node_body, make_occupancy, make_outward, make_present
 from ..lattice import make_lattice
 from ..launch import warp_kernel
 from ..stepping.status import StepStatus
 from ..types import Types
 
 
-def make_contact_constraint(t: Types):
+def make_contact_constraint(t: Types, normal: str = "difference"):
     """Contact as constraints of the implicit solve (the module docstring):
     ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
     before its ``clear``: the node's active bin and c_i), ``sums`` and
     ``project`` (the W-orthogonal projection onto B v = 0,
     :func:`make_projection`)."""
-    return (make_couple(t), *make_projection(t))
+    return (make_couple(t, normal), *make_projection(t))
 
 
 @functools.cache
-def make_couple(t: Types):
+def make_couple(t: Types, normal: str = "difference"):
     """``couple``: a node's constraint, if its bin is active: exactly two
     bodies a < c fill it and approach on the predictor, (V_a - V_c) . n_a >
     0, with n_a = outward(a) and n_c = -n_a (every node of the bin finds the
@@ -60,8 +64,9 @@ def make_couple(t: Types):
     Bins = make_bins(t)
     nearest = make_nearest(t)
     node_body = make_node_body(t)
-    outward = make_outward(t)
+    outward = make_outward(t, normal)
     occupancy = make_occupancy(t)
+    present_at = make_present(t)
 
     @warp_kernel
     def couple(
@@ -78,7 +83,7 @@ def make_couple(t: Types):
         g = nearest(lat, lat.q[i])
         present, _m, _p, volume, a, c = occupancy(lat, bins, g)  # a, c: the first and second body present
         n_global = lat.n_global
-        if not (bins.M[b * n_global + g] > S(0.0)) or present != 2 or volume < bins.fill:
+        if not present_at(lat, bins, b, g) or present != 2 or volume < bins.fill:
             return
         n = outward(lat, bins, a, g)
         if wp.length(n) <= S(0.0):
@@ -95,17 +100,18 @@ def make_couple(t: Types):
 
 
 @functools.cache
-def make_rub(t: Types):
+def make_rub(t: Types, normal: str = "difference"):
     """``rub``: Coulomb friction on the solved velocities of a constrained
     node (the module docstring), between ``bin`` (the solution binned) and
-    ``unbin``; ``num`` and ``den`` the predictor's projection sums per bin
-    (lambda = num / den)."""
+    ``unbin``; ``num`` and ``den`` the projection sums (mode 1) of the
+    residual at the solution per bin (lambda = -num / den)."""
     S = t.scalar
     Lattice = make_lattice(t)
     Bins = make_bins(t)
     node_body = make_node_body(t)
-    outward = make_outward(t)
+    outward = make_outward(t, normal)
     occupancy = make_occupancy(t)
+    present_at = make_present(t)
 
     @warp_kernel
     def rub(lat: Lattice, bins: Bins, cbin: wp.array(dtype=wp.int32), num: wp.array(dtype=S),
@@ -118,12 +124,12 @@ def make_rub(t: Types):
         present, m_tot, p_tot, _volume, a, c = occupancy(lat, bins, g)
         n_global = lat.n_global
         m_b = bins.M[b * n_global + g]
-        if present != 2 or not (m_b > S(0.0)):
+        if present != 2 or not present_at(lat, bins, b, g):
             return
         n = outward(lat, bins, a, g)  # as make_couple's
         if b != a:
             n = -n
-        dn = (num[g] / den[g]) / (S(lat.n_grids) * m_b)  # the normal velocity change the constraint gave b
+        dn = -(num[g] / den[g]) / (S(lat.n_grids) * m_b)  # the normal velocity change the constraint gave b
         u = bins.P[b * n_global + g] / m_b - p_tot / m_tot
         ut = u - wp.dot(u, n) * n
         lt = wp.length(ut)

@@ -9,6 +9,7 @@ import functools
 import warp as wp
 
 from ..lattice import make_lattice
+from ..scene import CONTACT_NORMALS
 from ..stencil import make_node_box
 from ..types import Types
 
@@ -26,6 +27,7 @@ def make_bins(t: Types):
         P: wp.array(dtype=t.vec)  # [kg m/s]
         rest_mass: wp.array(dtype=S)  # per body: rho_b dx^d [kg]
         fill: S  # the volume fraction of a lattice node in contact
+        share: S  # the volume fraction a body must fill at a lattice node to be present there
         mu: wp.array(dtype=S)  # Coulomb mu between bodies a and b at a * n_bodies + b (friction; else unused)
 
     return Bins
@@ -117,21 +119,40 @@ def make_node_body(t: Types):
 
 
 @functools.cache
-def make_outward(t: Types):
-    """``outward(lat, bins, b, g) -> n_b``: body b's unit outward normal at
-    global node g, normalize(grad(M_others - M_b)) by central differences
-    (one-sided at the lattice edge), M_others the bodies present at g; 0
-    where the gradient vanishes."""
+def make_present(t: Types):
+    """``present_at(lat, bins, c, g) -> bool``: body c is present at global
+    node g, M_cg > share rho_c dx^d (``Bins.share``: 0, any mass; above
+    it, the fringe of a stencil reaching a node beside the body is not)."""
     S = t.scalar
-    vec = t.vec
     Lattice = make_lattice(t)
     Bins = make_bins(t)
 
     @wp.func
-    def outward(lat: Lattice, bins: Bins, b: int, g: int):
+    def present_at(lat: Lattice, bins: Bins, c: int, g: int):
+        return bins.M[c * lat.n_global + g] > bins.share * bins.rest_mass[c]
+
+    return present_at
+
+
+@functools.cache
+def make_outward(t: Types, normal: str = "difference"):
+    """``outward(lat, bins, b, g) -> n_b``: body b's unit outward normal at
+    global node g (mpm.scene.CONTACT_NORMALS), gradients by central differences
+    (one-sided at the lattice edge) over the bodies present at g; 0 where
+    the gradient vanishes."""
+    S = t.scalar
+    vec = t.vec
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    if normal not in CONTACT_NORMALS:
+        raise ValueError(f"contact normal {normal!r}; accepted: {', '.join(CONTACT_NORMALS)}")
+    present_at = make_present(t)
+
+    @wp.func
+    def gradient(lat: Lattice, bins: Bins, c: int, g: int):
+        """grad M_c at g (central differences, one-sided at the lattice edge) [kg / lattice spacing]."""
         n = vec()
         rest = g
-        n_global = lat.n_global
         for d in range(wp.static(t.dim)):
             idx = rest // lat.strides[d]
             rest -= idx * lat.strides[d]
@@ -141,12 +162,41 @@ def make_outward(t: Types):
                 minus = g
             if idx == lat.cells[d]:
                 plus = g
-            grad_b = bins.M[b * n_global + plus] - bins.M[b * n_global + minus]
-            grad_tot = S(0.0)  # over the bodies present at g
+            n[d] = bins.M[c * lat.n_global + plus] - bins.M[c * lat.n_global + minus]
+        return n
+
+    @wp.func
+    def outward(lat: Lattice, bins: Bins, b: int, g: int):
+        n = vec()
+        n_global = lat.n_global
+        if wp.static(normal == "max_gradient"):
+            best = S(-1.0)
             for c in range(lat.n_bodies):
-                if bins.M[c * n_global + g] > S(0.0):
-                    grad_tot += bins.M[c * n_global + plus] - bins.M[c * n_global + minus]
-            n[d] = grad_tot - S(2.0) * grad_b  # grad(M_others) - grad(M_b)
+                if present_at(lat, bins, c, g):
+                    grad = gradient(lat, bins, c, g)
+                    size = wp.length(grad) / bins.rest_mass[c]
+                    if size > best:
+                        best = size
+                        n = grad  # into body c: body b's outward normal, unless c is b
+                        if c == b:
+                            n = -grad
+        else:
+            rest = g
+            for d in range(wp.static(t.dim)):
+                idx = rest // lat.strides[d]
+                rest -= idx * lat.strides[d]
+                minus = g - lat.strides[d]
+                plus = g + lat.strides[d]
+                if idx == 0:
+                    minus = g
+                if idx == lat.cells[d]:
+                    plus = g
+                grad_b = bins.M[b * n_global + plus] - bins.M[b * n_global + minus]
+                grad_tot = S(0.0)  # over the bodies present at g
+                for c in range(lat.n_bodies):
+                    if present_at(lat, bins, c, g):
+                        grad_tot += bins.M[c * n_global + plus] - bins.M[c * n_global + minus]
+                n[d] = grad_tot - S(2.0) * grad_b  # grad(M_others) - grad(M_b)
         length = wp.length(n)
         if length > S(0.0):
             n = n / length
@@ -164,6 +214,7 @@ def make_occupancy(t: Types):
     S = t.scalar
     Lattice = make_lattice(t)
     Bins = make_bins(t)
+    present_at = make_present(t)
 
     @wp.func
     def occupancy(lat: Lattice, bins: Bins, g: int):
@@ -175,7 +226,7 @@ def make_occupancy(t: Types):
         c = int(-1)
         for b in range(lat.n_bodies):
             m = bins.M[b * lat.n_global + g]
-            if m > S(0.0):
+            if present_at(lat, bins, b, g):
                 present += 1
                 m_tot += m
                 p_tot += bins.P[b * lat.n_global + g]

@@ -25,10 +25,13 @@ Bodies are in contact at a global node where two or more are present and
 their volume fractions fill it: sum_b M_bg / (rho_b dx^d) >= ``fill``
 (rho_b the body's rest density). Without this test a node would register
 contact as soon as the faint fringes of two stencils overlap, bodies several
-cells apart. There, body b's outward normal is
+cells apart. A body is present at g where M_bg > share rho_b dx^d
+(``Scene.contact_share``, 0 by default: any mass). There, body b's outward
+normal is (``Scene.contact_normal``, mpm.contact.lattice ``make_outward``)
     n_b = normalize(grad (M_others - M_b)),   M_others = sum of the other
 bodies present at that node (central differences), which for two bodies is
-the common normal, n_a = -n_b. With the
+the common normal, n_a = -n_b ("difference"), or the normal of the body
+present with the largest grad M_c / (rho_c dx^d) ("max_gradient"). With the
 centre-of-mass velocity v_cm = sum P / sum M, a body approaching the others,
 (v_b - v_cm) . n_b > 0, loses that normal component:
     dV_bg = -((v_b - v_cm) . n_b) n_b,
@@ -62,7 +65,7 @@ import numpy as np
 import warp as wp
 
 from .constraint import make_contact_constraint, make_rub
-from .lattice import make_bins, make_lattice_point, make_node_body, make_occupancy, make_outward
+from .lattice import make_bins, make_lattice_point, make_node_body, make_occupancy, make_outward, make_present
 from ..lattice import make_lattice, make_node_mass
 from ..launch import warp_kernel
 from ..stepping.status import StepControl, StepStatus
@@ -79,7 +82,7 @@ GATHER_PASSES = 2
 
 
 @functools.cache
-def make_bin_dv(t: Types, friction: bool = False):
+def make_bin_dv(t: Types, friction: bool = False, normal: str = "difference"):
     """``bin_dv(lat, bins, b, g) -> (dV_bg, in contact)``: body b's
     correction at lattice node g (the module docstring), and whether g is
     in contact. ``friction``: Coulomb friction on the tangential part (the
@@ -88,8 +91,9 @@ def make_bin_dv(t: Types, friction: bool = False):
     vec = t.vec
     Lattice = make_lattice(t)
     Bins = make_bins(t)
-    outward = make_outward(t)
+    outward = make_outward(t, normal)
     occupancy = make_occupancy(t)
+    present_at = make_present(t)
 
     @wp.func
     def correction(lat: Lattice, bins: Bins, b: int, g: int, v_cm: t.vec, mu: S):
@@ -120,7 +124,7 @@ def make_bin_dv(t: Types, friction: bool = False):
         num = S(0.0)
         for c in range(lat.n_bodies):
             m_c = bins.M[c * lat.n_global + g]
-            if c != b and m_c > S(0.0):
+            if c != b and present_at(lat, bins, c, g):
                 num += m_c * bins.mu[b * lat.n_bodies + c]
         return num / (m_tot - bins.M[b * lat.n_global + g])
 
@@ -128,8 +132,8 @@ def make_bin_dv(t: Types, friction: bool = False):
     def bin_dv(lat: Lattice, bins: Bins, b: int, g: int):
         dv = vec()
         present, m_tot, p_tot, volume, a, c = occupancy(lat, bins, g)
-        # (a node whose own share is not > 0 - a non-finite mass - takes nothing)
-        if not (bins.M[b * lat.n_global + g] > S(0.0)) or present < 2 or volume < bins.fill:
+        # (a body not present at g - a fringe, or a non-finite mass - takes nothing)
+        if not present_at(lat, bins, b, g) or present < 2 or volume < bins.fill:
             return dv, False
         v_cm = p_tot / m_tot
         mu = S(0.0)
@@ -142,7 +146,7 @@ def make_bin_dv(t: Types, friction: bool = False):
             # three or more: the mean correction sum_c M_cg dV_cg / sum_c M_cg is taken off every body
             dp_sum = vec()
             for k in range(lat.n_bodies):
-                if bins.M[k * lat.n_global + g] > S(0.0):
+                if present_at(lat, bins, k, g):
                     if wp.static(friction):
                         mu = friction_of(lat, bins, k, g, m_tot)
                     dv_k, dp_k, hit_k = correction(lat, bins, k, g, v_cm, mu)
@@ -157,7 +161,8 @@ def make_bin_dv(t: Types, friction: bool = False):
 
 
 @functools.cache
-def make_contact(t: Types, batched: bool = False, gather: bool = False, friction: bool = False):
+def make_contact(t: Types, batched: bool = False, gather: bool = False, friction: bool = False,
+                 normal: str = "difference"):
     """The three contact passes, each over the body nodes (never over the
     whole lattice, which a scene of small bodies in a large domain would pay
     for every step): ``splat`` bins the nodes, ``correct`` gives each node
@@ -168,7 +173,8 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
     nodes around it and takes back their corrections with the same weights
     (the module docstring) instead of being binned at the nearest one.
     ``batched``: nothing in a step the driver skips (``control.skip``).
-    ``friction``: Coulomb friction between the bodies (:func:`make_bin_dv`)."""
+    ``friction``: Coulomb friction between the bodies (:func:`make_bin_dv`);
+    ``normal``: the rule of the bodies' normals (mpm.CONTACT_NORMALS)."""
     S = t.scalar
     vec = t.vec
     Lattice = make_lattice(t)
@@ -176,7 +182,7 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
     node_mass = make_node_mass(t, batched)
     node_body = make_node_body(t)
     lattice_point = make_lattice_point(t, gather)
-    bin_dv = make_bin_dv(t, friction)
+    bin_dv = make_bin_dv(t, friction, normal)
     n_points = 2**t.dim if gather else 1  # the lattice nodes a body node is put on
 
     @warp_kernel
@@ -251,12 +257,14 @@ class Contact:
         self.model, self.launch, self.control = model, launch, control
         mu = model.scene.friction_table() if model.scene.contact == "friction" else np.zeros((1, 1))
         self.friction = bool(mu.max() > 0.0)
-        self.splat, self.correct, self.clear = make_contact(t, batched, gather=lagrangian, friction=self.friction)
+        normal = model.scene.contact_normal
+        self.splat, self.correct, self.clear = make_contact(t, batched, gather=lagrangian, friction=self.friction,
+                                                            normal=normal)
         self.passes = GATHER_PASSES if lagrangian else 1
         # the implicit solve's constraints bin every node to one lattice node (disjoint rows)
         self.bin, _, self.unbin = make_contact(t, batched) if implicit else (None, None, None)
-        self.constraint = make_contact_constraint(t) if implicit else ()
-        self._rub = make_rub(t) if implicit and self.friction else None
+        self.constraint = make_contact_constraint(t, normal) if implicit else ()
+        self._rub = make_rub(t, normal) if implicit and self.friction else None
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
         self.fill = t.scalar(model.scene.contact_fill)
@@ -269,6 +277,7 @@ class Contact:
         self.bins = make_bins(t)()
         self.bins.M, self.bins.P, self.bins.rest_mass, self.bins.fill = self.M, self.P, self.rest_mass, self.fill
         self.bins.mu = self.mu
+        self.bins.share = t.scalar(model.scene.contact_share)
 
     def kernels(self) -> list:
         return list(dict.fromkeys([self.splat, self.correct, self.clear, *self.constraint]
@@ -296,8 +305,9 @@ class Contact:
 
     def rub(self, grid, layout, cbin, num, den, status) -> None:
         """Coulomb friction on the implicit solve's velocities at its
-        constrained nodes, from the predictor's projection sums ``num`` and
-        ``den`` (mpm.contact.constraint ``make_rub``); nothing without friction."""
+        constrained nodes, from the projection sums ``num`` and ``den`` of the
+        residual at the solution (mpm.contact.constraint ``make_rub``);
+        nothing without friction."""
         if self._rub is None:
             return
         args = [grid.lattice, self.bins]

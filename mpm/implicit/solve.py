@@ -106,8 +106,6 @@ class ImplicitSolve:
             if self.contact is not None:
                 self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
-                k = m.n_nodes if self.contact.friction else 1  # the predictor's sums, for the friction after
-                self.contact_lam = (wp.zeros(k, dtype=t.scalar), wp.zeros(k, dtype=t.scalar))
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
             self.visc = wp.zeros(m.n_particles if self.viscous else 1, dtype=t.scalar)
             self.acc = wp.zeros(6, dtype=wp.float64)
@@ -260,9 +258,6 @@ class ImplicitSolve:
         if self.contact is not None:
             self._activate()
             self._project(0, s.grid.v)
-            if self.contact.friction:
-                wp.copy(self.contact_lam[0], self.contact_num)  # per bin of the global lattice
-                wp.copy(self.contact_lam[1], self.contact_den)
 
     def finish(self) -> None:
         """The constraints' work (:func:`make_boundary_work`), then Coulomb
@@ -275,7 +270,8 @@ class ImplicitSolve:
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, s.buffer.status])
         if self.contact is not None:  # friction between bodies (mpm.contact.constraint make_rub)
-            self.contact.rub(s.grid, s.layout, self.cbin, *self.contact_lam, s.buffer.status)
+            # (the last residual evaluation, at the solution, left the sums of its reaction in contact_num, _den)
+            self.contact.rub(s.grid, s.layout, self.cbin, self.contact_num, self.contact_den, s.buffer.status)
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,

@@ -19,7 +19,7 @@ import mpm
 from mpm.loads import LOAD_KINDS, Load
 from mpm.materials import Material
 from mpm.sampling import PARTICLE_VOLUMES
-from mpm.scene import CONTACT_TYPES, WALL_TYPES
+from mpm.scene import CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
 from .colliders import ColliderConfig, COLLIDERS
 from .fields import ConfigError, Context, Family, check, choice, number, plain, setting, vector
@@ -275,6 +275,11 @@ class SceneConfig:
                                            "contact_pairs names it", ge=0.0)
     contact_pairs: List[ContactPairConfig] = setting([], "pairs of bodies with their own Coulomb mu "
                                                          "(contact=friction): [{bodies: [a, b], friction: mu}]")
+    contact_normal: str = setting("difference", "the bodies' normals at a contact node: difference (the bisector "
+                                                "of their own) or max_gradient (the body with the largest volume "
+                                                "gradient's)", choices=CONTACT_NORMALS)
+    contact_share: float = setting(0.0, "the node volume fraction a body must fill there to take part in "
+                                        "contact (0: any mass; 0.1 leaves out a stencil's fringe)", ge=0.0, lt=1.0)
     bodies: List[BodyConfig] = setting([], "the bodies", nonempty="at least one body")
     regions: List[RegionConfig] = setting([], "kinematic boundary regions")
     loads: List[LoadConfig] = setting([], "external loads: point loads, tractions, body forces")
@@ -352,6 +357,7 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                       walls=sc.walls, wall_cells=sc.wall_cells, ppc=sc.ppc, jitter=sc.jitter,
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
                       contact_fill=sc.contact_fill, contact_friction=sc.contact_friction,
+                      contact_normal=sc.contact_normal, contact_share=sc.contact_share,
                       contact_pairs=[_pair(f"{key}.contact_pairs[{i}]", p, body_index)
                                      for i, p in enumerate(sc.contact_pairs)],
                       regions=regions, particle_resolution=sc.particle_resolution,

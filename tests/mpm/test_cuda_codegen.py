@@ -167,6 +167,8 @@ class Case:
     implicit: bool = False
     psd: bool = True
     contact: str = "frictionless"
+    contact_friction: float = 0.0  # mu between the bodies (contact="friction")
+    normal: str = "difference"  # the contact's normals (mpm.contact.lattice.NORMALS)
     regions: bool = False
     colliders: tuple[str, ...] = ()  # kinds
     friction: bool = False
@@ -225,7 +227,8 @@ def scene(case: Case, dim: int) -> mpm.Scene:
                  Load("traction", f, select=mpm.Box(c, (0.2,) * dim), normal=(1.0,) + (0.0,) * (dim - 1),
                       table=((0.0, 0.0), (0.1, 1.0), (0.2, 0.5)))]
     return mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, ppc=1, bodies=bodies,
-                     gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact, regions=regions,
+                     gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact,
+                     contact_friction=case.contact_friction, contact_normal=case.normal, regions=regions,
                      colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads)
 
 
@@ -279,6 +282,13 @@ def cases(dim: int) -> list[Case]:
         Case(materials=two), Case(materials=two, fuse=True), Case(scheme="tlmpm", materials=two),
         Case(materials=two, contact="shared"), Case(scheme="tlmpm", materials=two, contact="none"),
         Case(scheme="tlmpm", materials=two, implicit=True), Case(materials=two, implicit=True),
+        # with Coulomb friction: explicit (binned and gathered), implicit, in batches; each normal rule
+        Case(materials=two, contact="friction", contact_friction=0.3, normal="max_gradient"),
+        Case(scheme="tlmpm", materials=two, contact="friction", contact_friction=0.3),
+        Case(scheme="tlmpm", materials=two, contact="friction", contact_friction=0.3, normal="max_gradient"),
+        Case(scheme="tlmpm", materials=two, implicit=True, contact="friction", contact_friction=0.3),
+        Case(materials=two, implicit=True, contact="friction", contact_friction=0.3, normal="max_gradient"),
+        Case(batched=True, materials=two, contact="friction", contact_friction=0.3),
         # kinematic regions
         Case(regions=True), Case(scheme="tlmpm", regions=True), Case(materials=two, regions=True),
         Case(scheme="tlmpm", regions=True, implicit=True),
@@ -388,6 +398,8 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return {1, 2}
     if name == "affine":  # C over a configuration update
         return set(mpm.schemes.AFFINE)
+    if name == "normal":  # the contact's normals
+        return set(mpm.CONTACT_NORMALS)
     if name == "kind":  # the scheme's update rule (mpm.schemes.rule_kind)
         return {"always", "never", "paper", "distortion"}
     if parameter.annotation in (bool, "bool") or isinstance(parameter.default, bool):
