@@ -1,23 +1,24 @@
-"""Slide an elastic block along an anchored elastic plate with Coulomb
-friction between the two bodies (``contact="friction"``) and compare its
-acceleration with the closed form.
+"""A block sliding, or a disk rolling, on an anchored elastic plate with
+Coulomb friction between the two bodies (``contact="friction"``), against
+the closed forms.
 
-    python examples/sliding_block.py [--scheme tlmpm] [--integrator explicit] [--friction 0.2]
+    python examples/incline.py [--body block] [--scheme tlmpm] [--integrator explicit] [--friction 0.2]
         [--angle 0] [--speed 0.5] [--resolution 64] [--normal max_gradient] [--share 0.1]
         [--duration 0.1] [--device cpu]
 
-A block (0.09375 m square, E = 2e5 Pa) starts at ``--speed`` on a plate
-(E = 2e6 Pa) whose bottom strip is held still, its top on a row of grid
-nodes. ``--angle`` theta tilts gravity (g = 9.81 m/s^2) by theta towards +x:
-the plate is a plane inclined at theta, in its own frame. While the block
-slides (v > 0) Coulomb friction gives it the acceleration
-a = g (sin theta - mu cos theta); it sticks when a < 0 has stopped it, and
-stays at rest from rest where tan theta <= mu. The script prints the
-block's mean velocity at ten instants, its travel, its acceleration while
-it slides (a line fitted to the samples from a quarter of the run on, until
-v falls below a quarter of the speed) and the closed form. A bad argument
-ends it with one line (``error: --option: value; accepted: ...``) and exit
-code 2.
+The body (a block 0.09375 m square, or a disk of that diameter; E = 2e5 Pa)
+starts at ``--speed`` on a plate (E = 2e6 Pa) whose bottom strip is held
+still, its top on a row of grid nodes. ``--angle`` theta tilts gravity
+(g = 9.81 m/s^2) by theta towards +x: the plate is a plane inclined at
+theta, in its own frame. While the block slides (v > 0) Coulomb friction
+gives it a = g (sin theta - mu cos theta); it sticks when a < 0 has stopped
+it, and stays at rest from rest where tan theta <= mu. A solid disk rolls
+without slipping at a = (2/3) g sin theta where mu >= tan(theta) / 3, and
+slips at g (sin theta - mu cos theta) below. The script prints the body's
+mean velocity at ten instants, its travel, its acceleration (a line fitted
+to the samples from a quarter of the run on, until v falls below a quarter
+of the speed) and the closed form. A bad argument ends it with one line
+(``error: --option: value; accepted: ...``) and exit code 2.
 """
 
 from __future__ import annotations
@@ -31,22 +32,24 @@ import mpm  # noqa: E402
 from _args import Parser, bounded, choice, device, integer, positive  # noqa: E402 (this folder)
 
 G = 9.81  # [m/s^2]
-SPEED = 0.5  # the block's initial velocity [m/s]
+SPEED = 0.5  # the body's initial velocity [m/s]
+BODIES = ("block", "disk")
 
 
 def slide(scheme: str = "tlmpm", integrator: str = "explicit", friction: float = 0.2, resolution: int = 64,
           normal: str = "max_gradient", share: float = 0.1, duration: float = 0.1, device: str = "cpu",
-          samples: int = 10, angle: float = 0.0, speed: float = SPEED) -> tuple[np.ndarray, ...]:
-    """The block's mean x velocity [m/s] and travel [m] at ``samples`` instants [s] of
-    ``duration``, gravity tilted by ``angle`` [deg], the block's initial
-    velocity ``speed`` [m/s]. The plate's top lies on node row 10 of a 1 m x 0.5 m domain
-    on a row of nodes at any ``resolution`` from 64 that is a multiple of 32; the
-    block is 0.09375 m square."""
-    top, half = 0.15625, 0.046875  # [m]: on a node row at a multiple of 32 cells across 1 m
+          samples: int = 10, angle: float = 0.0, speed: float = SPEED, body: str = "block") -> tuple[np.ndarray, ...]:
+    """The body's mean x velocity [m/s] and travel [m] at ``samples``
+    instants [s] of ``duration``, gravity tilted by ``angle`` [deg], the
+    body's initial velocity ``speed`` [m/s]. The domain is 1 m x 0.5 m; the
+    plate's top (y = 0.15625 m) lies on a row of nodes at any ``resolution``
+    from 64 that is a multiple of 32."""
+    top, half = 0.15625, 0.046875  # [m]
     plate = mpm.Box((0.5, top - 0.04), (0.45, 0.04))
+    centre = (0.25, top + half)
+    shape = mpm.Box(centre, (half, half)) if body == "block" else mpm.Sphere(centre, half)
     bodies = [mpm.Body(plate, mpm.FixedCorotated(E=2.0e6, nu=0.3), name="plate"),
-              mpm.Body(mpm.Box((0.25, top + half), (half, half)), mpm.FixedCorotated(E=2.0e5, nu=0.3), name="block",
-                       velocity=(speed, 0.0))]
+              mpm.Body(shape, mpm.FixedCorotated(E=2.0e5, nu=0.3), name=body, velocity=(speed, 0.0))]
     theta = np.radians(angle)
     scene = mpm.Scene(
         dim=2, domain=(1.0, 0.5), resolution=resolution, ppc=4, bodies=bodies,
@@ -71,11 +74,15 @@ def slide(scheme: str = "tlmpm", integrator: str = "explicit", friction: float =
     return np.array(t), np.array(v), np.array(travel)
 
 
-def expected(angle: float, friction: float, speed: float = SPEED) -> float:
-    """The block's acceleration [m/s^2] while it slides, g (sin theta -
-    mu cos theta); 0 for a block at rest that friction holds (tan theta <= mu)."""
+def expected(angle: float, friction: float, speed: float = SPEED, body: str = "block") -> float:
+    """The body's acceleration [m/s^2]: a block sliding, g (sin theta -
+    mu cos theta), or 0 at rest that friction holds (tan theta <= mu); a
+    solid disk, (2/3) g sin theta rolling (mu >= tan(theta) / 3), else
+    slipping as the block slides."""
     theta = np.radians(angle)
     a = G * (np.sin(theta) - friction * np.cos(theta))
+    if body == "disk" and friction >= np.tan(theta) / 3:
+        return float(2.0 / 3.0 * G * np.sin(theta))
     return 0.0 if speed == 0.0 and a <= 0.0 else float(a)
 
 
@@ -95,6 +102,7 @@ def acceleration(t: np.ndarray, v: np.ndarray, speed: float = SPEED) -> float:
 
 def main(argv=None) -> int:
     parser = Parser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    parser.add_argument("--body", type=choice(BODIES), default="block", help=", ".join(BODIES))
     parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="tlmpm", help=", ".join(mpm.SCHEMES))
     parser.add_argument("--integrator", type=choice(mpm.INTEGRATORS), default="explicit",
                         help=", ".join(mpm.INTEGRATORS))
@@ -109,12 +117,12 @@ def main(argv=None) -> int:
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     args = parser.parse_args(argv)
     t, v, travel = slide(args.scheme, args.integrator, args.friction, args.resolution, args.normal, args.share,
-                 args.duration, args.device, angle=args.angle, speed=args.speed)
+                 args.duration, args.device, angle=args.angle, speed=args.speed, body=args.body)
     print("t [s]:   " + " ".join(f"{x:7.3f}" for x in t))
     print("v [m/s]: " + " ".join(f"{x:7.4f}" for x in v))
     print(f"travel {travel[-1]:.3e} m ({travel[-1] * args.resolution:.4f} cells)")
     print(f"acceleration {acceleration(t, v, args.speed):.4f} m/s^2; "
-          f"g (sin theta - mu cos theta) = {expected(args.angle, args.friction, args.speed):.4f} m/s^2")
+          f"closed form {expected(args.angle, args.friction, args.speed, args.body):.4f} m/s^2")
     return 0
 
 
