@@ -15,6 +15,10 @@ from .colliders import Collider
 from .materials import Material
 
 CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
+"""between bodies (Scene.contact): frictionless (mpm.contact), friction
+(Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
+(they pass through each other) or shared (EMPM only: one grid for all
+bodies)"""
 CONTACT_NORMALS = ("difference", "max_gradient")
 """How a body's outward normal at a lattice node is taken (``Scene.contact_normal``):
 "difference", normalize(grad(M_others - M_b)), the bisector of the bodies'
@@ -22,10 +26,6 @@ own normals; "max_gradient", the normal of the body present whose volume
 gradient |grad M_c| / (rho_c dx^d) is the largest (Nairn 2013, Comput.
 Model. Eng. Sci. 92, 271-299): a flat face keeps its own normal where the
 corner of another body rests on it."""
-"""between bodies (Scene.contact): frictionless (mpm.contact), friction
-(Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
-(they pass through each other) or shared (EMPM only: one grid for all
-bodies)"""
 WALL_TYPES = ("sticky", "slip", "open")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
