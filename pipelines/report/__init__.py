@@ -66,11 +66,17 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
         assign_errors(jobs)
         style = label_styles(sorted({j.label for j in jobs}))
         documents: dict[str, list[str]] = {}  # markdown files of their own: the sections they hold
+        left_out = []  # sections without data in this sweep: their titles, named once at the end
         for section in load_sections():
             part = section(jobs=jobs, out=out, style=style, duplicates=duplicates)
-            if section.document is not None and part and not is_absent(part):
+            if part and is_absent(part):
+                left_out.append(part[0].removeprefix("## "))
+                continue
+            if section.document is not None and part:
                 documents.setdefault(section.document, []).extend(part)
             lines += part
+        if left_out:
+            lines += ["## Sections without data in this sweep", "", "; ".join(left_out) + ".", ""]
         for name, body in documents.items():
             title = Path(name).stem.replace("_", " ").capitalize()
             (out / name).write_text("\n".join([f"# {title}", ""] + body).rstrip() + "\n")

@@ -41,9 +41,13 @@ def positive(value: float | None) -> bool:
     return value is not None and math.isfinite(value) and value > 0
 
 
+NUMBER = re.compile(r"((?:(?<=[=,])-)?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)")
+
+
 def natural_key(text: str) -> list:
-    """Sort key that orders "2" before "10"."""
-    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", text)]
+    """Sort key that orders numbers by value: "2" before "10", "5e4" before
+    "1e5", "E=-1" before "E=0"."""
+    return [(0, float(t)) if i % 2 else (1, t) for i, t in enumerate(NUMBER.split(text))]
 
 
 def fmt(value, digits: int = 4) -> str:

@@ -1,5 +1,6 @@
 """Response: each measured quantity against each swept parameter (the
-report's first figure), a line per method; a log axis where the sweep is
+report's first figure), a line per method: the scene's physical responses
+(``scene.responses``) first, then the costs; a log axis where the sweep is
 geometric; response.csv."""
 
 from __future__ import annotations
@@ -26,6 +27,20 @@ RESPONSES = [
 SKIPPED = ("hydra", "log.", "run.force", "run.device", "run.progress")
 
 
+def scene_responses(jobs: list[Job]) -> list[tuple]:
+    """The physical responses the jobs' scenes declare (``scene.responses``,
+    metrics.json ``responses``), as :data:`RESPONSES` entries, by name."""
+    found: dict[str, str] = {}
+    for j in jobs:
+        for name, r in (j.metrics.get("responses") or {}).items():
+            found.setdefault(name, r.get("unit", ""))
+
+    def getter(name: str):
+        return lambda j: num(((j.metrics.get("responses") or {}).get(name) or {}).get("value"))
+
+    return [(name, f"{name.replace('_', ' ')}", unit, getter(name)) for name, unit in found.items()]
+
+
 def swept_parameters(jobs: list[Job]) -> dict[str, dict]:
     """Numeric overrides whose value varies across the jobs: key -> {job rel: value}."""
     keys = sorted({k for j in jobs for k in j.overrides if not k.startswith(SKIPPED)})
@@ -35,6 +50,21 @@ def swept_parameters(jobs: list[Job]) -> dict[str, dict]:
         if len(values) >= 2 and all(v is not None for v in values.values()) and len(set(values.values())) > 1:
             out[key] = values
     return out
+
+
+def concurrent(jobs: list[Job]) -> int:
+    """How many of ``jobs`` ran while another did: each job's wall-clock span
+    ends when its metrics.json was last written and lasted ``wall_time_s``."""
+    spans = []
+    for j in jobs:
+        wall = j.num("wall_time_s")
+        try:
+            end = (j.path / "metrics.json").stat().st_mtime
+        except OSError:
+            continue
+        if wall is not None:
+            spans.append((end - wall, end))
+    return sum(any(a < d and c < b for k, (c, d) in enumerate(spans) if k != i) for i, (a, b) in enumerate(spans))
 
 
 def line_label(j: Job, key: str) -> str:
@@ -49,8 +79,9 @@ def section_response(jobs: list[Job], out: Path, style: dict) -> list[str]:
     done = [j for j in jobs if j.completed]
     if not params or not done:
         return []
-    # a response with a value in some job and not zero in all (a plot with something to show)
-    responses = [r for r in RESPONSES if any(r[3](j) is not None for j in done)
+    # the scenes' physical responses first, then the costs; a response with a value in some job and
+    # not zero in all (a plot with something to show)
+    responses = [r for r in scene_responses(done) + RESPONSES if any(r[3](j) is not None for j in done)
                  and any(r[3](j) for j in done if r[3](j) is not None)]
     if not responses:
         return []
@@ -98,6 +129,11 @@ def section_response(jobs: list[Job], out: Path, style: dict) -> list[str]:
         lines += [f"Swept: `{key}` = {', '.join(f'{v:g}' for v in sorted(set(xs)))}"
                   + (" (geometric: log axis)" if log_x else "")
                   + ("; the resolution in cells across the domain" if key in RESOLUTION_KEYS else "") + ".", ""]
+    shared = concurrent(done)
+    if shared and any(r[0] == "step_time_ms" for r in responses):
+        lines += [f"{shared} of the {len(done)} jobs ran while another did (their wall-clock spans overlap): "
+                  "they shared the machine's cores, so their times per step are no benchmark "
+                  "(`hydra.launcher.n_jobs=1` runs one at a time).", ""]
     write_csv(out / "response.csv", ["parameter", "value", "line", "response", "response_value", "dir"], rows)
     lines += ["Every point in [response.csv](response.csv).", ""]
     lines += md_table(["parameter", "values", "lines"],

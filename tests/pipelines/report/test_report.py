@@ -3,6 +3,7 @@ sweep (no simulation)."""
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -227,3 +228,34 @@ def test_run_settings_that_change_the_method_split_labels(tmp_path):
     assign_labels(jobs)
     assert sorted(j.label for j in jobs) == ["empm · quadratic · mls · run.dt=1e-4",
                                              "empm · quadratic · mls · run.dt=2e-4"]
+
+
+def test_a_plain_sweep_sorts_by_value_and_leaves_out_what_it_lacks(tmp_path):
+    """``-m material.E=5e4,1e5,2e5`` (directories named by the overrides, as
+    Hydra names them): the per-job table orders E by value, not as text, the
+    sections of other experiments are left out of report.md, named once at
+    its end instead of one "Not available" section each, the scene's
+    physical responses are plotted against E beside the costs, and the report says
+    that the jobs ran at the same time (their 2 s wall-clock spans, ending
+    when metrics.json was written, overlap); once they are 10 s apart, not."""
+    sweep = tmp_path / "sweep"
+    for i, E in enumerate(("5e4", "1e5", "2e5")):
+        responses = {"peak_compression": {"value": 0.3 / (i + 1), "unit": "-"},
+                     "rebound_height": {"value": (0.2, 0.25, 0.3)[i], "unit": "m"}}
+        _job(sweep, f"material.E={E}", _metrics("empm", "quadratic", 16, config_hash=f"E{i}", responses=responses),
+             ["scheme=empm", f"material.E={E}"])
+    text = write_report(sweep, tmp_path / "out").read_text()
+    rows = _rows(tmp_path / "out" / "runs.csv")
+    assert [r["dir"] for r in rows] == ["material.E=5e4", "material.E=1e5", "material.E=2e5"]
+    # the scene's responses against E, by value, beside the costs
+    response = [r for r in _rows(tmp_path / "out" / "response.csv") if r["parameter"] == "material.E"]
+    rebound = [(float(r["value"]), float(r["response_value"])) for r in response if r["response"] == "rebound_height"]
+    assert rebound == [(5e4, 0.2), (1e5, 0.25), (2e5, 0.3)]
+    assert {r["response"] for r in response} >= {"peak_compression", "rebound_height", "step_time_ms"}
+    assert "Not available" not in text
+    tail = text.split("## Sections without data in this sweep", 1)[1]
+    assert "Cantilever under a tip load" in tail and "Stability maps: the largest stable time step" in tail
+    assert "3 of the 3 jobs ran while another did" in text
+    for i, d in enumerate(sorted(sweep.iterdir())):
+        os.utime(d / "metrics.json", (1e9 + 10 * i, 1e9 + 10 * i))
+    assert "ran while another did" not in write_report(sweep, tmp_path / "again").read_text()
