@@ -9,7 +9,7 @@ throughout (m, s, kg, Pa). :data:`__all__` is the public API; docs/library.md
 is its guide and docs/extending.md says how to add a material or a kernel.
 """
 
-from . import analytic
+from . import analytic, responses
 from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
 from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
@@ -20,6 +20,7 @@ from .materials import (MATERIALS, NACC, FixedCorotated, Fluid, Material, NeoHoo
                         Viscoplastic, Viscous, VonMises, register_material)
 from .meshes import MeshShape
 from .model import Model, SceneError, State, build
+from .responses import Response
 from .scene import (CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Body, Bowl, Box, Compound, ContactPair, Cylinder,
                     KinematicRegion, Rotated, Scene, Sphere, rotation_matrix)
 from .schemes import AULMPM, EMPM, SCHEMES, TLMPM
@@ -46,7 +47,7 @@ __all__ = [
     # building and stepping
     "build", "Model", "State", "SceneError", "Solver", "SolverOptions", "plan",
     "Driver", "StepPolicy", "Detection", "Detector", "DETECTION_ACTIONS", "Observer", "Event", "Outcome",
-    "StepReport", "cfl_dt",
+    "StepReport", "cfl_dt", "Response", "responses",
     # closed-form solutions
     "analytic",
 ]

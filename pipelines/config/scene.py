@@ -18,6 +18,7 @@ from omegaconf import MISSING, OmegaConf
 import mpm
 from mpm.loads import LOAD_KINDS, Load
 from mpm.materials import Material
+from mpm.responses import QUANTITIES, REDUCTIONS
 from mpm.sampling import PARTICLE_VOLUMES
 from mpm.scene import CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
@@ -74,6 +75,20 @@ class ContactPairConfig:
 
     bodies: List[Any] = setting([], "the two bodies: indices or names", parse=body_pair)
     friction: float = setting(0.0, "Coulomb mu of their contact", ge=0.0)
+
+
+@dataclass
+class ResponseConfig:
+    """A physical response the run measures (mpm.responses): ``quantity`` of
+    ``body``'s particles (null: every body's), reduced over the run by
+    ``reduce``; metrics.json ``responses`` and the sweep report's response plots."""
+
+    name: str = setting(MISSING, "the response's name (metrics.json, the sweep report)")
+    quantity: str = setting("center_y", "per state: " + "; ".join(f"{k}, {v}" for k, v in QUANTITIES.items()),
+                            choices=tuple(QUANTITIES))
+    body: Optional[Any] = setting(None, "a body's index or name; null: every body", parse=body_ref)
+    reduce: str = setting("max", "over the run: " + "; ".join(f"{k}, {v}" for k, v in REDUCTIONS.items()),
+                          choices=tuple(REDUCTIONS))
 
 
 @dataclass
@@ -280,6 +295,8 @@ class SceneConfig:
                                                 "gradient's)", choices=CONTACT_NORMALS)
     contact_share: float = setting(0.0, "the node volume fraction a body must fill there to take part in "
                                         "contact (0: any mass; 0.1 leaves out a stencil's fringe)", ge=0.0, lt=1.0)
+    responses: List[ResponseConfig] = setting([], "the physical responses the run measures (a ball's rebound, a "
+                                                    "front): [{name: ..., quantity: ..., body: ..., reduce: ...}]")
     bodies: List[BodyConfig] = setting([], "the bodies", nonempty="at least one body")
     regions: List[RegionConfig] = setting([], "kinematic boundary regions")
     loads: List[LoadConfig] = setting([], "external loads: point loads, tractions, body forces")
@@ -365,6 +382,24 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                       loads=[_load(f"{key}.loads[{i}]", ld, body_index, ctx) for i, ld in enumerate(sc.loads)])
     scene.solution = _solution(sc.solution, f"{key}.solution", scene)
     return scene, sc
+
+
+def make_responses(sc: SceneConfig, scene: mpm.Scene, key: str = "scene") -> list[mpm.Response]:
+    """The scene's responses (``sc.responses``), bodies as indices."""
+    names = [b.name for b in scene.bodies]
+    out, seen = [], set()
+    for i, r in enumerate(sc.responses):
+        rkey = f"{key}.responses[{i}]"
+        if not r.name or r.name in seen:
+            raise ConfigError(f"{rkey}.name", f"{r.name!r}; accepted: a name no other response has")
+        seen.add(r.name)
+        body = r.body
+        if isinstance(body, str):
+            body = names.index(choice(f"{rkey}.body", body, names))
+        elif body is not None:
+            body = number(f"{rkey}.body", body, int, {"keyed": True, "ge": 0, "le": len(names) - 1})
+        out.append(mpm.Response(r.name, r.quantity, body, r.reduce))
+    return out
 
 
 def _pair(key: str, p: ContactPairConfig, body_index) -> mpm.ContactPair:

@@ -24,7 +24,7 @@ from .fields import ConfigError, check, number, plain
 from .overrides import check_kinds, check_literals
 from .particles import check_particles
 from .physics import make_detect, make_integrator, make_material, make_scheme
-from .scene import make_scene
+from .scene import make_responses, make_scene
 from .schema import Config
 from .settings import KernelConfig, LogSettings, MapSpec, RunSettings
 
@@ -51,6 +51,7 @@ class RunSpec:
     material_used: bool = True  # some body takes the material group (else every body brings its own)
     # the particles the check sampled (mpm.model.sample_bodies), handed to mpm.build once (take_samples)
     samples: list | None = field(default=None, repr=False, compare=False)
+    responses: list = field(default_factory=list)  # mpm.Response: what the run measures (scene.responses)
 
     def take_samples(self) -> list | None:
         """The checked particles for ``mpm.build(..., samples=)``, released
@@ -236,7 +237,8 @@ def resolve(cfg) -> RunSpec:
     return RunSpec(scene=scene, scene_name=str(sc.name), scheme=scheme, kernel=mpm.KERNELS[kernel.name],
                    transfer=kernel.transfer, run=run, log=log, seed=seed, integrator=integrator, detect=detect,
                    stability_map=stability_map, flip=kernel.flip,
-                   material_used=any(b.material is None for b in sc.bodies))
+                   material_used=any(b.material is None for b in sc.bodies),
+                   responses=make_responses(sc, scene))
 
 
 def compose_spec(overrides: list[str]) -> RunSpec:

@@ -126,6 +126,7 @@ class Recorder(mpm.Observer):
         self.updates = np.zeros(len(bodies), np.int64)
         self.update_steps = 0  # steps at which at least one body was updated
         self.contact_work = 0.0  # [J] the contact's work on the grid so far (mpm.contact; <= 0)
+        self.responses = mpm.responses.Tracker(spec.responses, self.model) if spec.responses else None
         self.metrics["sync_every"] = self.driver.k
         self.built = True
 
@@ -160,6 +161,8 @@ class Recorder(mpm.Observer):
             self.particles()
             self._next_frame = 1.0 / log.fps
         self.log_fracture()
+        if self.responses is not None:
+            self.responses.update(self.state.x.numpy(), 0.0)
         self.announce_scheme()
         self.progress = Progress(*self.spec.end, log.progress)
         self.metrics["status"], self.metrics["reason"] = "running", ""
@@ -193,6 +196,8 @@ class Recorder(mpm.Observer):
             self.measure(self.row_extra(report, driver.current), report.diagnostics)
         if not driver.current:  # the device has moved on: the state is read at the batch's last step
             return
+        if self.responses is not None:
+            self.responses.update(self.state.x.numpy(), report.time)
         if log.particles and self.frame_due(last):
             self.particles()
             # the frame and this state's diagnostics (measured by the driver on the host at k = 1)
@@ -425,6 +430,10 @@ class Recorder(mpm.Observer):
         m["integrator"] = self.spec.integrator.name
         if self.solver.contact is not None:  # [J] the kinetic energy the contact between bodies took (<= 0)
             m["contact_work"] = self.contact_work
+        if self.responses is not None:  # the scene's physical responses (mpm.responses)
+            m["responses"] = {r.name: {"value": v if math.isfinite(v) else None, "unit": r.unit, "quantity": r.quantity, "reduce": r.reduce,
+                                       "body": "all" if r.body is None else self.spec.scene.bodies[r.body].name}
+                              for r, v in zip(self.responses.responses, self.responses.values().values())}
         if self.implicit:
             m["implicit"] = run_metrics.implicit_summary(self.spec.integrator, self.newton, self.driver.halved)
         m.update(self.drift.summary())

@@ -109,6 +109,11 @@ BAD_INPUTS = [
     (["scene.contact_normal=up"], "scene.contact_normal: 'up' unknown; accepted: difference, max_gradient"),
     (["scene.contact_share=1"],
      "scene.contact_share: 1.0 out of range; accepted: scene.contact_share >= 0.0, scene.contact_share < 1.0"),
+    (["scene.responses.0.quantity=mass"], "scene.responses[0].quantity: 'mass' unknown; accepted: bottom, top, "
+                                          "height, width, front, back, center_x, center_y"),
+    (["scene.responses.1.name=peak_compression"],
+     "scene.responses[1].name: 'peak_compression'; accepted: a name no other response has"),
+    (["scene.responses.0.body=cup"], "scene.responses[0].body: 'cup' unknown; accepted: ball"),
     (["scene.size=huge"], "scene.size: 'huge' unknown for scene elastic_ball_2d; accepted: default, paper"),
     (["scene.bodies.0.velocity=[nan,0]"], "scene.bodies[0].velocity[0]: nan is not finite"),
     (["scene.bodies.0.shape.type=cone"], "scene.bodies[0].shape.type: 'cone' unknown; accepted: box, sphere,"),

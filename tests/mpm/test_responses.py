@@ -1,0 +1,74 @@
+"""A run's physical responses (mpm.responses): each quantity and reduction
+against values worked out by hand, and a disc in free fall followed by a
+tracker: its centre's lowest point y0 - g t^2 / 2."""
+
+import numpy as np
+import pytest
+
+import mpm
+from mpm.responses import QUANTITIES, REDUCTIONS, Response, Tracker, quantity, reduce
+
+
+class _Model:
+    """The two fields a tracker reads: the particles' masses and each body's (start, count)."""
+
+    def __init__(self, mass, ranges):
+        self.mass = type("A", (), {"numpy": lambda self, m=np.asarray(mass, float): m})()
+        self.body_ranges = ranges
+
+
+X = np.array([[0.1, 0.5], [0.3, 0.2], [0.2, 0.9], [2.0, 2.0]])
+M = np.array([1.0, 1.0, 2.0, 5.0])
+
+
+@pytest.mark.parametrize("name,want", [("bottom", 0.2), ("top", 0.9), ("height", 0.7), ("width", 0.2),
+                                       ("front", 0.3), ("back", 0.1), ("center_x", 0.2), ("center_y", 0.625)])
+def test_each_quantity(name, want):
+    # the first three particles: centre x = (0.1 + 0.3 + 2 * 0.2) / 4, y = (0.5 + 0.2 + 1.8) / 4
+    assert quantity(name, X[:3], M[:3]) == pytest.approx(want)
+
+
+def test_the_lists_name_every_quantity_and_reduction():
+    for name in QUANTITIES:
+        quantity(name, X, M)
+    values = np.array([1.0, 0.4, 0.7, 0.6])
+    got = {k: reduce(k, values) for k in REDUCTIONS}
+    assert got == pytest.approx({"min": 0.4, "max": 1.0, "final": 0.6, "max_after_min": 0.7, "drop": 0.6})
+    assert np.isnan(reduce("max", np.array([])))
+
+
+def test_a_tracker_follows_one_body_or_all():
+    model = _Model(M, [(0, 3), (3, 1)])
+    tracker = Tracker([Response("low", "bottom", 0, "min"), Response("all_front", "front", None, "final")], model)
+    tracker.update(X, 0.0)
+    tracker.update(X - [0.0, 0.1], 0.1)
+    assert tracker.values() == pytest.approx({"low": 0.1, "all_front": 2.0})
+    with pytest.raises(ValueError, match="body 2"):
+        Tracker([Response("x", "top", 2)], model)
+    with pytest.raises(ValueError, match="a name twice"):
+        Tracker([Response("x", "top"), Response("x", "bottom")], model)
+    with pytest.raises(ValueError, match="quantity 'mass'"):
+        Response("x", "mass")
+
+
+def test_a_falling_disc_lowest_centre(device):
+    """The disc's centre falls freely for 0.1 s (no wall reached): its
+    lowest value is the last, y0 - g t^2 / 2 within symplectic Euler's g dt t."""
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, gravity=(0.0, -9.81),
+                      bodies=[mpm.Body(mpm.Sphere((0.5, 0.6), 0.1), mpm.NeoHookean(E=1.0e5, nu=0.3))])
+    model, state = mpm.build(scene, mpm.QUADRATIC, "float64", device)
+    tracker = Tracker([Response("lowest", "center_y", 0, "min")], model)
+
+    class Follow(mpm.Observer):
+        def on_start(self, driver):
+            tracker.update(driver.state.x.numpy(), driver.time)
+
+        def on_step(self, driver, report):
+            tracker.update(driver.state.x.numpy(), driver.time)
+
+    driver = mpm.Driver(mpm.Solver(model, mpm.TLMPM()), state, mpm.StepPolicy(duration=0.1), observers=[Follow()])
+    driver.run()
+    y0 = tracker.series[0][0][1]
+    assert y0 == pytest.approx(0.6, abs=0.5 / 32)  # the sampled disc's centre, within half a cell
+    dt = max(driver.dts)
+    assert tracker.values()["lowest"] == pytest.approx(y0 - 0.5 * 9.81 * 0.1**2, abs=9.81 * dt * 0.1)
