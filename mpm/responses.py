@@ -102,10 +102,20 @@ class Tracker:
         self._mass = [mass[s] for s in self._slices]
         self.series: list[list[tuple[float, float]]] = [[] for _ in self.responses]  # (t [s], value)
 
-    def update(self, x: np.ndarray, t: float) -> None:
-        """Record each response's quantity at the state with positions ``x`` [m] at time ``t`` [s]."""
+    def update(self, x: np.ndarray, t: float, kept: np.ndarray | None = None) -> None:
+        """Record each response's quantity at the state with positions ``x`` [m]
+        at time ``t`` [s]; ``kept``: the indices of the particles still in the
+        domain (None: all), once some were removed at open walls (NaN for a
+        body with none left)."""
+        alive = None
+        if kept is not None:
+            alive = np.zeros(len(x), bool)
+            alive[kept] = True
         for r, s, m, out in zip(self.responses, self._slices, self._mass, self.series):
-            out.append((float(t), quantity(r.quantity, x[s], m)))
+            xs = x[s]
+            if alive is not None:
+                xs, m = xs[alive[s]], m[alive[s]]
+            out.append((float(t), quantity(r.quantity, xs, m) if len(xs) else float("nan")))
 
     def values(self) -> dict[str, float]:
         """Each response's reduction over the states recorded so far."""
@@ -113,8 +123,17 @@ class Tracker:
                 for r, series in zip(self.responses, self.series)}
 
 
+    def summary(self, body_names: list[str]) -> dict[str, dict]:
+        """metrics.json ``responses``: per name its value (None when not
+        finite), unit, quantity, reduction and body (a name, or "all")."""
+        return {r.name: {"value": v if np.isfinite(v) else None, "unit": r.unit, "quantity": r.quantity,
+                         "reduce": r.reduce, "body": "all" if r.body is None else body_names[r.body]}
+                for r, v in zip(self.responses, self.values().values())}
+
+
 def reduce(kind: str, values: np.ndarray) -> float:
     """:data:`REDUCTIONS` ``kind`` of a quantity's values over a run's states."""
+    values = values[np.isfinite(values)]  # states where the body had no particle left
     if len(values) == 0:
         return float("nan")
     if kind == "min":

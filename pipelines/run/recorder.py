@@ -162,7 +162,7 @@ class Recorder(mpm.Observer):
             self._next_frame = 1.0 / log.fps
         self.log_fracture()
         if self.responses is not None:
-            self.responses.update(self.state.x.numpy(), 0.0)
+            self.responses.update(self.state.x.numpy(), self.t, self.solver.removals.kept)
         self.announce_scheme()
         self.progress = Progress(*self.spec.end, log.progress)
         self.metrics["status"], self.metrics["reason"] = "running", ""
@@ -197,7 +197,7 @@ class Recorder(mpm.Observer):
         if not driver.current:  # the device has moved on: the state is read at the batch's last step
             return
         if self.responses is not None:
-            self.responses.update(self.state.x.numpy(), report.time)
+            self.responses.update(self.state.x.numpy(), report.time, self.solver.removals.kept)
         if log.particles and self.frame_due(last):
             self.particles()
             # the frame and this state's diagnostics (measured by the driver on the host at k = 1)
@@ -431,9 +431,7 @@ class Recorder(mpm.Observer):
         if self.solver.contact is not None:  # [J] the kinetic energy the contact between bodies took (<= 0)
             m["contact_work"] = self.contact_work
         if self.responses is not None:  # the scene's physical responses (mpm.responses)
-            m["responses"] = {r.name: {"value": v if math.isfinite(v) else None, "unit": r.unit, "quantity": r.quantity, "reduce": r.reduce,
-                                       "body": "all" if r.body is None else self.spec.scene.bodies[r.body].name}
-                              for r, v in zip(self.responses.responses, self.responses.values().values())}
+            m["responses"] = self.responses.summary([b.name for b in self.spec.scene.bodies])
         if self.implicit:
             m["implicit"] = run_metrics.implicit_summary(self.spec.integrator, self.newton, self.driver.halved)
         m.update(self.drift.summary())

@@ -72,3 +72,14 @@ def test_a_falling_disc_lowest_centre(device):
     assert y0 == pytest.approx(0.6, abs=0.5 / 32)  # the sampled disc's centre, within half a cell
     dt = max(driver.dts)
     assert tracker.values()["lowest"] == pytest.approx(y0 - 0.5 * 9.81 * 0.1**2, abs=9.81 * dt * 0.1)
+
+
+def test_removed_particles_are_left_out():
+    """Particles removed at an open wall (``kept``: those left) do not count;
+    a body with none left gives NaN for that state, and the reduction skips it."""
+    model = _Model(M, [(0, 3), (3, 1)])
+    tracker = Tracker([Response("front", "front", 0, "max"), Response("far", "front", 1, "max")], model)
+    tracker.update(X, 0.0, kept=np.array([0, 2, 3]))  # particle 1 (x = 0.3) removed
+    tracker.update(X, 0.1, kept=np.array([0, 2]))  # body 1's only particle removed
+    assert tracker.values() == pytest.approx({"front": 0.2, "far": 2.0})
+    assert np.isnan(tracker.series[1][1][1])

@@ -38,7 +38,7 @@ def scene_responses(jobs: list[Job]) -> list[tuple]:
     def getter(name: str):
         return lambda j: num(((j.metrics.get("responses") or {}).get(name) or {}).get("value"))
 
-    return [(name, f"{name.replace('_', ' ')}", unit, getter(name)) for name, unit in found.items()]
+    return [(name, name.replace('_', ' '), unit, getter(name)) for name, unit in found.items()]
 
 
 def swept_parameters(jobs: list[Job]) -> dict[str, dict]:
