@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import recordings, regions
+from . import colours, recordings, regions
 
 
 def rerun_executable() -> str:
@@ -77,8 +77,8 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
     L = _domain(rec, rec.positions)
     regs = regions.regions(rec)  # the kinematic regions, from the recorded config
     fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
-    vmin, vmax = _recorded_range(rec, color) or _value_range([v for _, v in fields if v is not None])
-    unit = (rec.properties.get("color:unit") or [""])[0] if _recorded_range(rec, color) else ""
+    vmin, vmax = _recorded_range(rec, color) or colours.values_range(color, [v for _, v in fields])
+    unit = colours.UNITS.get(color, "")
     written = []
     for n, k in enumerate(range(0, len(rec.positions), every)):
         x = rec.positions[k]
@@ -125,23 +125,18 @@ COLLIDER_FACE, COLLIDER_EDGE = (0.55, 0.55, 0.62, 0.35), (0.35, 0.35, 0.4)
 
 
 def _recorded_range(rec: recordings.Recording, color: str) -> tuple[float, float] | None:
-    """The range the run fixed for ``color`` (recording property ``color``),
-    if it coloured its particles by that field."""
+    """The range the run coloured ``color`` with in the viewer (recording
+    property ``color``, or ``channels`` for a field of log.channels), if it
+    did: the frames use the same."""
     p = rec.properties
-    if (p.get("color:field") or [None])[0] != color or not p.get("color:low") or not p.get("color:high"):
+    if (p.get("color:field") or [None])[0] == color and p.get("color:low") and p.get("color:high"):
+        lo, hi = float(p["color:low"][0]), float(p["color:high"][0])
+    elif color in (p.get("channels:names") or []):
+        k = list(p["channels:names"]).index(color)
+        lo, hi = float(p["channels:low"][k]), float(p["channels:high"][k])
+    else:
         return None
-    return float(p["color:low"][0]), float(p["color:high"][0])
-
-
-def _value_range(values: list) -> tuple[float, float]:
-    """(low, high) of the finite values of every frame: one range for all
-    frames; (0, 1) when there is none."""
-    finite = [v[np.isfinite(v)] for v in values]
-    finite = [v for v in finite if v.size]
-    if not finite:
-        return 0.0, 1.0
-    lo, hi = min(float(v.min()) for v in finite), max(float(v.max()) for v in finite)
-    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) else None
 
 
 def _paint(rgb, val, vmin, vmax) -> dict:
@@ -176,7 +171,7 @@ def _legend(ax, rec, more: list, bodies: bool = True) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    from .rerun_sink import PALETTE
+    from .colours import PALETTE
 
     handles = [Line2D([], [], ls="", marker="o", color=PALETTE[i % len(PALETTE)] / 255.0, label=name)
                for i, name in enumerate(body_names(rec))] if bodies else []

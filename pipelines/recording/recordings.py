@@ -134,7 +134,7 @@ def read(path: str | Path, particles: bool = True) -> Recording:
     body = colors = None
     body_col = "/particles:body_index"
     if body_col in static.columns and len(static) and static[body_col].iloc[0] is not None:
-        from .rerun_sink import PALETTE_PACKED
+        from .colours import PALETTE_PACKED
 
         body = np.asarray(static[body_col].iloc[0], dtype=np.int64)
         colors = PALETTE_PACKED[body % len(PALETTE_PACKED)]

@@ -19,20 +19,23 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
                       component ``dJ`` (per-particle |det F^sn - 1|) and,
                       with plastic materials, their fields (``J_P``,
                       ``plastic_strain``, ...: mpm.materials.Plastic.fields);
-                      colours by ``meta.color`` (the body, or a field on
-                      the viridis map over a range fixed for the run:
-                      ``COLOR_RANGES``, ``log.color_range``, or for
-                      ``speed`` (|v| [m/s], recorded then) a bound found
-                      before the run); once
+                      colours by ``meta.color``: the body, or a field on
+                      the viridis map over its range (``log.color_range``,
+                      else the run's own: a colour row per frame at its
+                      step, written when the run ends;
+                      :mod:`pipelines.recording.colours`); once
                       particles were removed at open walls, ``index`` (their
                       numbers) with the ones left; radii and ``body_index`` (body
                       per particle) are static
+  /particles/key      the colour key beside the domain: a labelled swatch
+                      per body, or the field's colour bar with its range
+                      (:mod:`pipelines.recording.colour_key`; static)
   /channels/<field>   with log.channels, per field the particles again (the
-                      positions of each frame), coloured by that field on
-                      the viridis map over its fixed range (as /particles
-                      would be by log.color=<field>); hidden in the
+                      positions of each frame), coloured by that field as
+                      /particles would be by log.color=<field>, its key in
+                      /channels/<field>/key; hidden in the
                       blueprint: the user shows one in the viewer
-  /legend             what the colours mean: map, field and range (static)
+  /legend             what the colours mean in words: map, field, range (static)
   /domain             the domain box and the inner wall faces (static)
   /colliders/<name>   each collider's surface (3D) or outline (2D)
   /regions/<name>     each kinematic region's selection outlined where its
@@ -43,7 +46,8 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
   /scalars/<name>     one Scalars series per physics scalar, sent in batches
                       with ``send_columns``, named with its unit (SeriesLines)
   /events             TextLog lines with machine-readable values beside them
-  /__properties/...   resolved config, overrides, provenance, ``view`` (up axis)
+  /__properties/...   resolved config, overrides, provenance, ``view`` (up axis),
+                      ``color`` and ``channels`` (each coloured field's range and unit)
 Up is +y (:mod:`pipelines.recording.layout`: view coordinates in 3D, a
 mirroring transform on the spatial entities in 2D); the blueprint opens on
 the ``sim_time`` timeline.
@@ -63,57 +67,11 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from . import layout, regions, surfaces
+from . import colour_key, layout, regions, surfaces
+from .colours import PALETTE, PALETTE_PACKED, UNITS, FrameValues, body_colour, colormap, describe
 from .sinks import RunMeta, Sink, timings_path
 
 APP_ID = "aulmpm"
-VIRIDIS = np.array([(68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)], float)
-GREY = (150, 150, 150)  # a particle without a value (the field of another body's material)
-PALETTE = np.array([
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
-], dtype=np.uint8)
-
-
-def packed(rgb) -> np.ndarray:
-    """RGB rows (uint8) as Rerun's packed 0xRRGGBBAA colours, opaque."""
-    rgb = np.asarray(rgb, np.uint32).reshape(-1, 3)
-    return (rgb[:, 0] << 24) | (rgb[:, 1] << 16) | (rgb[:, 2] << 8) | np.uint32(255)
-
-
-# the colour map in 256 steps (a particle's colour is one lookup), the palette and grey, packed
-COLOR_LEVELS = 256
-VIRIDIS_LUT = packed(np.stack([np.interp(np.linspace(0.0, 1.0, COLOR_LEVELS), np.linspace(0.0, 1.0, len(VIRIDIS)),
-                                         VIRIDIS[:, c]) for c in range(3)], axis=1).round())
-PALETTE_PACKED = packed(PALETTE)
-GREY_PACKED = packed(GREY)[0]
-
-
-# the colour map's range of each field, fixed for the run (other fields: DEFAULT_RANGE)
-COLOR_RANGES = {
-    "dJ": (0.0, 0.1),  # |det F^sn - 1|: a tenth of the volume
-    "plastic_strain": (0.0, 0.5),
-    "J_P": (0.8, 1.2), "density_ratio": (0.8, 1.2),
-    "hardening": (0.0, 1.0),
-}
-DEFAULT_RANGE = (0.0, 1.0)
-UNITS = {"speed": "m/s"}  # of the coloured fields that have one (the others are ratios)
-
-
-def color_range(field: str) -> tuple[float, float]:
-    """The fixed (low, high) of ``field`` on the colour map."""
-    return COLOR_RANGES.get(field, DEFAULT_RANGE)
-
-
-def colormap(values: np.ndarray, top: float, bottom: float = 0.0) -> np.ndarray:
-    """Packed viridis colours of ``values`` from ``bottom`` to ``top``
-    (clamped; grey where not finite)."""
-    finite = np.isfinite(values)
-    span = (top - bottom) or 1.0
-    level = (np.where(finite, values, bottom) - bottom) * ((COLOR_LEVELS - 1) / span)
-    rgb = VIRIDIS_LUT[np.clip(level, 0.0, COLOR_LEVELS - 1).astype(np.intp)]
-    rgb[~finite] = GREY_PACKED
-    return rgb
 
 
 def _stream(recording_id: str, path: Path) -> rr.RecordingStream:
@@ -144,14 +102,15 @@ class RerunSink(Sink):
         self._moving = []
         self._regions = []  # pipelines.recording.regions.Region, drawn with each particle frame
         self._color = "body"
-        self._range = DEFAULT_RANGE  # the colour map's (low, high), fixed for the run
-        self._source = ""  # where the range comes from
+        self._ranges: dict = {}  # coloured field -> ((low, high), where it comes from); None: the run's, at close
+        self._values: FrameValues | None = None  # the frames' values of the fields coloured at close
         self._labelled: set[tuple] = set()  # scalar series named (with their unit) so far
         self._dim = 2
         self._body = None
-        self._channels: dict = {}  # log.channels: field -> ((low, high), source)
+        self._channels: list[str] = []  # log.channels: a /channels/<field> entity each
         self._layout: tuple | None = None  # the blueprint's arguments (start), re-sent with the extents at close
         self._extents: dict[str, tuple[float, float]] = {}  # scalar name -> (min, max) over the run
+        self._same: dict[str, bool] = {}  # layout.SAME_AS series -> equal to its twin at every step so far
         self._frames: queue.Queue | None = None  # to the writer thread (threaded)
         self._writer: threading.Thread | None = None
         self._failure: BaseException | None = None  # raised by the writer, re-raised here
@@ -173,13 +132,12 @@ class RerunSink(Sink):
         self._dim = meta.dim
         self._body = np.asarray(meta.particle_body)
         self._color, self._names = meta.color, meta.body_names
-        given, self._source = meta.color_range
-        self._range = tuple(given) if given is not None else color_range(self._color)
-        self._source = self._source or "fixed for the field"
-        self._channels = {}  # field -> ((low, high), where the range comes from)
-        for name, (given, source) in (meta.channels or {}).items():
-            self._channels[name] = ((tuple(given), source) if given is not None
-                                    else (color_range(name), "fixed for the field"))
+        self._channels = list(meta.channels or {})
+        given = {**(meta.channels or {}), **({self._color: meta.color_range} if self._color != "body" else {})}
+        self._ranges = {f: ((tuple(r), source) if r is not None else None) for f, (r, source) in given.items()}
+        later = [f for f, r in self._ranges.items() if r is None]
+        self._values = FrameValues(later) if later else None
+        self._field_notes = dict(meta.field_notes or {})
         layout.view_coordinates(rec, meta.dim, channels=bool(self._channels))
         rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
@@ -188,15 +146,17 @@ class RerunSink(Sink):
             rec.log(f"channels/{name}", self._points.from_fields(
                 radii=meta.particle_radius, **({"draw_order": CHANNEL_DRAW_ORDER} if meta.dim == 2 else {})),
                 static=True)
+        self._domain = tuple(meta.domain)
         self._regions = regions.of_yaml(((meta.properties or {}).get("config") or {}).get("yaml") or "", meta.dim)
         self._legend()
+        self._key()
         self._log_domain(meta)
         self._log_colliders(meta)
         for reg in self._regions:  # a region that never moves nor lets go: static
             if reg.still:
                 self._log_region(reg, 0.0, static=True)
         self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
-        rec.send_blueprint(layout.blueprint(*self._layout))
+        rec.send_blueprint(layout.blueprint(*self._layout, title=self._title()))
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
@@ -233,42 +193,99 @@ class RerunSink(Sink):
                                               colors=[(200, 200, 200), (120, 120, 120)],
                                               fill_mode=rr.components.FillMode.MajorWireframe), static=True)
 
-    def _colors(self, values: np.ndarray | None, index: np.ndarray | None) -> np.ndarray:
-        """Packed colour per particle: the body palette, or ``values`` on the
-        colour map (256 levels) over the run's fixed range (grey where not
-        finite)."""
-        if self._color == "body" or values is None:
+    def _colors(self, field: str, values: np.ndarray | None, index: np.ndarray | None) -> np.ndarray | None:
+        """Packed colour per particle: the body palette (``field`` body), or
+        ``values`` on the colour map (256 levels) over the field's range
+        (grey where not finite); None while that range is the run's, not
+        known before it ends."""
+        if field == "body" or values is None:
             body = self._body if index is None else self._body[index]
             return PALETTE_PACKED[body % len(PALETTE)]
-        return colormap(values, self._range[1], self._range[0])
+        if self._ranges.get(field) is None:
+            return None
+        (lo, hi), _ = self._ranges[field]
+        return colormap(np.asarray(values), hi, lo)
+
+    def _range_words(self, field: str) -> str:
+        """``speed 0 to 4.92 m/s (the run's range)``, or a note that the range comes at the end."""
+        r = self._ranges.get(field)
+        return (f"{describe(field, *r[0])} ({r[1]})" if r is not None else
+                f"{field} on the run's range (written when the run ends)")
+
+    def _title(self) -> str:
+        """The particle view's name: what the colours mean (and which channels wait to be shown)."""
+        if self._color != "body":
+            title = f"particles: {self._range_words(self._color)}"
+        elif len(self._names) > 4:
+            title = "particles coloured by body (key on the right)"
+        else:
+            title = "particles: " + ", ".join(f"{n} {body_colour(i)[1]}" for i, n in enumerate(self._names))
+        return title + (f"; hidden channels: {', '.join(self._channels)}" if self._channels else "")
 
     def _legend(self) -> None:
-        """The colour key (static): each body's colour, or the field, its map and range."""
+        """The colour key in words (static): each body's colour, or the field,
+        its map and range; with the ``color`` and ``channels`` properties."""
+        note = lambda f: f" {self._field_notes[f]}." if f in self._field_notes else ""  # noqa: E731
         if self._color == "body":
-            text = "**Particle colour: the body**\n\n" + "\n".join(
-                f"- {n}: rgb{tuple(int(c) for c in PALETTE[i % len(PALETTE)])}" for i, n in enumerate(self._names))
+            text = "**Particle colour: the body**: " + ", ".join(
+                f"{n} {body_colour(i)[1]}" for i, n in enumerate(self._names)) + "."
         else:
-            (lo, hi), unit = self._range, UNITS.get(self._color, "")
-            text = (f"**Particle colour: {self._color}{unit and f' [{unit}]'}** on the viridis map, fixed for "
-                    f"the run: {lo:.3g} (dark purple) to {hi:.3g} (yellow){unit and ' ' + unit}, clamped "
-                    f"({self._source}); grey: no value (another material)."
-                    "\n\nEvery per-particle field is in the recording (select a particle to read it).")
+            text = (f"**Particle colour: {self._range_words(self._color)}**, viridis from dark purple (low) to "
+                    f"yellow (high); grey: no value (another material).{note(self._color)}")
+        if self._channels:  # on one line, in sight when the viewer opens
+            text += ("\n\n**Channels** (hidden; the eye icon in the blueprint panel shows one, in 3D hide "
+                     "/particles), viridis: " + "; ".join(
+                         f"{self._range_words(n)} at /channels/{n}" for n in self._channels) + "."
+                     + "".join(note(n) for n in self._channels if n != self._color))
         if self._regions:
             text += "\n\n**Kinematic regions** (magenta outlines, faint while not acting): " + ", ".join(
                 f"{r.name} ({r.start:g} s to {r.end:g} s)" if np.isfinite(r.end) else f"{r.name} (from {r.start:g} s)"
                 for r in self._regions)
+        text += "\n\nEvery per-particle field is in the recording: select a particle to read it."
         if self._channels:
-            text += ("\n\n**Channels** (hidden: show one in the blueprint panel, eye icon, and hide /particles "
-                     "in 3D), each field on the viridis map over a range fixed for the run:\n" + "\n".join(
-                         f"- /channels/{n}: {n}{UNITS.get(n) and f' [{UNITS[n]}]' or ''} {lo:.3g} to {hi:.3g} "
-                         f"({source})" for n, ((lo, hi), source) in self._channels.items()))
-            self.rec.send_property("channels", rr.AnyValues(
-                names=list(self._channels), low=[r[0] for r, _ in self._channels.values()],
-                high=[r[1] for r, _ in self._channels.values()], source=[s for _, s in self._channels.values()]))
+            if all(self._ranges[n] is not None for n in self._channels):  # else sent at the end
+                self.rec.send_property("channels", rr.AnyValues(
+                    names=self._channels, low=[self._ranges[n][0][0] for n in self._channels],
+                    high=[self._ranges[n][0][1] for n in self._channels], unit=[UNITS.get(n, "") for n in self._channels],
+                    source=[self._ranges[n][1] for n in self._channels]))
         self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
-        self.rec.send_property("color", rr.AnyValues(field=self._color, colormap="viridis" if self._color != "body"
-                                                     else "palette", low=self._range[0], high=self._range[1],
-                                                     unit=UNITS.get(self._color, ""), source=self._source))
+        known = {} if self._ranges.get(self._color) is None else dict(
+            zip(("low", "high", "source"), (*self._ranges[self._color][0], self._ranges[self._color][1])))
+        self.rec.send_property("color", rr.AnyValues(
+            field=self._color, colormap="viridis" if self._color != "body" else "palette",
+            unit=UNITS.get(self._color, ""), **known))
+
+    def _key(self) -> None:
+        """The colour key in the particle view (:mod:`pipelines.recording.colour_key`),
+        once the ranges are known."""
+        if self._color == "body":
+            colour_key.log_bodies(self.rec, "particles/key", list(self._names), self._dim, self._domain)
+        elif self._ranges.get(self._color) is not None:
+            colour_key.log_bar(self.rec, "particles/key", self._color, *self._ranges[self._color][0], self._dim,
+                               self._domain)
+        for k, name in enumerate(self._channels):
+            if self._ranges.get(name) is not None:
+                colour_key.log_bar(self.rec, f"channels/{name}/key", name, *self._ranges[name][0], self._dim,
+                                   self._domain, column=k + 1)
+
+    def _colour_frames(self) -> None:
+        """At the end: the fields coloured on the run's range, a colour row
+        per logged frame at its step and time (beside its positions), the
+        ranges stated in the legend, properties, key and view title."""
+        values = self._values
+        for field in values.fields:
+            self._ranges[field] = (values.range(field), "the run's range")
+        paths = [("particles", self._color)] * (self._color in values.fields) + [
+            (f"channels/{n}", n) for n in self._channels if n in values.fields]
+        for step, t, frame in values:
+            self.rec.set_time("step", sequence=step)
+            self.rec.set_time("sim_time", duration=t)
+            for path, field in paths:
+                self.rec.log(path, self._points.from_fields(colors=self._colors(field, frame[field], None)))
+        values.close()
+        self._values = None
+        self._legend()
+        self._key()
 
     # ---------------------------------------------------------------- per step
     def particles(self, step, t, x, dJ, fields=None, index=None):
@@ -316,11 +333,13 @@ class RerunSink(Sink):
         values = dict(fields or {})
         if dJ is not None:
             values["dJ"] = dJ
-        colors = self._colors(values.get(self._color), index)
-        for name, ((lo, hi), _) in self._channels.items():
+        if self._values is not None:  # coloured at the end, on the run's range
+            self._values.add(step, t, len(x), values)
+        for name in self._channels:
             if values.get(name) is not None:
                 self.rec.log(f"channels/{name}", self._points.from_fields(
-                    positions=x, colors=colormap(np.asarray(values[name]), hi, lo)))
+                    positions=x, colors=self._colors(name, values[name], index)))
+        colors = self._colors(self._color, values.get(self._color), index)
         if index is not None:
             values["index"] = index.astype(np.int32)
         parts = [self._points.from_fields(positions=x, colors=colors)]
@@ -354,6 +373,10 @@ class RerunSink(Sink):
         self._append(self._timings, step, t, values)
 
     def flush(self):
+        for name, twin in layout.SAME_AS.items():  # a series equal to its twin so far is left out of the plots
+            if name in self._buffer and twin in self._buffer:
+                a, b = (np.asarray(self._buffer[n][2], np.float64) for n in (name, twin))
+                self._same[name] = self._same.get(name, True) and np.array_equal(a, b, equal_nan=True)
         for rec, root, buffer in ((self.rec, "scalars", self._buffer), (self.clock, "timings", self._timings)):
             for name, (steps, times, vals) in buffer.items():
                 if steps:
@@ -381,8 +404,11 @@ class RerunSink(Sink):
             self._drain()
             self.flush()
             self._check_writer()
-            if self._layout is not None and self._extents:  # the legends' room above the whole run's data
-                self.rec.send_blueprint(layout.blueprint(*self._layout, extents=self._extents))
+            if self._values is not None:
+                self._colour_frames()
+            if self._layout is not None:  # the colour range in the title, the legends' room above the data
+                self.rec.send_blueprint(layout.blueprint(*self._layout, extents=self._extents, title=self._title(),
+                                                         same=tuple(n for n, same in self._same.items() if same)))
         finally:
             try:  # leaving the streams (last entered first) flushes and finalises the files
                 self.clock.__exit__(None, None, None)

@@ -40,10 +40,11 @@ class RunMeta:
     scalar_groups: dict = field(default_factory=dict)  # view name -> scalar names
     colliders: list = field(default_factory=list)  # mpm.colliders.Collider (drawn by the sink)
     color: str = "body"  # what colours the particles: body, dJ or a per-particle field
-    color_range: tuple = (None, "")  # ((low, high) or None: the field's default, where it comes from)
+    color_range: tuple = (None, "")  # ((low, high) or None: the run's own, where it comes from)
     # log.channels: field -> ((low, high) or None, where it comes from), each an extra particle entity
     # /channels/<field> coloured by the field, hidden in the blueprint (:func:`channel_ranges`)
     channels: dict = field(default_factory=dict)
+    field_notes: dict = field(default_factory=dict)  # field -> what to know when reading it (the legend)
 
 
 class Sink:

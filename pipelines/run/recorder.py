@@ -139,8 +139,9 @@ class Recorder(mpm.Observer):
             dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
             body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
             particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
-            color=self.spec.log.color, color_range=run_metrics.color_range(self.spec, model, self.state),
-            channels=run_metrics.channel_ranges(self.spec.log, scene, self.state.x.numpy(), self.state.v.numpy()),
+            color=self.spec.log.color, color_range=run_metrics.color_range(self.spec),
+            channels=run_metrics.channel_ranges(self.spec.log),
+            field_notes=run_metrics.field_notes(self.scheme.name),
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
             scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])

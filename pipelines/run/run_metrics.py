@@ -101,51 +101,37 @@ def particle_fields(model, state, speed: bool = False) -> dict[str, np.ndarray]:
     return out
 
 
-def speed_range(scene, x: np.ndarray, v: np.ndarray) -> tuple[float, str]:
-    """A fixed top [m/s] of the speed colour map before the run, and how it
-    was found: the fastest of the initial particle speed with a free fall
-    from the highest particle to the lowest wall face along gravity,
-    sqrt(|v0|^2 + 2 |g| H), and the colliders' speeds; 1 m/s when all are 0."""
-    v0 = float(np.linalg.norm(v, axis=1).max()) if len(v) else 0.0
-    g = np.asarray(scene.gravity, float)
-    top, how = v0, "the initial particle speed"
-    if np.linalg.norm(g) > 0 and len(x):
-        down = g / np.linalg.norm(g)
-        wall = scene.wall_cells * scene.dx
-        floor = max(np.dot(c, down) for c in np.array(np.meshgrid(*[[wall, L - wall] for L in scene.domain]))
-                    .reshape(scene.dim, -1).T)  # the wall box's lowest corner along gravity
-        drop = max(floor - float((x @ down).min()), 0.0)
-        top = math.sqrt(v0 ** 2 + 2.0 * float(np.linalg.norm(g)) * drop)
-        how = f"sqrt(v0^2 + 2 g H): initial speed {v0:.3g} m/s, free fall H = {drop:.3g} m"
-    moving = max([c.speed() for c in scene.colliders] + [0.0])
-    if moving > top:
-        top, how = moving, "the fastest collider"
-    return (top, how) if top > 0 else (1.0, "nothing moves at the start: 1 m/s")
-
-
-def field_range(name: str, log, scene, x: np.ndarray, v: np.ndarray) -> tuple[tuple[float, float] | None, str]:
-    """The colour map's fixed (low, high) of the particle field ``name`` and
-    where it comes from: ``log.color_range`` for the field that colours the
-    particles (``log.color``), for speed a bound before the run
-    (:func:`speed_range`, from the initial positions ``x`` and velocities
-    ``v``), else None (the sink's default for the field)."""
+def field_range(name: str, log) -> tuple[tuple[float, float] | None, str]:
+    """The colour map's (low, high) of the particle field ``name`` and where
+    it comes from: ``log.color_range`` for the field that colours the
+    particles (``log.color``), else None: the run's own range, found when
+    it ends (:mod:`pipelines.recording.colours`)."""
     if name == log.color and log.color_range is not None:
         return (float(log.color_range[0]), float(log.color_range[1])), "log.color_range"
-    if name == "speed":
-        top, how = speed_range(scene, np.asarray(x, np.float64), np.asarray(v, np.float64))
-        return (0.0, top), how
     return None, ""
 
 
-def color_range(spec, model, state) -> tuple[tuple[float, float] | None, str]:
+def color_range(spec) -> tuple[tuple[float, float] | None, str]:
     """:func:`field_range` of ``log.color``."""
-    return field_range(spec.log.color, spec.log, model.scene, state.x.numpy(), state.v.numpy())
+    return field_range(spec.log.color, spec.log)
 
 
-def channel_ranges(log, scene, x: np.ndarray, v: np.ndarray) -> dict:
+def channel_ranges(log) -> dict:
     """``RunMeta.channels``: :func:`field_range` of each field of
     ``log.channels``."""
-    return {name: field_range(name, log, scene, x, v) for name in log.channels}
+    return {name: field_range(name, log) for name in log.channels}
+
+
+DJ_SINCE = {  # what dJ = |det F^sn - 1| accumulates, per scheme: F^sn maps the last reference configuration
+    "empm": "Under EMPM the reference is the last step's configuration: dJ is one step's volume change",
+    "tlmpm": "Under TLMPM the reference is the initial configuration: dJ is the volume change since the start",
+    "aulmpm": "Under A-ULMPM dJ is the volume change since the body's last configuration update",
+}
+
+
+def field_notes(scheme: str) -> dict:
+    """``RunMeta.field_notes``: what to know when reading a coloured field."""
+    return {"dJ": DJ_SINCE[scheme]} if scheme in DJ_SINCE else {}
 
 
 def recording_estimate(spec, model, state, n_scalars: int, dt: float) -> tuple[float, int, int]:

@@ -1,6 +1,7 @@
 """log.channels: besides /particles, one entity per field, /channels/<field>,
-coloured by that field on its fixed range, hidden in the blueprint (the
-user shows it in the viewer); none by default."""
+coloured by that field on its range (the run's own unless log.color_range
+gives it), with its colour key, hidden in the blueprint (the user shows it
+in the viewer); none by default."""
 
 import numpy as np
 import pytest
@@ -9,7 +10,8 @@ from rerun.chunk import RrdReader
 from helpers import compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import layout
-from pipelines.recording.rerun_sink import PALETTE_PACKED, RerunSink, color_range, colormap
+from pipelines.recording.colours import PALETTE_PACKED, colormap, values_range
+from pipelines.recording.rerun_sink import RerunSink
 from pipelines.recording.sinks import RunMeta
 from pipelines.run.run_metrics import channel_ranges
 
@@ -46,8 +48,10 @@ def test_each_channel_is_an_entity_coloured_on_its_range_and_hidden(tmp_path, di
     path = tmp_path / "recording.rrd"
     channels = {"speed": ((0.0, 2.5), "log.color_range"), "dJ": (None, ""), "plastic_strain": (None, "")}
     frames = record(path, dim, channels)
-    for name, (lo, hi) in (("speed", (0.0, 2.5)), ("dJ", color_range("dJ")),
-                           ("plastic_strain", color_range("plastic_strain"))):
+    ranges = {"speed": (0.0, 2.5), "dJ": values_range("dJ", [f[1] for f in frames]),
+              "plastic_strain": values_range("plastic_strain", [f[2]["plastic_strain"] for f in frames])}
+    assert ranges["dJ"][0] == 0.0 and ranges["dJ"][1] == max(float(f[1].max()) for f in frames)
+    for name, (lo, hi) in ranges.items():
         got = entity_colors(path, f"/channels/{name}", dim)
         assert len(got) == 2, name
         for c, (x, dJ, fields) in zip(got, frames):
@@ -64,7 +68,12 @@ def test_each_channel_is_an_entity_coloured_on_its_range_and_hidden(tmp_path, di
         assert d["flip"]["channels"] == layout.FLIP_2D
     props = RrdReader(str(path)).stream().collect().reader(index=None, contents="/__properties/**").to_pandas()
     assert list(props["property:channels:names"].iloc[0]) == ["speed", "dJ", "plastic_strain"]
-    assert list(props["property:channels:high"].iloc[0]) == [2.5, 0.1, 0.5]
+    assert np.allclose(list(props["property:channels:high"].iloc[0]), [r[1] for r in ranges.values()])
+    assert list(props["property:channels:source"].iloc[0]) == ["log.color_range", "the run's range", "the run's range"]
+    # each channel's colour key beside the domain: a bar and its ends, the field and unit
+    static = RrdReader(str(path)).stream().collect().reader(index=None, contents="/channels/**").to_pandas()
+    labels = static[f"/channels/speed/key/labels:Points{dim}D:labels"].dropna().iloc[0]
+    assert list(labels) == ["0", "2.5 m/s", "speed [m/s]"]
 
 
 def test_no_channels_by_default(tmp_path):
@@ -78,20 +87,15 @@ def test_no_channels_by_default(tmp_path):
 
 def test_channels_are_declared_checked_and_ranged():
     """log.channels is a log option; a field the scene cannot record is
-    refused naming the key; the ranges: the run's for the colouring field,
-    the free-fall bound for speed, else the field's fixed default."""
+    refused naming the key; the ranges: log.color_range for the colouring
+    field, else None (the run's own, found when it ends)."""
     spec = resolve(compose_cfg(["log.channels=[speed,dJ]", "log.color=dJ", "log.color_range=[0,0.2]"]))
     assert spec.log.channels == ["speed", "dJ"]
     with pytest.raises(ValueError, match=r"^log.channels: 'plastic_strain'; accepted: a list of dJ, speed"):
         resolve(compose_cfg(["log.channels=[plastic_strain]"]))
-    import mpm
-
-    model, state = mpm.build(spec.scene, spec.kernel, "float32", "cpu", spec.seed)
-    r = channel_ranges(spec.log, spec.scene, state.x.numpy(), state.v.numpy())
-    assert r["dJ"] == ((0.0, 0.2), "log.color_range")
-    (lo, hi), how = r["speed"]
-    assert lo == 0.0 and hi > 0 and "free fall" in how
-    assert channel_ranges(resolve(compose_cfg([])).log, spec.scene, state.x.numpy(), state.v.numpy()) == {}
+    r = channel_ranges(spec.log)
+    assert r == {"dJ": ((0.0, 0.2), "log.color_range"), "speed": (None, "")}
+    assert channel_ranges(resolve(compose_cfg([])).log) == {}
 
 
 def test_the_size_estimate_counts_the_channels(tmp_path):

@@ -130,7 +130,7 @@ def test_the_colour_map_spans_viridis_from_zero_to_the_top():
     """0 and below -> viridis' first colour, top and above -> its last; a
     value u in between -> the map interpolated at floor(255 u) / 255 (256
     levels), rounded; NaN -> grey."""
-    from pipelines.recording.rerun_sink import GREY, VIRIDIS, colormap, packed
+    from pipelines.recording.colours import GREY, VIRIDIS, colormap, packed
 
     values = np.array([-1.0, 0.0, 0.5, 1.0, 2.0, np.nan], np.float32)
     c = colormap(values, 1.0)

@@ -12,7 +12,7 @@ from PIL import Image
 
 from pipelines.recording import recordings, regions
 from pipelines.recording.display import projection, render_frames
-from pipelines.recording.rerun_sink import PALETTE, PALETTE_PACKED
+from pipelines.recording.colours import PALETTE, PALETTE_PACKED
 
 MAGENTA = np.round(np.array(regions.EDGE) * 255).astype(np.int32)
 

@@ -15,7 +15,8 @@ from helpers import CONF, compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import recordings
 from pipelines.recording.display import render_frames
-from pipelines.recording.rerun_sink import PALETTE, RerunSink
+from pipelines.recording.colours import PALETTE
+from pipelines.recording.rerun_sink import RerunSink
 from pipelines.recording.sinks import RunMeta
 
 SCENES = sorted(p.stem for p in (CONF / "scene").glob("*.yaml"))
