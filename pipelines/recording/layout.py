@@ -41,6 +41,9 @@ _UNITS = {
 }
 
 
+# a series left out of the plots when it equals another at every step (EMPM: a fresh reference is the last step's)
+SAME_AS = {"dt_fresh": "dt"}
+
 WORDS = {"dt": "time step", "dt_fresh": "time step allowed now", "config_updates": "configuration updates"}
 
 
@@ -106,23 +109,26 @@ def y_range(members: list[str], extents: dict) -> tuple[float, float] | None:
     return lo - 0.05 * span, hi + LEGEND_ROOM * span
 
 
-def series_views(groups: dict, dim: int, extents: dict | None = None) -> list:
+def series_views(groups: dict, dim: int, extents: dict | None = None, same: tuple = ()) -> list:
     """One time-series view per group and unit (named with the unit), the
     whole run in view, on the simulated-time timeline. A plot of several
     series has a legend in its top-left corner; with the series' extents
     (the run's (min, max) per scalar name, known once it has ended) its y
     range leaves the legend room above the data, where Rerun would
-    otherwise draw it over the curves."""
+    otherwise draw it over the curves. A series in ``same`` is left out and
+    named in the title of its twin's plot (:data:`SAME_AS`)."""
     views = []
     for group, names in groups.items():
         by_unit: dict[str, list[str]] = {}
-        for n in names:
+        for n in (n for n in names if n not in same):
             by_unit.setdefault(unit(n, dim), []).append(n)
         for u, members in by_unit.items():
             title = group.split(" [")[0]
             if len(by_unit) > 1:  # the group's quantities apart: named by the first (less its axis)
                 title = label(members[0], dim).split(" [")[0].split(" (")[0]
                 title = title[:-2] if len(members) > 1 and title[-2:] in (" x", " y", " z") else title
+            twins = [n for n in same if SAME_AS[n] in members]
+            title += "".join(f" (= {WORDS.get(n, n)})" for n in twins)
             title = f"{title} [{u}]" if u else title
             room = y_range(members, extents or {}) if len(members) > 1 else None
             views.append(rrb.TimeSeriesView(
@@ -135,35 +141,43 @@ def series_views(groups: dict, dim: int, extents: dict | None = None) -> list:
     return views
 
 
-def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents: dict | None = None):
-    """The particle view (domain, floor and colliders drawn, y up) beside the
-    colour key, the time series (a tab each) and the events; ``channels``
-    (log.channels): their entities in the particle view, hidden (the user
-    shows one in the viewer's blueprint panel); ``extents``: the series'
-    (min, max), for the plots' y ranges (:func:`series_views`)."""
+def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents: dict | None = None,
+              title: str = "particles", same: tuple = ()):
+    """The particle view (domain, floor and colliders drawn, y up; named
+    ``title``, which says what the colours mean) with its colour key
+    beside the domain, next to the colour legend, the time series (a tab
+    each) and the events; ``channels`` (log.channels): their entities in
+    the particle view, hidden (the user shows one in the viewer's blueprint
+    panel); ``extents``: the series' (min, max), for the plots' y ranges
+    (:func:`series_views`); ``same``: series left out, equal to their
+    :data:`SAME_AS` at every step (one curve would hide the other)."""
+    from .colour_key import extent
+
     L = np.asarray(domain, float)
     hidden = [f"/channels/{c}" for c in channels]
-    contents = ["/particles", "/domain", "/colliders/**", "/regions/**"] + hidden
+    contents = ["/particles", "/particles/key/**", "/domain", "/colliders/**", "/regions/**"] + [
+        p for c in hidden for p in (c, f"{c}/key/**")]
     overrides = {path: rrb.EntityBehavior(visible=False) for path in hidden} or None
     if dim == 2:
         m = 0.05 * float(L.max())
-        view = rrb.Spatial2DView(name="particles", origin="/", contents=contents, overrides=overrides,
-                                 visual_bounds=rrb.VisualBounds2D(x_range=[-m, L[0] + m],
+        view = rrb.Spatial2DView(name=title, origin="/", contents=contents, overrides=overrides,
+                                 visual_bounds=rrb.VisualBounds2D(x_range=[-m, extent(L, 1 + len(channels)) + m],
                                                                   y_range=[-L[1] - m, m]))
     else:
         view = rrb.Spatial3DView(
-            name="particles", origin="/", contents=contents, overrides=overrides, eye_controls=camera(L, wall),
+            name=title, origin="/", contents=contents, overrides=overrides, eye_controls=camera(L, wall),
             line_grid=rrb.LineGrid3D(visible=True, plane=rr.components.Plane3D((0.0, 1.0, 0.0), wall),
                                      spacing=float(10 ** np.floor(np.log10(L.max() / 4)))))
-    series = series_views(groups, dim, extents)
+    series = series_views(groups, dim, extents, same)
     return rrb.Blueprint(
         rrb.Horizontal(
             view,
             rrb.Vertical(rrb.TextDocumentView(name="colour", origin="/legend"), rrb.Tabs(*series, name="time series"),
-                         rrb.TextLogView(name="events", origin="/events"), row_shares=[1, 4, 2]),
-            column_shares=[3, 2],
+                         rrb.TextLogView(name="events", origin="/events"), row_shares=[2, 6, 2]),
+            column_shares=[1, 1],
         ),
         rrb.TimePanel(timeline=TIMELINE),
+        rrb.SelectionPanel(expanded=False),  # room for the plots: their time axes labelled at 1600 px
         collapse_panels=False,
     )
 
@@ -177,7 +191,8 @@ def declared(path) -> dict:
     look_target, eye_up), ``grid`` (the 3D line grid's plane), ``hidden``
     (the entities a view's overrides hide, e.g. ``/channels/speed``),
     ``y_range`` and ``legend`` (per time-series view: its y range, when
-    set, and its legend's corner), all from the last blueprint sent."""
+    set, and its legend's corner), ``title`` (the particle view's name,
+    listed in ``views`` as "particles"), all from the last blueprint sent."""
     from rerun.chunk import RrdReader
 
     reader = RrdReader(str(path))
@@ -191,7 +206,7 @@ def declared(path) -> dict:
     props = data.reader(index=None, contents="/__properties/**").to_arrow_table()
     up = first(props, "property:view:up")
     out = {"up": up[0] if up else None, "coordinates": None, "flip": {}, "views": {}, "y_range": {}, "legend": {},
-           "timeline": None, "eye": {}, "grid": None, "hidden": []}
+           "timeline": None, "eye": {}, "grid": None, "hidden": [], "title": None}
     xyz = first(static, "/:ViewCoordinates:xyz")
     if xyz is not None:  # Rerun's codes: 1 up, 2 down, 3 right, 4 left, 5 forward, 6 back
         out["coordinates"] = "".join("?UDRLFB"[int(c)] for c in np.ravel(xyz))
@@ -201,14 +216,19 @@ def declared(path) -> dict:
     tables = [reader.store(store=b).stream().collect().reader(index="blueprint", contents="/**").to_arrow_table()
               for b in reader.blueprints()]
     if tables:
-        # the run's start sends a blueprint, its end the same one with the plots' y ranges (a superset);
-        # the reader does not keep their order, the viewer activates the last sent
-        table = max(tables, key=lambda t: len(t.column_names))
+        # the run's start sends a blueprint, its end another (the colour range, the plots' y ranges); the
+        # reader does not keep their order, the viewer activates the last sent: the latest log time
+        table = max(tables, key=lambda t: max(v for v in t.column("log_time").to_pylist() if v is not None)
+                    if "log_time" in t.column_names else 0)
         for c in table.column_names:
             if c.endswith(":ViewBlueprint:class_identifier"):
                 view = c.split(":")[0]
                 name = first(table, f"{view}:ViewBlueprint:display_name")
-                out["views"][name[0] if name else view] = first(table, c)[0]
+                kind = first(table, c)[0]
+                if kind in ("2D", "3D"):  # the particle view, named by what its colours mean
+                    out["title"] = name[0] if name else None
+                    name = ["particles"]
+                out["views"][name[0] if name else view] = kind
             elif ":EyeControls3D:" in c:
                 out["eye"][c.rsplit(":", 1)[1]] = np.ravel(first(table, c)).tolist()
             elif c.endswith(":ScalarAxis:range") or c.endswith(":PlotLegend:corner"):

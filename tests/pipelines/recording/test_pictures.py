@@ -14,7 +14,7 @@ from helpers import ROOT, compose_cfg
 from pipelines.config.validate import resolve
 from pipelines.recording import layout, recordings
 from pipelines.recording.display import render_frames
-from pipelines.recording.rerun_sink import PALETTE, color_range, colormap
+from pipelines.recording.colours import PALETTE, colormap, values_range
 from pipelines.run.runner import execute
 
 
@@ -87,6 +87,24 @@ def test_a_2d_recording_is_drawn_y_up_on_the_sim_time_timeline(tmp_path):
     # the particle data stay in the scene's coordinates (y up): the ball starts above the middle
     rec = recordings.read(path)
     assert rec.positions[0][:, 1].mean() > 0.5
+    # EMPM's reference is fresh at every step: the step allowed now is the step taken, one curve named for both
+    assert np.array_equal(rec.scalars["dt"][1], rec.scalars["dt_fresh"][1])
+    assert "time step (= time step allowed now) [s]" in series and "time step [s]" not in series
+    # the particle view is named by what its colours mean, and its key (a swatch per body) is recorded
+    assert d["title"] == "particles: ball blue"
+    key = RrdReader(str(path)).stream().collect().reader(index=None, contents="/particles/key/**").to_pandas()
+    assert [v[0] for c in key.columns if c.endswith(":labels") for v in key[c]] == ["ball (blue)"]
+
+
+def test_a_step_that_differs_from_the_one_allowed_now_is_drawn_beside_it(tmp_path):
+    """Under A-ULMPM the reference ages between updates and the step taken
+    falls below the one a fresh reference would allow: both curves share
+    one plot, neither left out."""
+    path = run(tmp_path, ["scheme=aulmpm", "scene.resolution=16", "run.duration=0.4", "log.every=0"])
+    rec = recordings.read(path)
+    assert not np.array_equal(rec.scalars["dt"][1], rec.scalars["dt_fresh"][1])
+    series = [name for name, kind in layout.declared(path)["views"].items() if kind == "TimeSeries"]
+    assert "time step [s]" in series and not any("(= " in name for name in series)
 
 
 def test_legends_sit_above_the_data(tmp_path):
@@ -126,39 +144,45 @@ def test_a_3d_recording_declares_y_up_and_a_camera_above_the_floor(tmp_path):
     assert cos.min() > np.cos(np.radians(45.0))
 
 
-def test_field_colours_use_a_range_fixed_for_the_run(tmp_path):
-    """log.color=dJ: every frame's colours are the map over the stated range
-    (not a running maximum); the range and map are recording properties."""
+def test_field_colours_use_the_runs_own_range(tmp_path):
+    """log.color=dJ: every frame's colours are the map over one range, the
+    run's own (from 0 to the largest dJ of any logged frame: nothing is
+    clipped, and not a running maximum); the range, map and source are
+    recording properties, and the particle view's name states them."""
     path = run(tmp_path, ["scene=rotating_plate_2d", "scheme=tlmpm", "scene.resolution=16", "run.steps=20",
                           "log.every=10", "log.color=dJ"])
     rec = recordings.read(path)
-    lo, hi = color_range("dJ")
-    assert rec.properties["color:field"] == ["dJ"] and rec.properties["color:colormap"] == ["viridis"]
-    assert rec.properties["color:low"] == [lo] and rec.properties["color:high"] == [hi]
+    lo, hi = values_range("dJ", rec.dJ)
+    assert lo == 0.0 and hi == max(float(d.max()) for d in rec.dJ) > 0
+    p = rec.properties
+    assert p["color:field"] == ["dJ"] and p["color:colormap"] == ["viridis"] and p["color:source"] == ["the run's range"]
+    assert np.isclose(p["color:low"][0], lo) and np.isclose(p["color:high"][0], hi, rtol=1e-6)
     from rerun.chunk import RrdReader
 
     df = RrdReader(str(path)).stream().collect().reader(index="step", contents="/particles").to_pandas()
     colors = [np.asarray(c, np.uint32) for c in df["/particles:Points2D:colors"] if c is not None]
     assert len(colors) == len(rec.steps) == 3
     for c, dJ in zip(colors, rec.dJ):
-        assert np.array_equal(c, colormap(dJ.astype(np.float32), hi, lo))
+        assert np.array_equal(c, colormap(dJ.astype(np.float32), p["color:high"][0], p["color:low"][0]))
     assert np.ptp(rec.dJ[-1]) > 0  # the frames do differ, so the check above can tell a range apart
+    assert np.any(colors[-1] == colormap(np.array([hi], np.float32), hi)[0])  # the top colour is used
+    assert layout.declared(path)["title"] == f"particles: dJ 0 to {hi:.3g} (the run's range)"
 
 
-def test_speed_colours_follow_the_speed_map_over_a_range_stated_before_the_run(tmp_path):
+def test_speed_colours_follow_the_speed_map_over_the_runs_range(tmp_path):
     """log.color=speed: the particles' |v| [m/s] is recorded and coloured on
-    the map from 0 to the free-fall bound sqrt(v0^2 + 2 g H) of the ball at
-    rest (H: its highest particle above the floor), stated in the recording."""
+    the map from 0 to the fastest particle of any logged frame; the ball
+    falls from rest, so that is g t at the last frame (t = 0.04 s)."""
     path = run(tmp_path, ["scene.resolution=16", "run.steps=40", "log.every=20", "log.color=speed"])
     rec = recordings.read(path)
     final = np.load(tmp_path / "final_state.npz")
     assert np.allclose(rec.fields[-1]["speed"], np.linalg.norm(final["v"], axis=1), rtol=1e-6)
     assert rec.fields[0]["speed"].max() == 0.0  # the ball starts at rest
-    wall = 3 * 1.0 / 16  # the floor: three cells of the 16-cell grid over 1 m
-    top = np.sqrt(2 * 9.81 * (rec.positions[0][:, 1].max() - wall))
     p = rec.properties
-    assert p["color:field"] == ["speed"] and p["color:unit"] == ["m/s"] and "free fall" in p["color:source"][0]
-    assert p["color:low"] == [0.0] and np.isclose(p["color:high"][0], top, rtol=1e-5)
+    assert p["color:field"] == ["speed"] and p["color:unit"] == ["m/s"] and p["color:source"] == ["the run's range"]
+    top = max(float(f["speed"].max()) for f in rec.fields)
+    assert p["color:low"] == [0.0] and np.isclose(p["color:high"][0], top, rtol=1e-6)
+    assert np.isclose(top, 9.81 * rec.times[-1], rtol=1e-3)  # free fall: v = g t (float32)
     from rerun.chunk import RrdReader
 
     df = RrdReader(str(path)).stream().collect().reader(index="step", contents="/particles").to_pandas()
@@ -168,8 +192,8 @@ def test_speed_colours_follow_the_speed_map_over_a_range_stated_before_the_run(t
         assert np.array_equal(c, colormap(speed["speed"], p["color:high"][0], 0.0))
     assert not np.array_equal(colors[0], colors[-1])  # the ball has picked up speed: its colour changed
     legend = RrdReader(str(path)).stream().collect().reader(index=None, contents="/legend").to_pandas()
-    assert "speed [m/s]" in str(legend.iloc[0].to_dict())
-    # a range given in the config replaces the bound; a bad one is refused naming the key
+    assert f"speed 0 to {top:.3g} m/s" in str(legend.iloc[0].to_dict())
+    # a range given in the config replaces the run's; a bad one is refused naming the key
     path = run(tmp_path / "given", ["scene.resolution=16", "run.steps=1", "log.color=speed",
                                     "log.color_range=[0,2.5]"])
     assert recordings.read(path).properties["color:high"] == [2.5]
