@@ -122,13 +122,19 @@ class Tracker:
         return {r.name: reduce(r.reduce, np.array([v for _, v in series]))
                 for r, series in zip(self.responses, self.series)}
 
+    def reached(self) -> dict[str, bool]:
+        """Each response's :func:`reached` over the states recorded so far."""
+        return {r.name: reached(r.reduce, np.array([v for _, v in series]))
+                for r, series in zip(self.responses, self.series)}
 
     def summary(self, body_names: list[str]) -> dict[str, dict]:
         """metrics.json ``responses``: per name its value (None when not
-        finite), unit, quantity, reduction and body (a name, or "all")."""
+        finite), unit, quantity, reduction, body (a name, or "all") and
+        whether the run reached it (:func:`reached`)."""
         return {r.name: {"value": v if np.isfinite(v) else None, "unit": r.unit, "quantity": r.quantity,
-                         "reduce": r.reduce, "body": "all" if r.body is None else body_names[r.body]}
-                for r, v in zip(self.responses, self.values().values())}
+                         "reduce": r.reduce, "body": "all" if r.body is None else body_names[r.body],
+                         "reached": ok}
+                for r, v, ok in zip(self.responses, self.values().values(), self.reached().values())}
 
 
 def reduce(kind: str, values: np.ndarray) -> float:
@@ -146,3 +152,20 @@ def reduce(kind: str, values: np.ndarray) -> float:
     if kind == "max_after_min":
         return float(values[lowest:].max())
     return float((values[0] - values[lowest]) / values[0])  # drop
+
+
+def reached(kind: str, values: np.ndarray) -> bool:
+    """Whether the run reached the extremum that ``kind`` reduces to: False
+    when it lies at the last state (the quantity still moving towards it
+    when the run ended, e.g. a ball still sinking into the floor or still
+    rising: the value is a bound, not the response); "final" always."""
+    values = values[np.isfinite(values)]
+    if kind == "final" or len(values) == 0:
+        return kind == "final"
+    last = len(values) - 1
+    if kind == "max":
+        return int(np.argmax(values)) < last
+    lowest = int(np.argmin(values))
+    if kind == "max_after_min":
+        return lowest + int(np.argmax(values[lowest:])) < last
+    return lowest < last  # min, drop

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mpm
-from mpm.responses import QUANTITIES, REDUCTIONS, Response, Tracker, quantity, reduce
+from mpm.responses import QUANTITIES, REDUCTIONS, Response, Tracker, quantity, reached, reduce
 
 
 class _Model:
@@ -37,12 +37,27 @@ def test_the_lists_name_every_quantity_and_reduction():
     assert np.isnan(reduce("max", np.array([])))
 
 
+def test_an_extremum_at_the_last_state_is_not_reached():
+    """A ball still sinking when the run ends: its smallest height is the
+    last, a bound on the compression, not the peak; once it rises again the
+    peak is reached. The rebound is reached only once the rise has turned."""
+    sinking = np.array([1.0, 0.9, 0.8])
+    turned = np.array([1.0, 0.8, 0.9, 0.95, 0.9])
+    assert not reached("drop", sinking) and not reached("min", sinking) and reached("max", sinking)
+    assert reached("drop", turned) and reached("max_after_min", turned)
+    assert not reached("max_after_min", turned[:4])  # still rising
+    assert reached("final", sinking) and not reached("max", np.array([]))
+
+
 def test_a_tracker_follows_one_body_or_all():
     model = _Model(M, [(0, 3), (3, 1)])
     tracker = Tracker([Response("low", "bottom", 0, "min"), Response("all_front", "front", None, "final")], model)
     tracker.update(X, 0.0)
     tracker.update(X - [0.0, 0.1], 0.1)
     assert tracker.values() == pytest.approx({"low": 0.1, "all_front": 2.0})
+    assert tracker.reached() == {"low": False, "all_front": True}
+    assert tracker.summary(["a", "b"])["low"] == {"value": pytest.approx(0.1), "unit": "m", "quantity": "bottom",
+                                                  "reduce": "min", "body": "a", "reached": False}
     with pytest.raises(ValueError, match="body 2"):
         Tracker([Response("x", "top", 2)], model)
     with pytest.raises(ValueError, match="a name twice"):

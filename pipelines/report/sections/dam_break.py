@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from ...recording import recordings
-from ..common import absent, add_image, md_table, pyplot, write_csv
+from ..common import absent, add_image, md_table, natural_key, pyplot, write_csv
 from ..jobs import Job
 from ..registry import section
 
@@ -177,7 +177,7 @@ def section_dam_break(jobs: list[Job], out: Path) -> list[str]:
     if not have:
         return []
     curves, rows = {}, []
-    for j in sorted(have, key=lambda j: (j.resolution or 0, j.label)):
+    for j in sorted(have, key=lambda j: (j.resolution or 0, natural_key(j.label))):
         f = fronts(j)
         if f is None or len(f[0]) < 2:
             continue

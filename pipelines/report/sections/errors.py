@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..common import absent, add_image, md_table, pareto_front, positive, pyplot, write_csv
+from ..common import absent, add_image, md_table, natural_key, pareto_front, positive, pyplot, write_csv
 from ..jobs import Job, job_error
 from ..registry import section
 
@@ -49,7 +49,7 @@ def section_errors(jobs: list[Job], out: Path, style: dict) -> list[str]:
         for c, q in enumerate(quantities):
             ax = axes[r][c]
             pts = [j for j in members if positive(job_error(j, q))]
-            for label in sorted({j.label for j in pts}):
+            for label in sorted({j.label for j in pts}, key=natural_key):
                 js = sorted((j for j in pts if j.label == label), key=lambda j: j.resolution or 0)
                 colour, marker = style[label]
                 ax.plot([_run_time(j) for j in js], [job_error(j, q) for j in js], marker=marker,

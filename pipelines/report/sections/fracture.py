@@ -19,7 +19,7 @@ def section_fracture(jobs: list[Job], out: Path, style: dict) -> list[str]:
     if not have:
         return absent(title, "no completed job reports fracture")
     rows = []
-    for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, j.label)):
+    for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, natural_key(j.label))):
         rows.append([j.scene, j.label, j.resolution, j.rel, j.num("fracture"), as_int(j.num("fragments"))])
     write_csv(out / "fracture.csv", ["scene", "label", "resolution", "dir", "fracture", "fragments"], rows)
     groups = sorted({group_name(j) for j in have}, key=natural_key)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..common import absent, md_table, write_csv
+from ..common import absent, md_table, natural_key, write_csv
 from ..registry import section
 
 
@@ -147,7 +147,7 @@ def section_granular(jobs: list, out) -> list[str]:
     if not have:
         return absent(title, "no column-collapse job")
     rows = []
-    for j in sorted(have, key=lambda j: (j.scene, j.label)):
+    for j in sorted(have, key=lambda j: (j.scene, natural_key(j.label))):
         s = j.final_state()
         if s is None or j.status not in ("completed", "unstable"):
             rows.append([j.scene, j.label, j.status, None, None, None, None, None, None, None, None])

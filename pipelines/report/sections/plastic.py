@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ..common import absent, md_table, write_csv
+from ..common import absent, md_table, natural_key, write_csv
 from ..registry import section
 
 
@@ -13,7 +13,7 @@ def section_plastic(jobs: list, out) -> list[str]:
     (metrics.json ``plastic``: min, mean and max per field), plastic.csv."""
     title = "Plastic state"
     rows = []
-    for j in sorted(jobs, key=lambda j: (j.scene, j.label)):
+    for j in sorted(jobs, key=lambda j: (j.scene, natural_key(j.label))):
         for body, fields in (j.metrics.get("plastic") or {}).items():
             for name, v in fields.items():
                 rows.append([j.scene, j.label, j.status, body, name, v["min"], v["mean"], v["max"]])

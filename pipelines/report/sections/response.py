@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections import defaultdict
 from pathlib import Path
 
+from mpm.responses import QUANTITIES, REDUCTIONS
+
 from ..common import (add_image, geometric, md_table, natural_key, num, parameter_label, positive, pyplot, total,
                       write_csv)
 from ..jobs import RESOLUTION_KEYS, Job
@@ -39,6 +41,29 @@ def scene_responses(jobs: list[Job]) -> list[tuple]:
         return lambda j: num(((j.metrics.get("responses") or {}).get(name) or {}).get("value"))
 
     return [(name, name.replace('_', ' '), unit, getter(name)) for name, unit in found.items()]
+
+
+def scene_response(j: Job, name: str) -> dict:
+    """Job ``j``'s metrics.json entry of scene response ``name`` ({} if none)."""
+    return (j.metrics.get("responses") or {}).get(name) or {}
+
+
+def not_reached(j: Job, name: str) -> bool:
+    """Whether the run ended before it reached response ``name``'s extremum
+    (``mpm.responses.reached``): its value is a bound."""
+    return scene_response(j, name).get("reached") is False
+
+
+def definitions(jobs: list[Job], names: list[str]) -> list[str]:
+    """A line per scene response: what it measures, in words."""
+    out = []
+    for name in names:
+        r = next((scene_response(j, name) for j in jobs if scene_response(j, name)), {})
+        what = QUANTITIES.get(r.get("quantity"), r.get("quantity", "?")).split(" [")[0]
+        body = "every body's particles" if r.get("body") == "all" else f"the {r.get('body')}"
+        out.append(f"- *{name.replace('_', ' ')}* [{r.get('unit', '')}]: {what} of {body}, "
+                   f"{REDUCTIONS.get(r.get('reduce'), r.get('reduce'))}.")
+    return out
 
 
 def swept_parameters(jobs: list[Job]) -> dict[str, dict]:
@@ -83,6 +108,10 @@ def section_response(jobs: list[Job], out: Path, style: dict) -> list[str]:
     # not zero in all (a plot with something to show)
     responses = [r for r in scene_responses(done) + RESPONSES if any(r[3](j) is not None for j in done)
                  and any(r[3](j) for j in done if r[3](j) is not None)]
+    # one value in every job (EMPM's update at every step): a sentence, not a flat line
+    constant = [r for r in responses if len(done) > 1 and all(r[3](j) is not None for j in done)
+                and len({r[3](j) for j in done}) == 1]
+    responses = [r for r in responses if r not in constant]
     if not responses:
         return []
     plt = pyplot()
@@ -106,6 +135,10 @@ def section_response(jobs: list[Job], out: Path, style: dict) -> list[str]:
                 pts = sorted(by_line[label], key=lambda p: p[0])
                 colour, marker = style.get(pts[0][2].label, ("C0", "o"))
                 ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=marker, color=colour, label=label)
+                bounds = [p for p in pts if not_reached(p[2], name)]  # hollow: the run ended first
+                if bounds:
+                    ax.plot([p[0] for p in bounds], [p[1] for p in bounds], linestyle="none", marker=marker,
+                            markersize=9, markerfacecolor="white", markeredgecolor=colour)
                 rows += [[key, p[0], label, name, p[1], p[2].rel] for p in pts]
             ys = [p[1] for pts in by_line.values() for p in pts]
             if log_x:
@@ -129,6 +162,19 @@ def section_response(jobs: list[Job], out: Path, style: dict) -> list[str]:
         lines += [f"Swept: `{key}` = {', '.join(f'{v:g}' for v in sorted(set(xs)))}"
                   + (" (geometric: log axis)" if log_x else "")
                   + ("; the resolution in cells across the domain" if key in RESOLUTION_KEYS else "") + ".", ""]
+    if constant:
+        lines += ["The same in every job: " + "; ".join(
+            f"{title} {r3(done[0]):.4g}{' ' + unit if unit else ''}" for _, title, unit, r3 in constant) + ".", ""]
+    physical = [r[0] for r in responses if r[0] in {n for n, *_ in scene_responses(done)}]
+    if physical:
+        lines += ["The scene's responses (`scene.responses`, each job's metrics.json):", ""]
+        lines += definitions(done, physical) + [""]
+        late = {n: [j.rel for j in done if not_reached(j, n)] for n in physical}
+        for n, rels in ((n, rels) for n, rels in late.items() if rels):
+            lines += [f"Not reached: *{n.replace('_', ' ')}* in job{'s' * (len(rels) > 1)} "
+                      f"{', '.join(sorted(rels, key=natural_key))} (hollow markers): the quantity was still moving "
+                      "towards it at the run's last state, so the value is a bound, not the response; a longer "
+                      "run (`run.duration`) reaches it.", ""]
     shared = concurrent(done)
     if shared and any(r[0] == "step_time_ms" for r in responses):
         lines += [f"{shared} of the {len(done)} jobs ran while another did (their wall-clock spans overlap): "

@@ -28,7 +28,7 @@ def section_speed(jobs: list[Job], out: Path, style: dict) -> list[str]:
         if j.kernel == "quadratic":
             quadratic.setdefault(kernel_key(j), j)
     rows, ratios = [], []
-    for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, j.label)):
+    for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, natural_key(j.label))):
         q = quadratic.get(kernel_key(j))
         ratio = None
         if q is not None and q is not j and j.kernel != "quadratic":

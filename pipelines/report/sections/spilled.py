@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..common import md_table, write_csv
+from ..common import md_table, natural_key, write_csv
 from ..jobs import Job
 from ..registry import section
 
@@ -17,7 +17,7 @@ def section_spilled(jobs: list[Job], out: Path) -> list[str]:
     if not have:
         return []
     rows = [[j.scene, j.label, j.resolution, j.rel, name, frac, (j.metrics.get("fragments") or {}).get(
-        name.split("/")[1])] for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, j.label))
+        name.split("/")[1])] for j in sorted(have, key=lambda j: (j.scene, j.resolution or 0, natural_key(j.label)))
         for name, frac in j.metrics["spilled"].items()]
     write_csv(out / "spilled.csv", ["scene", "label", "resolution", "dir", "fluid/bowl", "spilled",
                                     "bowl_fragments"], rows)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..common import absent, as_int, md_table, positive, write_csv
+from ..common import absent, as_int, md_table, natural_key, positive, write_csv
 from ..jobs import Job, extras_without
 from ..registry import section
 
@@ -28,7 +28,7 @@ def section_update_cost(jobs: list[Job], out: Path) -> list[str]:
         if j.scheme == "empm" and positive(j.num("update_time_ms")):
             empm.setdefault(match_key(j), j)
     rows, pairs = [], []
-    for j in sorted(have, key=lambda j: (j.scene, j.label, j.resolution or 0)):
+    for j in sorted(have, key=lambda j: (j.scene, natural_key(j.label), j.resolution or 0)):
         reduction, partner = None, None
         e = empm.get(match_key(j))
         if j.scheme == "aulmpm" and e is not None and positive(j.num("update_time_ms")):

@@ -239,19 +239,32 @@ def test_a_plain_sweep_sorts_by_value_and_leaves_out_what_it_lacks(tmp_path):
     that the jobs ran at the same time (their 2 s wall-clock spans, ending
     when metrics.json was written, overlap); once they are 10 s apart, not."""
     sweep = tmp_path / "sweep"
-    for i, E in enumerate(("5e4", "1e5", "2e5")):
-        responses = {"peak_compression": {"value": 0.3 / (i + 1), "unit": "-"},
-                     "rebound_height": {"value": (0.2, 0.25, 0.3)[i], "unit": "m"}}
-        _job(sweep, f"material.E={E}", _metrics("empm", "quadratic", 16, config_hash=f"E{i}", responses=responses),
+    values = ("50000.0", "100000.0", "200000.0")  # as Hydra writes 5e4,1e5,2e5: as text, 100000.0 comes first
+    for i, E in enumerate(values):
+        responses = {"peak_compression": {"value": 0.3 / (i + 1), "unit": "-", "quantity": "height",
+                                          "reduce": "drop", "body": "ball", "reached": True},
+                     "rebound_height": {"value": (0.2, 0.25, 0.3)[i], "unit": "m", "quantity": "bottom",
+                                        "reduce": "max_after_min", "body": "ball", "reached": i != 2}}
+        _job(sweep, f"material.E={E}", _metrics("empm", "quadratic", 16, config_hash=f"E{i}", responses=responses,
+                                                step_time_ms=1.0 + i, updates_per_1e4_steps=1e4),
              ["scheme=empm", f"material.E={E}"])
     text = write_report(sweep, tmp_path / "out").read_text()
     rows = _rows(tmp_path / "out" / "runs.csv")
-    assert [r["dir"] for r in rows] == ["material.E=5e4", "material.E=1e5", "material.E=2e5"]
+    assert [r["dir"] for r in rows] == [f"material.E={E}" for E in values]
+    # every per-job table orders E by value
+    assert [r["label"].split("=")[-1] for r in _rows(tmp_path / "out" / "speed.csv")] == list(values)
+    update_table = text.split("## Configuration-update cost", 1)[1].split("##", 1)[0]
+    assert [update_table.index(f"E={E} |") for E in values] == sorted(update_table.index(f"E={E} |") for E in values)
+    # what each response measures; a value the run ended before reaching is named; a constant is a sentence
+    assert "*rebound height* [m]: the lowest particle's height" in text
+    assert "Not reached: *rebound height* in job material.E=200000.0" in text and "Not reached: *peak" not in text
+    assert "configuration updates 1e+04 per 10⁴ steps;" in text.split("The same in every job: ", 1)[1].split("\n")[0]
     # the scene's responses against E, by value, beside the costs
     response = [r for r in _rows(tmp_path / "out" / "response.csv") if r["parameter"] == "material.E"]
     rebound = [(float(r["value"]), float(r["response_value"])) for r in response if r["response"] == "rebound_height"]
     assert rebound == [(5e4, 0.2), (1e5, 0.25), (2e5, 0.3)]
     assert {r["response"] for r in response} >= {"peak_compression", "rebound_height", "step_time_ms"}
+    assert "updates_per_1e4_steps" not in {r["response"] for r in response}
     assert "Not available" not in text
     tail = text.split("## Sections without data in this sweep", 1)[1]
     assert "Cantilever under a tip load" in tail and "Stability maps: the largest stable time step" in tail
