@@ -38,7 +38,7 @@ def scene_responses(jobs: list[Job]) -> list[tuple]:
             found.setdefault(name, r.get("unit", ""))
 
     def getter(name: str):
-        return lambda j: num(((j.metrics.get("responses") or {}).get(name) or {}).get("value"))
+        return lambda j: num(scene_response(j, name).get("value"))
 
     return [(name, name.replace('_', ' '), unit, getter(name)) for name, unit in found.items()]
 
