@@ -8,7 +8,9 @@ had ``--wait`` seconds to load (its wasm takes about a minute on two cores).
 Needs Chromium (``apt-get install chromium``) and ``aiohttp`` (``pip install
 -e ".[screenshot]"``), both checked before anything starts. The server and
 the browser run in process groups of their own, ended on every way out
-(success, failure, Ctrl-C, SIGTERM): nothing is left running.
+(success, failure, Ctrl-C, SIGTERM); on Linux this process also adopts what
+the browser detaches from its group (its crash handlers) and ends and reaps
+it, so that not even a zombie is left when it returns.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import base64
+import ctypes
 import json
 import importlib.util
 import os
@@ -89,6 +92,74 @@ def _end(p: subprocess.Popen) -> None:
     p.wait()
 
 
+def _children() -> set[int]:
+    """The pids whose parent is this process (Linux; elsewhere none)."""
+    return {pid for pid, ppid, _, _ in _proc_stats() if ppid == os.getpid()}
+
+
+def _proc_stats():
+    """(pid, ppid, pgid, state) of every process in /proc."""
+    if not os.path.isdir("/proc"):
+        return
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            yield int(entry), int(fields[1]), int(fields[2]), fields[0]  # fields: state, ppid, pgrp, ...
+
+
+def _subreaper(on: bool) -> bool:
+    """Linux: make this process (or stop it being) the parent of its
+    orphaned descendants (prctl PR_SET_CHILD_SUBREAPER); returns whether it
+    was one before. Elsewhere nothing, False."""
+    if not sys.platform.startswith("linux"):
+        return False
+    libc = ctypes.CDLL(None, use_errno=True)
+    was = ctypes.c_int(0)
+    libc.prctl(37, ctypes.byref(was), 0, 0, 0)  # PR_GET_CHILD_SUBREAPER
+    libc.prctl(36, int(on), 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
+    return bool(was.value)
+
+
+def _end_adopted(pids: set[int]) -> None:
+    """End and reap the adopted orphans ``pids`` (children of this process
+    not started by it): SIGTERM, then SIGKILL to what is left after 5 s."""
+    left = set(pids)
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in left:
+            try:
+                os.kill(pid, sig)
+            except ProcessLookupError:
+                pass
+        end = time.monotonic() + 5.0
+        while left and time.monotonic() < end:
+            for pid in list(left):
+                try:
+                    done, _ = os.waitpid(pid, os.WNOHANG)
+                except ChildProcessError:
+                    done = pid
+                if done:
+                    left.discard(pid)
+            time.sleep(0.05)
+        if not left:
+            return
+    for pid in left:
+        os.waitpid(pid, 0)
+
+
+def _remove_singleton_dir(profile: str) -> None:
+    """Remove the temporary directory holding the browser's singleton
+    socket (``/tmp/org.chromium.Chromium.*``, linked from its profile),
+    which a headless browser leaves behind."""
+    link = Path(profile) / "SingletonSocket"
+    if link.is_symlink():
+        target = Path(os.readlink(link)).parent
+        if target.name.startswith("org.chromium.Chromium.") and target.parent == Path(tempfile.gettempdir()):
+            shutil.rmtree(target, ignore_errors=True)
+
+
 def group_members(pgid: int) -> list[int]:
     """The live (not zombie) processes of process group ``pgid`` (Linux:
     from /proc; elsewhere [pgid] while the group exists)."""
@@ -98,16 +169,7 @@ def group_members(pgid: int) -> list[int]:
             return [pgid]
         except ProcessLookupError:
             return []
-    out = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[2]) == pgid and fields[0] != "Z":  # fields: state, ppid, pgrp, ...
-                out.append(int(entry))
-    return out
+    return [pid for pid, _, group, state in _proc_stats() if group == pgid and state != "Z"]
 
 
 async def _capture(port: int, url: str, out: Path, wait: float, size: tuple[int, int]) -> None:
@@ -153,6 +215,7 @@ def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900),
     main_thread = threading.current_thread() is threading.main_thread()
     if main_thread:
         signal.signal(signal.SIGTERM, _terminated)  # SIGTERM unwinds through the finally below
+    children, was_subreaper = _children(), _subreaper(True)
     try:
         started.append(_start([rerun_executable(), "--serve-web", "--web-viewer-port", str(web), "--port", str(grpc),
                                *files]))
@@ -162,10 +225,17 @@ def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900),
                                f"--window-size={size[0]},{size[1]}", f"--remote-debugging-port={devtools}",
                                "about:blank"]))
         _wait_for(f"http://127.0.0.1:{devtools}/json/version", start_timeout)
-        asyncio.run(_capture(devtools, url, Path(out), wait, size))
+        try:
+            asyncio.run(_capture(devtools, url, Path(out), wait, size))
+        except (OSError, StopIteration) as e:  # aiohttp's connection errors are OSErrors
+            raise RuntimeError(f"the browser's DevTools connection failed: {e or type(e).__name__}") from e
     finally:
         for p in reversed(started):
             _end(p)
+        _end_adopted(_children() - children - {p.pid for p in started})
+        if not was_subreaper:
+            _subreaper(False)
+        _remove_singleton_dir(profile)
         shutil.rmtree(profile, ignore_errors=True)
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

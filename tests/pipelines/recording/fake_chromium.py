@@ -3,7 +3,11 @@ calls the screenshot makes (``/json/version``, ``/json/list`` and a page's
 WebSocket) and returns, for ``Page.captureScreenshot``, a PNG of the size
 ``Emulation.setDeviceMetricsOverride`` set. It starts a child process of its
 own (``sleep``), as a browser does, so that a test sees whether the whole
-process group ends. ``FAKE_CHROMIUM=silent``: it never answers."""
+process group ends, and, as Chromium's crash handler, a second one detached
+in a session of its own (its pid written to ``FAKE_CHROMIUM_DETACHED``); it
+links ``SingletonSocket`` in its profile to a directory
+``org.chromium.Chromium.*`` in the temporary directory, as Chromium does.
+``FAKE_CHROMIUM=silent``: it never answers."""
 
 from __future__ import annotations
 
@@ -13,7 +17,9 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 
 def png(width: int, height: int) -> bytes:
@@ -28,6 +34,17 @@ def png(width: int, height: int) -> bytes:
 def main() -> None:
     port = next(int(a.split("=", 1)[1]) for a in sys.argv[1:] if a.startswith("--remote-debugging-port="))
     subprocess.Popen(["sleep", "300"])  # a child, as the browser's renderer
+    # a grandchild in a session of its own, its parent gone: an orphan, as the crash handler
+    detached = subprocess.Popen([sys.executable, "-c", "import subprocess; "
+                                 "print(subprocess.Popen(['sleep', '300'], start_new_session=True, "
+                                 "stdout=subprocess.DEVNULL).pid)"],
+                                stdout=subprocess.PIPE, text=True)
+    pid = detached.communicate()[0].strip()
+    if os.environ.get("FAKE_CHROMIUM_DETACHED"):
+        Path(os.environ["FAKE_CHROMIUM_DETACHED"]).write_text(pid)
+    profile = next(a.split("=", 1)[1] for a in sys.argv[1:] if a.startswith("--user-data-dir="))
+    singleton = tempfile.mkdtemp(prefix="org.chromium.Chromium.")
+    os.symlink(f"{singleton}/SingletonSocket", f"{profile}/SingletonSocket")
     if os.environ.get("FAKE_CHROMIUM") == "silent":
         time.sleep(300)
         return

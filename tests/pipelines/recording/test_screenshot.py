@@ -3,12 +3,16 @@ before anything starts, the picture has the size asked for, and no process
 it started (the viewer's server, the browser, their children) outlives it,
 after success and after a failure. A stand-in browser
 (tests/pipelines/recording/fake_chromium.py) speaks the DevTools calls, so
-the tests run without Chromium; the server is Rerun's own."""
+the tests run without Chromium; the server is Rerun's own. "No process"
+means none alive and none a zombie: what the browser detached from its
+group (as Chromium's crash handlers) is ended and reaped too."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +46,23 @@ def chromium(tmp_path, monkeypatch) -> Path:
 
 
 @pytest.fixture
+def detached(tmp_path, monkeypatch) -> Path:
+    """The file where the stand-in browser writes its detached process's pid."""
+    path = tmp_path / "detached.pid"
+    monkeypatch.setenv("FAKE_CHROMIUM_DETACHED", str(path))
+    return path
+
+
+def gone(pid: int) -> bool:
+    """No process ``pid``: neither running nor a zombie."""
+    return not os.path.exists(f"/proc/{pid}") if os.path.isdir("/proc") else True
+
+
+def singleton_dirs() -> set[str]:
+    return {d for d in os.listdir(tempfile.gettempdir()) if d.startswith("org.chromium.Chromium.")}
+
+
+@pytest.fixture
 def groups(monkeypatch) -> list[subprocess.Popen]:
     """The processes the screenshot starts (each leads a group of its own)."""
     started, start = [], shot._start
@@ -55,21 +76,26 @@ def groups(monkeypatch) -> list[subprocess.Popen]:
     return started
 
 
-def test_the_picture_has_the_size_asked_for_and_nothing_is_left(recording, chromium, groups, tmp_path):
+def test_the_picture_has_the_size_asked_for_and_nothing_is_left(recording, chromium, groups, detached, tmp_path):
+    dirs = singleton_dirs()
     out = shot.screenshot(recording, tmp_path / "out.png", wait=0.0, size=(640, 360), chromium=str(chromium))
     assert Image.open(out).size == (640, 360)
     assert len(groups) == 2  # the server, the browser
     assert all(p.returncode is not None and shot.group_members(p.pid) == [] for p in groups)
+    assert gone(int(detached.read_text()))  # the browser's detached process: ended and reaped
+    assert singleton_dirs() <= dirs  # the browser's singleton directory removed
 
 
-def test_a_failed_screenshot_leaves_no_process(recording, chromium, groups, tmp_path, monkeypatch):
+def test_a_failed_screenshot_leaves_no_process(recording, chromium, groups, detached, tmp_path, monkeypatch):
     """The browser never answers: the screenshot fails after its start
-    timeout, and the server, the browser and the browser's child are gone
-    (twice, so that a second use finds nothing of the first)."""
+    timeout, and the server, the browser, the browser's child and its
+    detached process are gone (twice, so that a second use finds nothing of
+    the first)."""
     monkeypatch.setenv("FAKE_CHROMIUM", "silent")
     for _ in range(2):
         with pytest.raises(OSError):
             shot.screenshot(recording, tmp_path / "out.png", wait=0.0, chromium=str(chromium), start_timeout=2.0)
+        assert gone(int(detached.read_text()))
     assert len(groups) == 4
     assert all(shot.group_members(p.pid) == [] for p in groups)
     assert not (tmp_path / "out.png").exists()
