@@ -10,7 +10,8 @@ Needs Chromium (``apt-get install chromium``) and ``aiohttp`` (``pip install
 the browser run in process groups of their own, ended on every way out
 (success, failure, Ctrl-C, SIGTERM); on Linux this process also adopts what
 the browser detaches from its group (its crash handlers) and ends and reaps
-it, so that not even a zombie is left when it returns.
+it, so that not even a zombie is left when it returns (a child another
+thread starts meanwhile would be taken for one of the browser's).
 """
 
 from __future__ import annotations
