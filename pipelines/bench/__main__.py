@@ -265,6 +265,9 @@ def main(argv=None) -> None:
     p.add_argument("--json", type=Path, default=None, help="also write the results here")
     for table, what in SKIPPABLE.items():
         p.add_argument(f"--no-{table}", dest=table, action="store_false", help=f"skip the {what} table")
+    p.add_argument("--genesis-python", default=os.environ.get("GENESIS_PYTHON"),
+                   help="a Python with genesis-world installed: the peers table adds Genesis on the 3D ball "
+                        "(CPU only; default: $GENESIS_PYTHON)")
     p.add_argument("--paper", action="store_true", help="add the A-ULMPM Table 2 scenes at the paper's size")
     p.add_argument("--scaling", action="store_true", help="add the 10K-1M particle scaling table")
     p.add_argument("--large", action="store_true", help="add the 1M and 10M particle sphere (for a GPU)")
@@ -309,6 +312,8 @@ def main(argv=None) -> None:
         rows = ([bench_case(c, CASES[c], args.steps or STEPS[c], Path(tmp)) for c in args.cases]
                 if args.speed else [])
         peer_rows = peers.bench_peers(Path(tmp), device) if args.peers else []
+        genesis_rows = (peers.bench_genesis(Path(tmp), args.genesis_python) if args.peers and device == "cpu"
+                        else [])
         schemes = bench_schemes(Path(tmp), args.steps) if args.schemes else []
         updates = bench_updates(Path(tmp)) if args.updates else []
         kernels = bench_kernels(Path(tmp), 40) if args.kernels else []
@@ -334,6 +339,8 @@ def main(argv=None) -> None:
               f"{r['step_ms']:>8.3f} {r['particle_steps_per_s'] / 1e6:>13.2f} {logged}")
     if peer_rows:
         peers.print_peers(peer_rows, device)
+        if genesis_rows:
+            peers.print_genesis(genesis_rows)
     if schemes:
         print("\nschemes on the 2D ball (128^2) and the 3D sphere (64^3), step only")
         print(f"{'case':<8} {'place':<13} {'scheme':<8} {'ms/step':>8} {'vs empm':>8} {'update ms/step':>15} "
@@ -412,7 +419,7 @@ def main(argv=None) -> None:
         throughput.print_sweep(sweep)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
-                                         "peers": peer_rows, "kernels": kernels, "materials": materials,
+                                         "peers": peer_rows + genesis_rows, "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
                                          "profile": profile, "precision": precisions, "paper": paper,

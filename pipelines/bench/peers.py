@@ -11,10 +11,22 @@ is the per-core comparison) or on the GPU. Ours is the same ball through
 ``pipelines.run`` with logging off (the full step: the time-step policy,
 the stability figures, the walls). Interleaved rounds, the fastest median
 of each; the ratio is Taichi's ms per step over ours.
+
+Genesis's MPM (genesis-world 1.4, its CPU backend on one thread; too large
+to share this project's environment: ``--genesis-python`` names a Python
+where it is installed) steps the 3D elastic ball (64^3 cells, fixed
+corotated, ours EMPM MLS) in a process of its own
+(pipelines/bench/genesis_peer.py), in rounds interleaved with ours. Genesis
+samples its own particles (particle size dx / 2, as our 8 per cell), so
+the counts differ slightly: the table gives both, the ratio of ms per step
+and the ratio of particle-steps per second.
 """
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -145,6 +157,64 @@ def bench_peers(workdir: Path, device: str, rounds: int = ROUNDS) -> list[dict]:
         theirs = t if theirs is None else min(theirs, t)
     return [{"peer": "taichi", "missing": False, "particles": n, "ours_ms": ours, "taichi_ms": theirs,
              "ratio": theirs / ours, "threads": 1 if device == "cpu" else None, "rounds": rounds}]
+
+
+BALL_3D = ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated", "scheme=empm"]
+GENESIS_STEPS = 60
+GENESIS_SCRIPT = Path(__file__).with_name("genesis_peer.py")
+
+
+def genesis_ball(python: str, steps: int = GENESIS_STEPS, timeout: float = 1800.0) -> dict:
+    """Genesis's ms per step on the bench's 3D ball, run by ``python`` (a
+    Python with genesis-world installed): {particles, ms_per_step, build_s,
+    threads, genesis}."""
+    spec = spec_for(BALL_3D)
+    body = spec.scene.bodies[0]
+    mat, shape = body.material, body.shape
+    args = {"dt": DT, "gravity": list(spec.scene.gravity), "domain": list(spec.scene.domain),
+            "grid_density": round(1.0 / spec.scene.dx), "particle_size": spec.scene.dx / 2,
+            "E": mat.E, "nu": mat.nu, "rho": mat.rho, "center": list(shape.center), "radius": shape.radius,
+            "warm": 5, "steps": steps}
+    out = subprocess.run([python, str(GENESIS_SCRIPT), json.dumps(args)], capture_output=True, text=True,
+                         timeout=timeout)
+    if out.returncode != 0:
+        raise RuntimeError(f"the Genesis peer failed ({python}): {out.stderr.strip().splitlines()[-1:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def bench_genesis(workdir: Path, python: str | None, rounds: int = ROUNDS) -> list[dict]:
+    """Ours and Genesis's on the 3D ball, ``rounds`` interleaved rounds (the
+    fastest median of each); ``python`` None: not measured."""
+    if not python:
+        return [{"peer": "genesis", "missing": True}]
+    ours = theirs = None
+    for k in range(rounds):
+        m = interleaved({"ours": BALL_3D + QUIET}, [f"run.steps={GENESIS_STEPS}"], workdir / f"genesis{k}", 1,
+                        warm=WARM if k == 0 else None)["ours"]
+        ours = m if ours is None or m["step_time_ms"] < ours["step_time_ms"] else ours
+        g = genesis_ball(python)
+        theirs = g if theirs is None or g["ms_per_step"] < theirs["ms_per_step"] else theirs
+    n_ours, n_theirs = ours["particles"], theirs["particles"]
+    return [{"peer": "genesis", "missing": False, "version": theirs["genesis"], "threads": theirs["threads"],
+             "particles": n_ours, "genesis_particles": n_theirs, "ours_ms": ours["step_time_ms"],
+             "genesis_ms": theirs["ms_per_step"], "ratio": theirs["ms_per_step"] / ours["step_time_ms"],
+             "throughput_ratio": (n_ours / ours["step_time_ms"]) / (n_theirs / theirs["ms_per_step"]),
+             "rounds": rounds}]
+
+
+def print_genesis(rows: list[dict]) -> None:
+    print("\npeers: the 3D elastic ball (64^3, EMPM MLS, fixed corotated) against Genesis's MPM "
+          "(CPU backend, one thread), fastest median of interleaved rounds")
+    for r in rows:
+        if r["missing"]:
+            print("genesis not measured (--genesis-python PYTHON: a Python with genesis-world installed)")
+            continue
+        print(f"{'ours: particles':>15} {'ms':>8} {'genesis: particles':>18} {'ms':>8} {'genesis / ours':>14} "
+              f"{'per particle':>12} {'rounds':>6}")
+        print(f"{r['particles']:>15,} {r['ours_ms']:>8.3f} {r['genesis_particles']:>18,} {r['genesis_ms']:>8.3f} "
+              f"{r['ratio']:>13.2f}x {r['throughput_ratio']:>11.2f}x {r['rounds']:>6}")
+        print(f"(genesis-world {r['version']}, {r['threads']} thread; 'per particle': ours particle-steps per "
+              f"second over Genesis's)")
 
 
 def print_peers(rows: list[dict], device: str) -> None:

@@ -144,3 +144,37 @@ def test_the_peers_table_says_when_taichi_is_missing(tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "taichi", None)
     assert peers.bench_peers(tmp_path, DEVICE) == [{"peer": "taichi", "missing": True}]
+
+
+def test_the_genesis_peer_gets_the_bench_ball_and_one_thread(tmp_path, monkeypatch):
+    """The Genesis peer (run by another Python; here this one with a
+    stand-in genesis package, tests/pipelines/bench/stub_genesis) is given
+    the bench's 3D ball: 64 cells per metre, particles dx / 2 apart (8 per
+    cell, as ours), the ball's E, nu, density, centre and radius, a
+    corotated elastic law, one substep per step, one thread."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from pipelines.bench import peers
+
+    log = tmp_path / "genesis.json"
+    monkeypatch.setenv("PYTHONPATH", str(Path(__file__).with_name("stub_genesis")))
+    monkeypatch.setenv("STUB_GENESIS_LOG", str(log))
+    monkeypatch.delenv("QD_NUM_THREADS", raising=False)
+    out = peers.genesis_ball(sys.executable, steps=20)
+    seen = json.loads(log.read_text())
+    assert seen["init"]["backend"] == "cpu" and seen["init"]["threads"] == "1"
+    assert seen["mpm"]["grid_density"] == 64 and seen["mpm"]["particle_size"] == pytest.approx(1 / 128)
+    assert seen["mpm"]["upper_bound"] == [1.0, 1.0, 1.0]
+    assert seen["material"] == {"E": 1e5, "nu": 0.3, "rho": 1000.0, "model": "corotation"}
+    assert seen["sphere"] == {"pos": [0.5, 0.55, 0.5], "radius": 0.2}
+    assert seen["sim"]["substeps"] == 1 and seen["sim"]["gravity"] == [0.0, -9.81, 0.0]
+    assert out["particles"] == round((4 / 3) * 3.141592653589793 * 0.2 ** 3 * 128 ** 3)
+    assert out["ms_per_step"] >= 0.0 and out["threads"] == 1
+
+
+def test_the_genesis_peer_is_not_measured_without_its_python(tmp_path):
+    from pipelines.bench import peers
+
+    assert peers.bench_genesis(tmp_path, None) == [{"peer": "genesis", "missing": True}]
