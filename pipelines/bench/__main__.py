@@ -284,6 +284,9 @@ def main(argv=None) -> None:
         p.error(f"--steps: {args.steps}; accepted: an integer >= 1")
     if args.json is not None and (problem := output_file("--json", args.json, ".json")):
         p.error(problem)
+    if args.genesis_python and (problem := peers.genesis_python_problem(args.genesis_python)):
+        p.error(f"--genesis-python: {args.genesis_python}: {problem}; accepted: a Python executable where "
+                f"genesis-world is installed")
     for c in args.cases:
         if c not in CASES:
             p.error(f"unknown case {c!r}; accepted: {', '.join(CASES)}")

@@ -25,6 +25,8 @@ and the ratio of particle-steps per second.
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
 import time
@@ -162,6 +164,21 @@ def bench_peers(workdir: Path, device: str, rounds: int = ROUNDS) -> list[dict]:
 BALL_3D = ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated", "scheme=empm"]
 GENESIS_STEPS = 60
 GENESIS_SCRIPT = Path(__file__).with_name("genesis_peer.py")
+
+
+def genesis_python_problem(python: str) -> str | None:
+    """What is wrong with ``python`` as the Genesis peer's interpreter (not
+    an executable file, or genesis not importable there: looked up, not
+    imported), or None."""
+    path = shutil.which(python)
+    if path is None or not os.path.isfile(path):
+        return "no such executable"
+    probe = "import importlib.util, sys; sys.exit(importlib.util.find_spec('genesis') is None)"
+    try:
+        found = subprocess.run([path, "-c", probe], capture_output=True, timeout=60).returncode == 0
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"does not run ({e})"
+    return None if found else "genesis is not installed there"
 
 
 def genesis_ball(python: str, steps: int = GENESIS_STEPS, timeout: float = 1800.0) -> dict:

@@ -243,7 +243,9 @@ TOOLS = {
         "--steps": ["--steps 0", "--steps abc"], "--cold": ["--cold=1"], "--json": ["--json {dir}", "--json {file}"],
         "--paper": ["--paper=1"], "--scaling": ["--scaling=1"], "--only": ["--only abc", "--only speed,abc"],
         "--large": ["--large=1"], "--sweep": ["--sweep=1"], "--no-recording": ["--no-recording=1"],
-        "--device": ["--device tpu"], **{f"--no-{t}": [f"--no-{t}=1"] for t in (
+        "--device": ["--device tpu"],
+        "--genesis-python": ["--genesis-python {missing}", "--genesis-python {dir}", "--genesis-python {file}"],
+        **{f"--no-{t}": [f"--no-{t}=1"] for t in (
             "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile",
             "precision")},
     }),
