@@ -54,6 +54,9 @@ Everything runs through the same code path as ``pipelines.run``
 10. precision: plain float32, float32 with compensated sums of x and F
    (``run.compensate=true``) and float64 on the 2D ball, the 3D sphere and
    the small-deflection cantilever, EMPM and TLMPM (pipelines.bench.precision).
+11. order (``--only order`` alone, not in the default run): the 3D sphere
+   with its particles in sampled and in random order (pipelines.bench.order):
+   what a cell-order sort could gain on this device.
 
 ``--large`` adds the sphere at 1M and 10M particles (pipelines.bench.scale;
 meant for a GPU) and ``--sweep`` the runs per hour of a sweep of 2N jobs on
@@ -78,7 +81,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import peers, precision, scale, throughput
+from . import order, peers, precision, scale, throughput
 from ..config import schema
 from .runs import QUIET, RECORDING, execute, interleaved, loop_s, spec_for, timed
 from ..run.warp_setup import init_warp
@@ -248,7 +251,7 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 
 TABLES = ("speed", "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "precision", "paper", "scaling", "large", "sweep")
+          "profile", "precision", "paper", "scaling", "large", "sweep", "order")
 SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
              "integrators": "integrator", "fused": "fused-against-cached EMPM",
              "sync": "read-backs every k steps", "stages": "optional-stage",
@@ -278,7 +281,7 @@ def main(argv=None) -> None:
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
     p.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"),
                    help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
-    p.set_defaults(speed=True)  # the first table (--only may leave it out)
+    p.set_defaults(speed=True, order=False)  # the first table (--only may leave it out); order: --only alone
     args = p.parse_args(argv)
     if args.steps is not None and args.steps < 1:
         p.error(f"--steps: {args.steps}; accepted: an integer >= 1")
@@ -331,6 +334,7 @@ def main(argv=None) -> None:
         scaling = scale.bench_scaling(Path(tmp)) if args.scaling else []
         large = scale.bench_large(energies=(True, False)) if args.large else []
         sweep = throughput.bench_sweep(Path(tmp)) if args.sweep else []
+        orders = order.bench_order(device) if args.order else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
@@ -410,6 +414,8 @@ def main(argv=None) -> None:
         scale.print_stages(stages)
     if profile:
         scale.print_profile(profile)
+    if orders:
+        order.print_order(orders, device)
     if precisions:
         precision.print_precision(precisions)
     if paper:
@@ -425,7 +431,7 @@ def main(argv=None) -> None:
                                          "peers": peer_rows + genesis_rows, "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
-                                         "profile": profile, "precision": precisions, "paper": paper,
+                                         "profile": profile, "order": orders, "precision": precisions, "paper": paper,
                                          "scaling": scaling, "large": large, "sweep": sweep}, indent=2) + "\n")
 
 

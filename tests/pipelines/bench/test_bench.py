@@ -178,3 +178,29 @@ def test_the_genesis_peer_is_not_measured_without_its_python(tmp_path):
     from pipelines.bench import peers
 
     assert peers.bench_genesis(tmp_path, None) == [{"peer": "genesis", "missing": True}]
+
+
+def test_the_order_table_steps_the_same_particles_in_another_order(tmp_path):
+    """The permuted run is the same system: after 5 steps its particles,
+    sorted back by reference position X, have the sampled run's positions
+    and velocities (to float32 rounding: the grid sums in another order)
+    and the same masses."""
+    import numpy as np
+
+    from pipelines.bench import order
+
+    case = ["scene=elastic_ball_3d", "scene.resolution=16", "material=fixed_corotated", "scheme=empm"]
+    a, b = order._driver(DEVICE, False, case), order._driver(DEVICE, True, case)
+
+    def by_X(d):
+        X = d.state.X.numpy()
+        k = np.lexsort(X.T)
+        return X[k], d.state.x.numpy()[k], d.state.v.numpy()[k], d.solver.model.mass.numpy()[k]
+
+    (Xa, xa, va, ma), (Xb, xb, vb, mb) = by_X(a), by_X(b)
+    assert not np.array_equal(a.state.X.numpy(), b.state.X.numpy())  # the order did change
+    assert np.array_equal(Xa, Xb) and np.array_equal(ma, mb)
+    np.testing.assert_allclose(xb, xa, atol=1e-6)  # [m], a 1 m box in float32
+    np.testing.assert_allclose(vb, va, atol=1e-4 * max(1.0, np.abs(va).max()))
+    rows = order.bench_order(DEVICE, rounds=1, steps=2, case=case)
+    assert [r["order"] for r in rows] == ["sampled", "random"] and rows[0]["vs_sampled"] == 1.0
