@@ -57,7 +57,9 @@ kernel's implicit ``evaluate`` alone about 110 s), so about 13 minutes with
 whose PTX for the same hash is already in that directory, as its kernel
 cache does for the CPU, so a run after a change compiles only the modules
 whose generated code or options changed; what is skipped compiled before
-from the identical source, and its PTX is read and checked again.
+from the identical source, and its PTX is read and checked again. The
+directory grows as modules change; deleting it empties it
+(``wp.clear_kernel_cache()`` removes only Warp's ``wp_*`` folders).
 """
 
 from __future__ import annotations
