@@ -194,7 +194,8 @@ def genesis_ball(python: str, steps: int = GENESIS_STEPS, timeout: float = 1800.
     out = subprocess.run([python, str(GENESIS_SCRIPT), json.dumps(args)], capture_output=True, text=True,
                          timeout=timeout)
     if out.returncode != 0:
-        raise RuntimeError(f"the Genesis peer failed ({python}): {out.stderr.strip().splitlines()[-1:]}")
+        last = (out.stderr.strip().splitlines() or [f"exit code {out.returncode}"])[-1]
+        raise RuntimeError(f"the Genesis peer failed ({python}): {last}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -208,7 +209,10 @@ def bench_genesis(workdir: Path, python: str | None, rounds: int = ROUNDS) -> li
         m = interleaved({"ours": BALL_3D + QUIET}, [f"run.steps={GENESIS_STEPS}"], workdir / f"genesis{k}", 1,
                         warm=WARM if k == 0 else None)["ours"]
         ours = m if ours is None or m["step_time_ms"] < ours["step_time_ms"] else ours
-        g = genesis_ball(python)
+        try:
+            g = genesis_ball(python)
+        except (RuntimeError, subprocess.TimeoutExpired, ValueError) as e:  # ValueError: no JSON line
+            return [{"peer": "genesis", "missing": False, "failed": str(e)}]
         theirs = g if theirs is None or g["ms_per_step"] < theirs["ms_per_step"] else theirs
     n_ours, n_theirs = ours["particles"], theirs["particles"]
     return [{"peer": "genesis", "missing": False, "version": theirs["genesis"], "threads": theirs["threads"],
@@ -224,6 +228,9 @@ def print_genesis(rows: list[dict]) -> None:
     for r in rows:
         if r["missing"]:
             print("genesis not measured (--genesis-python PYTHON: a Python with genesis-world installed)")
+            continue
+        if r.get("failed"):
+            print(f"genesis not measured: {r['failed']}")
             continue
         print(f"{'ours: particles':>15} {'ms':>8} {'genesis: particles':>18} {'ms':>8} {'genesis / ours':>14} "
               f"{'per particle':>12} {'rounds':>6}")

@@ -204,3 +204,22 @@ def test_the_order_table_steps_the_same_particles_in_another_order(tmp_path):
     np.testing.assert_allclose(vb, va, atol=1e-4 * max(1.0, np.abs(va).max()))
     rows = order.bench_order(DEVICE, rounds=1, steps=2, case=case)
     assert [r["order"] for r in rows] == ["sampled", "random"] and rows[0]["vs_sampled"] == 1.0
+
+
+def test_a_failing_genesis_peer_is_one_line_in_its_table(tmp_path, monkeypatch, capsys):
+    """Genesis breaking in its own process ends neither the bench nor its
+    other tables: the table's row names the failure in one line."""
+    import sys
+    from pathlib import Path
+
+    from pipelines.bench import peers
+
+    monkeypatch.setenv("PYTHONPATH", str(Path(__file__).with_name("stub_genesis")))
+    monkeypatch.setenv("STUB_GENESIS_LOG", str(tmp_path / "genesis.json"))
+    monkeypatch.setenv("STUB_GENESIS_FAIL", "1")
+    monkeypatch.setattr(peers, "interleaved", lambda *a, **k: {"ours": {"step_time_ms": 1.0, "particles": 10}})
+    rows = peers.bench_genesis(tmp_path, sys.executable, rounds=1)
+    assert rows[0]["failed"].startswith("the Genesis peer failed")
+    peers.print_genesis(rows)
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1].startswith("genesis not measured: the Genesis peer failed") and "stub genesis" in out[-1]

@@ -1,7 +1,8 @@
 """A stand-in for Genesis in the bench's tests: the calls
 pipelines/bench/genesis_peer.py makes, each recording its arguments in the
 JSON file ``STUB_GENESIS_LOG``; a step does nothing. The particle count is
-the sphere's volume over the particle size cubed."""
+the sphere's volume over the particle size cubed. ``STUB_GENESIS_FAIL``: a
+step raises, as a broken install would."""
 
 import json
 import math
@@ -42,4 +43,5 @@ class Scene:
         pass
 
     def step(self):
-        pass
+        if os.environ.get("STUB_GENESIS_FAIL"):
+            raise RuntimeError("stub genesis: the step failed")
