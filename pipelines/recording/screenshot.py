@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import base64
+import contextlib
 import ctypes
 import json
 import importlib.util
@@ -75,21 +76,31 @@ def _start(cmd: list[str]) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 
+def _escalate(send, alive) -> None:
+    """``send(SIGTERM)``, then ``send(SIGKILL)`` if ``alive()`` still holds
+    5 s later (``alive`` may reap what has exited)."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        send(sig)
+        end = time.monotonic() + 5.0
+        while alive() and time.monotonic() < end:
+            time.sleep(0.05)
+        if not alive():
+            return
+
+
 def _end(p: subprocess.Popen) -> None:
     """End ``p``'s whole process group (a wrapper's children too, e.g. the
     venv's ``rerun`` script and the viewer binary it starts): SIGTERM, then
     SIGKILL to what is left after 5 s."""
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
+    def send(sig):
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(p.pid, sig)
-        except ProcessLookupError:
-            break
-        end = time.monotonic() + 5.0
-        while group_members(p.pid) and time.monotonic() < end:
-            p.poll()  # reap the leader
-            time.sleep(0.05)
-        if not group_members(p.pid):
-            break
+
+    def alive():
+        p.poll()  # reap the leader
+        return bool(group_members(p.pid))
+
+    _escalate(send, alive)
     p.wait()
 
 
@@ -128,24 +139,23 @@ def _end_adopted(pids: set[int]) -> None:
     """End and reap the adopted orphans ``pids`` (children of this process
     not started by it): SIGTERM, then SIGKILL to what is left after 5 s."""
     left = set(pids)
-    for sig in (signal.SIGTERM, signal.SIGKILL):
+
+    def send(sig):
         for pid in left:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, sig)
-            except ProcessLookupError:
-                pass
-        end = time.monotonic() + 5.0
-        while left and time.monotonic() < end:
-            for pid in list(left):
-                try:
-                    done, _ = os.waitpid(pid, os.WNOHANG)
-                except ChildProcessError:
-                    done = pid
-                if done:
-                    left.discard(pid)
-            time.sleep(0.05)
-        if not left:
-            return
+
+    def alive():
+        for pid in list(left):
+            try:
+                done = os.waitpid(pid, os.WNOHANG)[0]
+            except ChildProcessError:
+                done = pid
+            if done:
+                left.discard(pid)
+        return bool(left)
+
+    _escalate(send, alive)
     for pid in left:
         os.waitpid(pid, 0)
 
