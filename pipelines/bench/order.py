@@ -21,9 +21,8 @@ import numpy as np
 import warp as wp
 
 import mpm
+from .peers import BALL_3D as SPHERE  # the same sphere as the Genesis table
 from .runs import spec_for
-
-SPHERE = ["scene=elastic_ball_3d", "scene.resolution=64", "material=fixed_corotated", "scheme=empm"]
 
 
 def _driver(device: str, shuffled: bool, case: list[str] = SPHERE) -> mpm.Driver:
