@@ -3,8 +3,8 @@ Coulomb friction between the two bodies (``contact="friction"``), against
 the closed forms.
 
     python examples/incline.py [--body block] [--scheme tlmpm] [--integrator explicit] [--friction 0.2]
-        [--angle 0] [--speed 0.5] [--resolution 64] [--normal max_gradient] [--share 0.1]
-        [--duration 0.1] [--device cpu]
+        [--angle 0] [--speed 0.5] [--resolution 64] [--normal stiffer] [--share 0.1]
+        [--fill 0.5] [--duration 0.1] [--device cpu]
 
 The body (a block 0.09375 m square, or a disk of that diameter; E = 2e5 Pa)
 starts at ``--speed`` on a plate (E = 2e6 Pa) whose bottom strip is held
@@ -37,13 +37,15 @@ BODIES = ("block", "disk")
 
 
 def slide(scheme: str = "tlmpm", integrator: str = "explicit", friction: float = 0.2, resolution: int = 64,
-          normal: str = "max_gradient", share: float = 0.1, duration: float = 0.1, device: str = "cpu",
-          samples: int = 10, angle: float = 0.0, speed: float = SPEED, body: str = "block") -> tuple[np.ndarray, ...]:
+          normal: str = "stiffer", share: float = 0.1, duration: float = 0.1, device: str = "cpu",
+          samples: int = 10, angle: float = 0.0, speed: float = SPEED, body: str = "block",
+          fill: float = 0.5) -> tuple[np.ndarray, ...]:
     """The body's mean x velocity [m/s] and travel [m] at ``samples``
     instants [s] of ``duration``, gravity tilted by ``angle`` [deg], the
-    body's initial velocity ``speed`` [m/s]. The domain is 1 m x 0.5 m; the
-    plate's top (y = 0.15625 m) lies on a row of nodes at any ``resolution``
-    from 64 that is a multiple of 32."""
+    body's initial velocity ``speed`` [m/s], ``fill`` the volume fraction
+    of a lattice node in contact (Scene.contact_fill). The domain is
+    1 m x 0.5 m; the plate's top (y = 0.15625 m) lies on a row of nodes at
+    any ``resolution`` from 64 that is a multiple of 32."""
     top, half = 0.15625, 0.046875  # [m]
     plate = mpm.Box((0.5, top - 0.04), (0.45, 0.04))
     centre = (0.25, top + half)
@@ -55,7 +57,7 @@ def slide(scheme: str = "tlmpm", integrator: str = "explicit", friction: float =
         dim=2, domain=(1.0, 0.5), resolution=resolution, ppc=4, bodies=bodies,
         gravity=(G * np.sin(theta), -G * np.cos(theta)),
         contact="friction" if friction > 0 else "frictionless", contact_friction=friction,
-        contact_normal=normal, contact_share=share,
+        contact_normal=normal, contact_share=share, contact_fill=fill,
         regions=[mpm.KinematicRegion(body=0, select=mpm.Box((0.5, top - 0.07), (0.45, 0.011)), velocity=(0.0, 0.0))])
     model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
     options = mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]())
@@ -110,14 +112,15 @@ def main(argv=None) -> int:
     parser.add_argument("--angle", type=bounded(0.0, 60.0, "deg"), default=0.0, help="the incline [deg]")
     parser.add_argument("--speed", type=bounded(0.0, 5.0, "m/s"), default=SPEED, help="initial speed [m/s]")
     parser.add_argument("--resolution", type=integer(64, 256, step=32), default=64, help="cells across 1 m")
-    parser.add_argument("--normal", type=choice(mpm.CONTACT_NORMALS), default="max_gradient",
+    parser.add_argument("--normal", type=choice(mpm.CONTACT_NORMALS), default="stiffer",
                         help=", ".join(mpm.CONTACT_NORMALS))
     parser.add_argument("--share", type=bounded(0.0, 0.9, "-"), default=0.1, help="scene.contact_share")
+    parser.add_argument("--fill", type=bounded(0.01, 1.0, "-"), default=0.5, help="scene.contact_fill")
     parser.add_argument("--duration", type=positive("s"), default=0.1, help="simulated time [s]")
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     args = parser.parse_args(argv)
     t, v, travel = slide(args.scheme, args.integrator, args.friction, args.resolution, args.normal, args.share,
-                 args.duration, args.device, angle=args.angle, speed=args.speed, body=args.body)
+                 args.duration, args.device, angle=args.angle, speed=args.speed, body=args.body, fill=args.fill)
     print("t [s]:   " + " ".join(f"{x:7.3f}" for x in t))
     print("v [m/s]: " + " ".join(f"{x:7.4f}" for x in v))
     print(f"travel {travel[-1]:.3e} m ({travel[-1] * args.resolution:.4f} cells)")

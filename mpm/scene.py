@@ -19,13 +19,19 @@ CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
 (Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
 (they pass through each other) or shared (EMPM only: one grid for all
 bodies)"""
-CONTACT_NORMALS = ("difference", "max_gradient")
+CONTACT_NORMALS = ("difference", "max_gradient", "stiffer")
 """How a body's outward normal at a lattice node is taken (``Scene.contact_normal``):
 "difference", normalize(grad(M_others - M_b)), the bisector of the bodies'
 own normals; "max_gradient", the normal of the body present whose volume
 gradient |grad M_c| / (rho_c dx^d) is the largest (Nairn 2013, Comput.
 Model. Eng. Sci. 92, 271-299): a flat face keeps its own normal where the
-corner of another body rests on it."""
+corner of another body rests on it, unless the corner's gradient is the
+larger; "stiffer", the normal of the stiffest body present (the largest
+P-wave modulus rho c^2 at rest, c the material's wave speed: a master
+surface, as in master-slave contact), bodies of equal stiffness by the
+largest volume gradient: a face keeps its normal under a softer body's
+corner or curve, which would otherwise turn sliding into approach and
+drag."""
 WALL_TYPES = ("sticky", "slip", "open")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
@@ -322,8 +328,8 @@ class Scene:
     """pairs of bodies with their own Coulomb coefficient (``contact="friction"``)"""
     contact_normal: str = "difference"
     """how the bodies' normals at a lattice node are taken (CONTACT_NORMALS): "difference"
-    (the bisector of the bodies' own normals) or "max_gradient" (the normal of the body with the largest
-    volume gradient there)"""
+    (the bisector of the bodies' own normals), "max_gradient" (the normal of the body with the largest
+    volume gradient there) or "stiffer" (the stiffest body's there; equals by the largest gradient)"""
     contact_share: float = 0.0
     """the volume fraction a body must fill at a lattice node to take part in contact there (0: any mass);
     above the fraction a stencil's fringe leaves beside a body (about 0.02), a body's side does not touch

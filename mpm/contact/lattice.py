@@ -29,6 +29,7 @@ def make_bins(t: Types):
         fill: S  # the volume fraction of a lattice node in contact
         share: S  # the volume fraction a body must fill at a lattice node to be present there
         mu: wp.array(dtype=S)  # Coulomb mu between bodies a and b at a * n_bodies + b (friction; else unused)
+        rank: wp.array(dtype=wp.int32)  # per body: its place by stiffness, equals equal (normal "stiffer"; else unused)
 
     return Bins
 
@@ -137,7 +138,7 @@ def make_present(t: Types):
 @functools.cache
 def make_outward(t: Types, normal: str = "difference"):
     """``outward(lat, bins, b, g) -> n_b``: body b's unit outward normal at
-    global node g (mpm.scene.CONTACT_NORMALS), gradients by central differences
+    global node g (mpm.scene.CONTACT_NORMALS; "stiffer" reads ``Bins.rank``), gradients by central differences
     (one-sided at the lattice edge) over the bodies present at g; 0 where
     the gradient vanishes."""
     S = t.scalar
@@ -178,6 +179,20 @@ def make_outward(t: Types, normal: str = "difference"):
                     if size > best:
                         best = size
                         n = grad  # into body c: body b's outward normal, unless c is b
+                        if c == b:
+                            n = -grad
+        elif wp.static(normal == "stiffer"):
+            best = S(-1.0)
+            top = int(-1)
+            for c in range(lat.n_bodies):
+                if present_at(lat, bins, c, g):
+                    grad = gradient(lat, bins, c, g)
+                    size = wp.length(grad) / bins.rest_mass[c]
+                    r = bins.rank[c]
+                    if r > top or (r == top and size > best):  # the stiffest; of equals, the largest gradient
+                        top = r
+                        best = size
+                        n = grad
                         if c == b:
                             n = -grad
         else:

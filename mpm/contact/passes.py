@@ -31,7 +31,12 @@ normal is (``Scene.contact_normal``, mpm.contact.lattice ``make_outward``)
     n_b = normalize(grad (M_others - M_b)),   M_others = sum of the other
 bodies present at that node (central differences), which for two bodies is
 the common normal, n_a = -n_b ("difference"), or the normal of the body
-present with the largest grad M_c / (rho_c dx^d) ("max_gradient"). With the
+present with the largest grad M_c / (rho_c dx^d) ("max_gradient"), or of
+the stiffest body present, the largest gradient among equals ("stiffer":
+the face of a stiff body keeps its normal under a softer body's corner,
+whose tilted normal turned sliding into approach: a block at 30 deg with
+mu = 0.5 went 0.055 m/s^2 against 0.657 with max_gradient, EMPM, 128
+cells). With the
 centre-of-mass velocity v_cm = sum P / sum M, a body approaching the others,
 (v_b - v_cm) . n_b > 0, loses that normal component:
     dV_bg = -((v_b - v_cm) . n_b) n_b,
@@ -243,6 +248,15 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
     return splat, correct, clear
 
 
+def stiffness_rank(bodies) -> np.ndarray:
+    """Per body, its place among the bodies by P-wave modulus rho c^2 [Pa]
+    at rest (c the material's wave speed), 0 the softest; bodies of equal
+    modulus (to 12 digits: rho (sqrt(M / rho))^2 differs from M in the last
+    bits) share a place (the contact normal "stiffer", mpm.CONTACT_NORMALS)."""
+    moduli = [float(f"{b.material.rho * b.material.wave_speed() ** 2:.12g}") for b in bodies]
+    return np.unique(moduli, return_inverse=True)[1].astype(np.int32)
+
+
 class Contact:
     """Contact between the bodies of ``model`` on the device: the bins (M
     and P per body on the global lattice, zero between steps) and the passes
@@ -274,9 +288,11 @@ class Contact:
             self.rest_mass = wp.array([b.material.rho * model.dx**t.dim for b in model.scene.bodies],
                                       dtype=t.scalar)
             self.mu = wp.array(mu.ravel() if self.friction else [0.0], dtype=t.scalar)
+            self.rank = wp.array(stiffness_rank(model.scene.bodies), dtype=wp.int32)
         self.bins = make_bins(t)()
         self.bins.M, self.bins.P, self.bins.rest_mass, self.bins.fill = self.M, self.P, self.rest_mass, self.fill
         self.bins.mu = self.mu
+        self.bins.rank = self.rank
         self.bins.share = t.scalar(model.scene.contact_share)
 
     def kernels(self) -> list:

@@ -291,8 +291,8 @@ class SceneConfig:
     contact_pairs: List[ContactPairConfig] = setting([], "pairs of bodies with their own Coulomb mu "
                                                          "(contact=friction): [{bodies: [a, b], friction: mu}]")
     contact_normal: str = setting("difference", "the bodies' normals at a contact node: difference (the bisector "
-                                                "of their own) or max_gradient (the body with the largest volume "
-                                                "gradient's)", choices=CONTACT_NORMALS)
+                                                "of their own), max_gradient (the body with the largest volume "
+                                                "gradient's) or stiffer (the stiffest body's)", choices=CONTACT_NORMALS)
     contact_share: float = setting(0.0, "the node volume fraction a body must fill there to take part in "
                                         "contact (0: any mass; 0.1 leaves out a stencil's fringe)", ge=0.0, lt=1.0)
     responses: List[ResponseConfig] = setting([], "the physical responses the run measures (a ball's rebound, a "

@@ -15,12 +15,13 @@ from test_conservation import colliding_scene
 DEVICE = "cpu"
 
 
-def outward(M, b, g, present, cells, strides, rest_mass=None, normal="difference"):
+def outward(M, b, g, present, cells, strides, rest_mass=None, normal="difference", rank=None):
     """Body b's unit outward normal at global node g (mpm.contact), grad M_c
     by central differences, one-sided at the lattice's edge: "difference",
     normalize(grad(M_others - M_b)); "max_gradient", +-grad M_c of the body c
     present with the largest |grad M_c| / rest_mass_c (the first of equals),
-    pointing out of b (into c, or against grad M_b when c is b)."""
+    pointing out of b (into c, or against grad M_b when c is b); "stiffer",
+    the same among the bodies present of the highest ``rank``."""
     idx = np.unravel_index(g, tuple(c + 1 for c in cells))
     grad = np.zeros((M.shape[0], len(cells)))
     for d in range(len(cells)):
@@ -30,6 +31,8 @@ def outward(M, b, g, present, cells, strides, rest_mass=None, normal="difference
     if normal == "difference":
         n = grad[present].sum(0) - 2.0 * grad[b]
     else:
+        if normal == "stiffer":
+            present = present[rank[present] == rank[present].max()]
         sizes = np.linalg.norm(grad[present], axis=1) / rest_mass[present]
         c = present[int(np.argmax(sizes))]
         n = -grad[c] if c == b else grad[c]
@@ -57,7 +60,7 @@ def lattice_weights(q, inv_dx, cells, strides, gather):
 
 
 def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass, fill, gather=False, mu=None,
-                      normal="difference", share=0.0):
+                      normal="difference", share=0.0, rank=None):
     """The corrected node velocities, the nodes taking a correction from a
     lattice node in contact and the number of lattice nodes in contact with
     three or more bodies: M_bg = sum w_ig m_i / G, P_bg = sum w_ig m_i v_i /
@@ -69,7 +72,8 @@ def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass,
     dV_bg -= min(1, mu_b rel / |u_t|) u_t with u_t = (v_b - v_cm) - rel n_b
     and mu_b the pair's (two bodies) or the mass-weighted mean over the
     others present. A body is present at g where M_bg > ``share`` rest_mass_b;
-    ``normal``: the rule of :func:`outward`. Also returns the kinetic energy the correction changed,
+    ``normal``: the rule of :func:`outward` (``rank``: per body, its place by
+    stiffness). Also returns the kinetic energy the correction changed,
     sum_i (m_i / G) (|v_i'|^2 - |v_i|^2) / 2."""
     nb, n_global = len(rest_mass), int(np.prod(np.asarray(cells) + 1))
     live = m > 0
@@ -90,7 +94,7 @@ def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass,
         hit[gg] = True
         v_cm = P[present, gg].sum(0) / M[present, gg].sum()
         for b in present:
-            n = outward(M, b, gg, present, cells, strides, rest_mass, normal)
+            n = outward(M, b, gg, present, cells, strides, rest_mass, normal, rank)
             u = P[b, gg] / M[b, gg] - v_cm
             rel = u @ n
             if rel > 0:
@@ -112,17 +116,31 @@ def reference_contact(m, v, q, body, n_grids, inv_dx, cells, strides, rest_mass,
     return out, live & touching.any(axis=1), crowded, work
 
 
+def test_bodies_of_equal_stiffness_share_a_place():
+    """The normal "stiffer" ranks bodies by P-wave modulus rho c^2: equal
+    materials share a place (their normals then by the largest gradient), a
+    denser body of the same moduli is softer (c^2 = M / rho: the same rho c^2)."""
+    box = mpm.Box((0.5, 0.5), (0.1, 0.1))
+    bodies = [mpm.Body(box, mpm.FixedCorotated(E=2e5, nu=0.3)), mpm.Body(box, mpm.FixedCorotated(E=2e6, nu=0.3)),
+              mpm.Body(box, mpm.FixedCorotated(E=2e5, nu=0.3, rho=3000.0)), mpm.Body(box, mpm.Fluid(K=1e4))]
+    moduli = [b.material.rho * b.material.wave_speed() ** 2 for b in bodies]
+    assert moduli[0] == pytest.approx(moduli[2], rel=1e-12)
+    rank = contact.stiffness_rank(bodies)
+    assert list(rank) == [1, 2, 1, 0]
+
+
 FRICTION = dict(contact="friction", contact_friction=0.6, contact_pairs=[mpm.ContactPair(0, 1, 0.25)])
 """Coulomb friction between the three colliding bodies: 0.25 between the
 first two, 0.6 for the other pairs (a pair's own mu and the mass-weighted
 mean where three meet)."""
 
 
-SETTINGS = [(False, "difference", 0.0), (True, "difference", 0.0), (True, "max_gradient", 0.1)]
+SETTINGS = [(False, "difference", 0.0), (True, "difference", 0.0), (True, "max_gradient", 0.1),
+            (True, "stiffer", 0.1)]
 """(friction, Scene.contact_normal, Scene.contact_share)"""
 
 
-@pytest.mark.parametrize("friction,normal,share", SETTINGS, ids=["frictionless", "friction", "max_gradient"])
+@pytest.mark.parametrize("friction,normal,share", SETTINGS, ids=["frictionless", "friction", "max_gradient", "stiffer"])
 @pytest.mark.parametrize("scheme,kernel", [(mpm.EMPM(), "quadratic"), (mpm.TLMPM(), "quadratic"),
                                            (mpm.EMPM(), "compact"), (mpm.TLMPM(), "compact")],
                          ids=lambda x: getattr(x, "name", x))
@@ -149,7 +167,7 @@ def test_contact_matches_the_lattice_rule(scheme, kernel, friction, normal, shar
     rest_mass = solver.contact.rest_mass.numpy()
     inv_dx, cells, strides = float(solver.contact.inv_dx), np.asarray(model.cells), np.asarray(model.strides)
     resolve = solver._resolve_contact
-    seen = []
+    seen, differs = [], []
 
     def checked():
         n = solver.layout.n_nodes
@@ -161,8 +179,11 @@ def test_contact_matches_the_lattice_rule(scheme, kernel, friction, normal, shar
         body = (np.searchsorted(offset, np.arange(n), side="right") - 1) // G
         gather = scheme.name != "empm"
         args = (body, G, inv_dx, cells, strides, rest_mass, float(solver.contact.fill), gather,
-                scene.friction_table() if friction else None, normal, share)
+                scene.friction_table() if friction else None, normal, share, solver.contact.rank.numpy())
         want, in_contact, crowded, work = reference_contact(m, v, q, *args)
+        if normal == "stiffer":  # the rule matters: the largest gradient alone would give other normals
+            other = reference_contact(m, v, q, *args[:-3], "max_gradient", share)[0]
+            differs.append(not np.array_equal(other, want))
         for _ in range(contact.GATHER_PASSES - 1 if gather else 0):  # each from the last pass's velocities
             want, _, _, more = reference_contact(m, want, q, *args)
             work += more
@@ -187,3 +208,7 @@ def test_contact_matches_the_lattice_rule(scheme, kernel, friction, normal, shar
     # of 0.1 the third body's fringe is not present there)
     assert sum(n > 0 for n, _, _ in seen) >= 20 and sum(c for _, c, _ in seen) > 0, seen
     assert share > 0 or sum(k for _, _, k in seen) > 0, seen
+    assert normal != "stiffer" or sum(differs) > 0
+    # the places by P-wave modulus rho c^2 (6.7e4, 1.3e5 and 1.4e5 Pa here: no two equal)
+    moduli = [b.material.rho * b.material.wave_speed() ** 2 for b in scene.bodies]
+    assert list(solver.contact.rank.numpy()) == list(np.argsort(np.argsort(moduli)))

@@ -295,6 +295,8 @@ def cases(dim: int) -> list[Case]:
         Case(scheme="tlmpm", materials=two, contact="friction", contact_friction=0.3, normal="max_gradient"),
         Case(scheme="tlmpm", materials=two, implicit=True, contact="friction", contact_friction=0.3),
         Case(materials=two, implicit=True, contact="friction", contact_friction=0.3, normal="max_gradient"),
+        Case(scheme="tlmpm", materials=two, contact="friction", contact_friction=0.3, normal="stiffer"),
+        Case(materials=two, implicit=True, contact="friction", contact_friction=0.3, normal="stiffer"),
         Case(batched=True, materials=two, contact="friction", contact_friction=0.3),
         # kinematic regions
         Case(regions=True), Case(scheme="tlmpm", regions=True), Case(materials=two, regions=True),
