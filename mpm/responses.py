@@ -34,6 +34,8 @@ REDUCTIONS = {
     "final": "the value at the last state",
     "max_after_min": "the largest value after the smallest (a rebound's height)",
     "drop": "(initial - smallest) / initial, a fraction (a compression)",
+    "acceleration": "twice the t^2 coefficient of a parabola fitted to the states from a quarter of the run on "
+                    "(m/s^2 of a length: a body sliding or rolling)",
 }
 """How a response reduces its quantity over the states of a run."""
 
@@ -61,7 +63,7 @@ class Response:
 
     @property
     def unit(self) -> str:
-        return "-" if self.reduce == "drop" else "m"
+        return {"drop": "-", "acceleration": "m/s^2"}.get(self.reduce, "m")
 
 
 def quantity(name: str, x: np.ndarray, m: np.ndarray) -> float:
@@ -119,7 +121,7 @@ class Tracker:
 
     def values(self) -> dict[str, float]:
         """Each response's reduction over the states recorded so far."""
-        return {r.name: reduce(r.reduce, np.array([v for _, v in series]))
+        return {r.name: reduce(r.reduce, np.array([v for _, v in series]), np.array([t for t, _ in series]))
                 for r, series in zip(self.responses, self.series)}
 
     def reached(self) -> dict[str, bool]:
@@ -137,8 +139,11 @@ class Tracker:
                 for r, v, ok in zip(self.responses, self.values().values(), self.reached().values())}
 
 
-def reduce(kind: str, values: np.ndarray) -> float:
-    """:data:`REDUCTIONS` ``kind`` of a quantity's values over a run's states."""
+def reduce(kind: str, values: np.ndarray, times: np.ndarray | None = None) -> float:
+    """:data:`REDUCTIONS` ``kind`` of a quantity's values over a run's states
+    at ``times`` [s] (needed by "acceleration")."""
+    if kind == "acceleration":
+        return _acceleration(values, times)
     values = values[np.isfinite(values)]  # states where the body had no particle left
     if len(values) == 0:
         return float("nan")
@@ -154,14 +159,24 @@ def reduce(kind: str, values: np.ndarray) -> float:
     return float((values[0] - values[lowest]) / values[0])  # drop
 
 
+def _acceleration(values: np.ndarray, times: np.ndarray) -> float:
+    """d^2 q / dt^2 of q(t) = a t^2 / 2 + b t + c fitted by least squares to
+    the finite states from a quarter of the run on (a body's load settles
+    first); NaN with fewer than four."""
+    use = np.isfinite(values) & (times >= times[-1] / 4) if len(values) else np.zeros(0, bool)
+    if use.sum() < 4:
+        return float("nan")
+    return float(2.0 * np.polyfit(times[use], values[use], 2)[0])
+
+
 def reached(kind: str, values: np.ndarray) -> bool:
     """Whether the run reached the extremum that ``kind`` reduces to: False
     when it lies at the last state (the quantity still moving towards it
     when the run ended, e.g. a ball still sinking into the floor or still
     rising: the value is a bound, not the response); "final" always."""
     values = values[np.isfinite(values)]
-    if kind == "final" or len(values) == 0:
-        return kind == "final"
+    if kind in ("final", "acceleration") or len(values) == 0:
+        return kind in ("final", "acceleration")
     last = len(values) - 1
     if kind == "max":
         return int(np.argmax(values)) < last

@@ -27,13 +27,25 @@ RESOLUTION_KEYS = {"scene.resolution", "scene.particle_resolution"}
 
 
 def _load_yaml(path: Path):
-    """A YAML file as plain containers, interpolations left unresolved; None if unreadable."""
+    """A YAML file as plain containers, each top-level entry with its
+    interpolations resolved where they resolve (a scene's value picked by
+    its size), else left as written; None if unreadable."""
     if not path.is_file():
         return None
     try:
         from omegaconf import OmegaConf
 
-        return OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+        loaded = OmegaConf.load(path)
+        if not OmegaConf.is_dict(loaded):
+            return OmegaConf.to_container(loaded, resolve=False)
+        out = {}
+        for key in loaded:
+            try:
+                out[key] = OmegaConf.to_container(loaded[key], resolve=True) if OmegaConf.is_config(
+                    loaded[key]) else OmegaConf.select(loaded, str(key))
+            except Exception:  # a resolver of the run's own (e.g. the core count) or a missing key
+                out[key] = OmegaConf.to_container(loaded, resolve=False)[key]
+        return out
     except Exception:
         try:
             import yaml

@@ -6,8 +6,10 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from mpm.responses import reduce
 from pipelines.report import write_report
 from pipelines.report.common import geometric, parameter_label
 from pipelines.report.sections.response import swept_parameters
@@ -81,3 +83,16 @@ def test_no_numeric_parameter_varies_no_figure(tmp_path):
     assert swept_parameters(load_jobs(sweep)[0]) == {}
     report = write_report(sweep).read_text()
     assert "response_" not in report and not (sweep / "response.csv").exists()
+
+
+def test_the_acceleration_reduction_fits_a_parabola():
+    """reduce("acceleration"): q(t) = 0.3 + 0.1 t + 1.7 t^2 / 2 sampled at
+    20 states gives 1.7 to round-off from a quarter of the run on; the
+    states before t_end / 4 are left out (a different parabola there does
+    not change it); fewer than four usable states give NaN."""
+    t = np.linspace(0.0, 0.4, 21)[1:]
+    q = 0.3 + 0.1 * t + 0.85 * t**2
+    assert reduce("acceleration", q, t) == pytest.approx(1.7, rel=1e-9)
+    early = t < 0.1
+    assert reduce("acceleration", np.where(early, 5.0 * t**2, q), t) == pytest.approx(1.7, rel=1e-9)
+    assert np.isnan(reduce("acceleration", q[:3], t[:3]))
