@@ -143,6 +143,8 @@ def reduce(kind: str, values: np.ndarray, times: np.ndarray | None = None) -> fl
     """:data:`REDUCTIONS` ``kind`` of a quantity's values over a run's states
     at ``times`` [s] (needed by "acceleration")."""
     if kind == "acceleration":
+        if times is None:
+            raise ValueError("reduce: 'acceleration' needs the states' times")
         return _acceleration(values, times)
     values = values[np.isfinite(values)]  # states where the body had no particle left
     if len(values) == 0:

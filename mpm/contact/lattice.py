@@ -29,7 +29,7 @@ def make_bins(t: Types):
         fill: S  # the volume fraction of a lattice node in contact
         share: S  # the volume fraction a body must fill at a lattice node to be present there
         mu: wp.array(dtype=S)  # Coulomb mu between bodies a and b at a * n_bodies + b (friction; else unused)
-        rank: wp.array(dtype=wp.int32)  # per body: its place by stiffness, equals equal (normal "stiffer"; else unused)
+        rank: wp.array(dtype=wp.int32)  # per body: its place by stiffness, equal moduli equal ("stiffer"; else unused)
 
     return Bins
 
@@ -138,9 +138,9 @@ def make_present(t: Types):
 @functools.cache
 def make_outward(t: Types, normal: str = "difference"):
     """``outward(lat, bins, b, g) -> n_b``: body b's unit outward normal at
-    global node g (mpm.scene.CONTACT_NORMALS; "stiffer" reads ``Bins.rank``), gradients by central differences
-    (one-sided at the lattice edge) over the bodies present at g; 0 where
-    the gradient vanishes."""
+    global node g (mpm.scene.CONTACT_NORMALS; "stiffer" reads ``Bins.rank``),
+    gradients by central differences (one-sided at the lattice edge) over
+    the bodies present at g; 0 where the gradient vanishes."""
     S = t.scalar
     vec = t.vec
     Lattice = make_lattice(t)
