@@ -38,13 +38,13 @@ def _load_yaml(path: Path):
         loaded = OmegaConf.load(path)
         if not OmegaConf.is_dict(loaded):
             return OmegaConf.to_container(loaded, resolve=False)
-        out = {}
+        out = OmegaConf.to_container(loaded, resolve=False)
         for key in loaded:
             try:
                 out[key] = OmegaConf.to_container(loaded[key], resolve=True) if OmegaConf.is_config(
                     loaded[key]) else OmegaConf.select(loaded, str(key))
-            except Exception:  # a resolver of the run's own (e.g. the core count) or a missing key
-                out[key] = OmegaConf.to_container(loaded, resolve=False)[key]
+            except Exception:  # a resolver of the run's own (e.g. the core count) or a missing key: as written
+                pass
         return out
     except Exception:
         try:

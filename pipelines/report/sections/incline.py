@@ -80,33 +80,33 @@ HEADERS = ["scheme", "integrator", "cells", "theta [deg]", "mu", "speed [m/s]", 
            "acceleration [m/s^2]", "closed form", "error [%]"]
 
 
+def _section(jobs: list[Job], out: Path, scene: str, experiment: str, title: str, csv: str, closed,
+             what: str) -> list[str]:
+    """A section's lines and its csv: the jobs of ``scene`` against ``closed(incline(job))``."""
+    have = [j for j in jobs if j.scene == scene]
+    if not have:
+        return absent(title, f"no {scene} job (+experiment={experiment})")
+    rows = _rows(have, closed)
+    write_csv(out / csv, HEADERS, rows)
+    return [f"## {title}", "", f"{what} ([{csv}]({csv})).", ""] + md_table(HEADERS, rows)
+
+
 @section(order=67)
 def section_incline(jobs: list[Job], out: Path) -> list[str]:
     """incline.csv: a block on an inclined plane against g (sin - mu cos)."""
-    title = "Friction between bodies: a block on an incline"
-    have = [j for j in jobs if j.scene == BLOCK]
-    if not have:
-        return absent(title, f"no {BLOCK} job (+experiment=incline)")
-    rows = _rows(have, lambda c: sliding(c["theta"], c["g"], c["mu"], c["speed"]))
-    write_csv(out / "incline.csv", HEADERS, rows)
-    return [f"## {title}", "",
-            "A block's acceleration down a plane inclined at theta with Coulomb friction mu between it and "
-            "the plane's body (the parabola fitted to its centre from a quarter of the run on), against "
-            "g (sin theta - mu cos theta) while it slides; from rest where tan theta <= mu the closed form is "
-            "rest and the error column gives the fitted acceleration itself ([incline.csv](incline.csv)).",
-            ""] + md_table(HEADERS, rows)
+    return _section(jobs, out, BLOCK, "incline", "Friction between bodies: a block on an incline", "incline.csv",
+                    lambda c: sliding(c["theta"], c["g"], c["mu"], c["speed"]),
+                    "A block's acceleration down a plane inclined at theta with Coulomb friction mu between it "
+                    "and the plane's body (the parabola fitted to its centre from a quarter of the run on), "
+                    "against g (sin theta - mu cos theta) while it slides; from rest where tan theta <= mu the "
+                    "closed form is rest and the error column gives the fitted acceleration itself")
 
 
 @section(order=68)
 def section_rolling(jobs: list[Job], out: Path) -> list[str]:
     """rolling.csv: a solid disk rolling down a plane against (2/3) g sin theta."""
-    title = "Friction between bodies: a disk rolling down an incline"
-    have = [j for j in jobs if j.scene == DISK]
-    if not have:
-        return absent(title, f"no {DISK} job (+experiment=incline_disk)")
-    rows = _rows(have, lambda c: rolling(c["theta"], c["g"], c["mu"]))
-    write_csv(out / "rolling.csv", HEADERS, rows)
-    return [f"## {title}", "",
-            "A solid disk's acceleration down a plane inclined at theta (its centre's parabola from a quarter "
-            "of the run on), against rolling without slipping, (2/3) g sin theta where mu >= tan theta / 3, "
-            "per grid ([rolling.csv](rolling.csv)).", ""] + md_table(HEADERS, rows)
+    return _section(jobs, out, DISK, "incline_disk", "Friction between bodies: a disk rolling down an incline",
+                    "rolling.csv", lambda c: rolling(c["theta"], c["g"], c["mu"]),
+                    "A solid disk's acceleration down a plane inclined at theta (its centre's parabola from a "
+                    "quarter of the run on), against rolling without slipping, (2/3) g sin theta where "
+                    "mu >= tan theta / 3, per grid")
