@@ -19,18 +19,9 @@ lambda n_b = -lambda n_a: momentum is exchanged, not created. Bins with
 three or more bodies, and bins that start approaching during the solve, are
 left to the explicit pass after it.
 
-Coulomb friction between the bodies (``Scene.contact = "friction"``) acts
-after the solve, as the colliders' does (mpm.implicit.system
-``make_friction``): with the constraint's whole normal impulse over the
-step, the reaction left in the residual at the solution,
-R = m (v - v*) + dt f = -c~ lambda at a constrained node (v* the predictor
-before its projection; mode 1 of :func:`make_projection` gives
-lambda = -B W R / (B W B^T), the stresses' share of the load included, which
-the predictor alone misses), body b's normal velocity change is
-dn_b = lambda / (G M_bg), and the tangential velocity of body b relative to
-the bin's centre of mass, u_t, loses min(|u_t|, mu dn_b) (:func:`make_rub`).
-M_a dn_a = M_c dn_c and M_a u_t,a = -M_c u_t,c, so momentum is kept; the
-energy taken goes into ``contact_work``.
+Coulomb friction between the bodies (``Scene.contact = "friction"``) is
+part of the solve too: a stuck bin's relative velocity vanishes, a sliding
+bin carries the Coulomb load (mpm.contact.friction).
 """
 
 import functools
@@ -40,25 +31,26 @@ import warp as wp
 from .lattice import make_bins, make_nearest, make_node_body, make_occupancy, make_outward, make_present
 from ..lattice import make_lattice
 from ..launch import warp_kernel
-from ..stepping.status import StepStatus
 from ..types import Types
 
 
-def make_contact_constraint(t: Types, normal: str = "difference"):
+def make_contact_constraint(t: Types, normal: str = "difference", touching: bool = False):
     """Contact as constraints of the implicit solve (the module docstring):
     ``couple`` (body nodes, after mpm.contact ``splat`` of the predictor and
     before its ``clear``: the node's active bin and c_i), ``sums`` and
     ``project`` (the W-orthogonal projection onto B v = 0,
-    :func:`make_projection`)."""
-    return (make_couple(t, normal), *make_projection(t))
+    :func:`make_projection`). ``touching``: every two-body bin is a
+    constraint, approaching or not (friction, mpm.contact.friction, which
+    lets go of the bins that pull)."""
+    return (make_couple(t, normal, touching), *make_projection(t))
 
 
 @functools.cache
-def make_couple(t: Types, normal: str = "difference"):
+def make_couple(t: Types, normal: str = "difference", touching: bool = False):
     """``couple``: a node's constraint, if its bin is active: exactly two
     bodies a < c fill it and approach on the predictor, (V_a - V_c) . n_a >
-    0, with n_a = outward(a) and n_c = -n_a (every node of the bin finds the
-    same)."""
+    0 (or touch, ``touching``), with n_a = outward(a) and n_c = -n_a (every
+    node of the bin finds the same)."""
     S = t.scalar
     Lattice = make_lattice(t)
     Bins = make_bins(t)
@@ -88,61 +80,16 @@ def make_couple(t: Types, normal: str = "difference"):
         n = outward(lat, bins, a, g)
         if wp.length(n) <= S(0.0):
             return
-        if not (wp.dot(bins.P[a * n_global + g] / bins.M[a * n_global + g]
-                       - bins.P[c * n_global + g] / bins.M[c * n_global + g], n) > S(0.0)):
-            return
+        if wp.static(not touching):
+            if not (wp.dot(bins.P[a * n_global + g] / bins.M[a * n_global + g]
+                           - bins.P[c * n_global + g] / bins.M[c * n_global + g], n) > S(0.0)):
+                return
         if b != a:
             n = -n
         cbin[i] = g
         coef[i] = (lat.m[i] / (S(lat.n_grids) * bins.M[b * n_global + g])) * n
 
     return couple
-
-
-@functools.cache
-def make_rub(t: Types, normal: str = "difference"):
-    """``rub``: Coulomb friction on the solved velocities of a constrained
-    node (the module docstring), between ``bin`` (the solution binned) and
-    ``unbin``; ``num`` and ``den`` the projection sums (mode 1) of the
-    residual at the solution per bin (lambda = -num / den)."""
-    S = t.scalar
-    Lattice = make_lattice(t)
-    Bins = make_bins(t)
-    node_body = make_node_body(t)
-    outward = make_outward(t, normal)
-    occupancy = make_occupancy(t)
-    present_at = make_present(t)
-
-    @warp_kernel
-    def rub(lat: Lattice, bins: Bins, cbin: wp.array(dtype=wp.int32), num: wp.array(dtype=S),
-            den: wp.array(dtype=S), status: StepStatus):
-        i = wp.tid()
-        g = cbin[i]
-        if g < 0 or lat.m[i] <= S(0.0) or not (den[g] > S(0.0)):
-            return
-        b = node_body(lat, i)
-        present, m_tot, p_tot, _volume, a, c = occupancy(lat, bins, g)
-        n_global = lat.n_global
-        m_b = bins.M[b * n_global + g]
-        if present != 2 or not present_at(lat, bins, b, g):
-            return
-        n = outward(lat, bins, a, g)  # as make_couple's
-        if b != a:
-            n = -n
-        dn = -(num[g] / den[g]) / (S(lat.n_grids) * m_b)  # the normal velocity change the constraint gave b
-        u = bins.P[b * n_global + g] / m_b - p_tot / m_tot
-        ut = u - wp.dot(u, n) * n
-        lt = wp.length(ut)
-        if not (lt > S(0.0)) or not (dn > S(0.0)):
-            return
-        v = lat.v[i]
-        v_new = v - ut * wp.min(S(1.0), bins.mu[a * lat.n_bodies + c] * dn / lt)
-        m = wp.float64(lat.m[i]) / wp.float64(lat.n_grids)
-        wp.atomic_add(status.contact_work, 0, wp.float64(0.5) * m
-                      * (wp.float64(wp.dot(v_new, v_new)) - wp.float64(wp.dot(v, v))))
-        lat.v[i] = v_new
-
-    return rub
 
 
 @functools.cache

@@ -60,7 +60,8 @@ energy relative to v_cm only: the contact's work (``contact_work``,
 mpm.stepping.status) is never positive but for round-off.
 
 Under the implicit integrator contact is also a constraint of the system
-(mpm.contact.constraint); the lattice reads shared by both are in
+(mpm.contact.constraint), and friction part of the solve
+(mpm.contact.friction); the lattice reads shared by all are in
 mpm.contact.lattice.
 """
 
@@ -69,7 +70,8 @@ import functools
 import numpy as np
 import warp as wp
 
-from .constraint import make_contact_constraint, make_rub
+from .constraint import make_contact_constraint
+from .friction import make_friction_constraint
 from .lattice import make_bins, make_lattice_point, make_node_body, make_occupancy, make_outward, make_present
 from ..lattice import make_lattice, make_node_mass
 from ..launch import warp_kernel
@@ -277,8 +279,9 @@ class Contact:
         self.passes = GATHER_PASSES if lagrangian else 1
         # the implicit solve's constraints bin every node to one lattice node (disjoint rows)
         self.bin, _, self.unbin = make_contact(t, batched) if implicit else (None, None, None)
-        self.constraint = make_contact_constraint(t, normal) if implicit else ()
-        self._rub = make_rub(t, normal) if implicit and self.friction else None
+        self.constraint = make_contact_constraint(t, normal, touching=self.friction) if implicit else ()
+        # with friction the solve's projection has a stuck bin's d rows (mpm.contact.friction)
+        self.sliding = make_friction_constraint(t, normal) if implicit and self.friction else ()
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
         self.fill = t.scalar(model.scene.contact_fill)
@@ -298,7 +301,7 @@ class Contact:
     def kernels(self) -> list:
         return list(dict.fromkeys([self.splat, self.correct, self.clear, *self.constraint]
                                   + ([self.bin, self.unbin] if self.constraint else [])
-                                  + ([self._rub] if self._rub is not None else [])))
+                                  + list(self.sliding)))
 
     def resolve(self, grid, layout, status) -> None:
         """Contact on the grid velocities (module docstring)."""
@@ -308,27 +311,17 @@ class Contact:
             self.launch(self.correct, layout.n_nodes, [*args, int(k == 0), status, self.control])
             self.launch(self.clear, layout.n_nodes, [*args, self.control])
 
-    def couple(self, grid, layout, cbin, coef) -> None:
+    def couple(self, grid, layout, cbin, coef, friction=None) -> None:
         """The implicit solve's constraints from the predictor in ``grid.v``:
         per node its active bin ``cbin`` and coefficient ``coef``
-        (:func:`make_contact_constraint`; the bins are zero again after)."""
+        (:func:`make_contact_constraint`; the bins are zero again after);
+        with friction, ``friction`` = (bin normal, state, mu, load) per bin
+        (mpm.contact.friction ``frame``)."""
         args = [grid.lattice, self.bins]
         n = layout.n_nodes
         dev = self.model.device
         wp.launch(self.bin, n, device=dev, inputs=[*args, self.control])
         wp.launch(self.constraint[0], n, device=dev, inputs=[*args, cbin, coef])
-        wp.launch(self.unbin, n, device=dev, inputs=[*args, self.control])
-
-    def rub(self, grid, layout, cbin, num, den, status) -> None:
-        """Coulomb friction on the implicit solve's velocities at its
-        constrained nodes, from the projection sums ``num`` and ``den`` of the
-        residual at the solution (mpm.contact.constraint ``make_rub``);
-        nothing without friction."""
-        if self._rub is None:
-            return
-        args = [grid.lattice, self.bins]
-        n = layout.n_nodes
-        dev = self.model.device
-        wp.launch(self.bin, n, device=dev, inputs=[*args, self.control])
-        wp.launch(self._rub, n, device=dev, inputs=[*args, cbin, num, den, status])
+        if friction is not None:
+            wp.launch(self.sliding[0], n, device=dev, inputs=[*args, cbin, *friction])
         wp.launch(self.unbin, n, device=dev, inputs=[*args, self.control])

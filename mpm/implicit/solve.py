@@ -40,7 +40,12 @@ add the linear constraints B v = 0 of mpm.contact (equal normal velocities
 of two approaching bodies in a global bin): the start is projected onto them
 and CG runs projected (Gould, Hribar & Nocedal 2001), z = W (r - B^T lambda)
 with W = Pi D^-1 Pi and lambda making B z = 0, so every iterate keeps them;
-the residual is measured without the constraints' reaction.
+the residual is measured without the constraints' reaction. With Coulomb
+friction between the bodies a bin sticks (its whole relative velocity
+constrained) or slides (its normal row, and the Coulomb load in v*): the
+solve starts with every frictional bin stuck and is repeated from its last
+solution while a bin changes state or its load moves (mpm.contact.friction,
+at most FRICTION_ROUNDS solves).
 
 A plastic model's return mapping has run in P2G: F^0s is the returned
 elastic state, so the energy is the elastic predictor's for the step.
@@ -58,6 +63,8 @@ from ..materials.differential import make_tangent_type
 ARMIJO = 1.0e-4  # sufficient decrease of E along the Newton direction
 BACKTRACKS = 12  # halvings of the Newton step before the line search gives up
 ROUNDOFF = 10.0  # the residual's floor in units of its round-off (ImplicitSolve.solve)
+FRICTION_ROUNDS = 8  # solves per step at most with friction between bodies (stick / slip changes)
+FRICTION_TOL = 1.0e-2  # a sliding bin's load settled: it moved by less than this fraction of mu lambda_n
 
 
 @dataclass
@@ -69,6 +76,7 @@ class NewtonReport:
     residual: float = 0.0  # final |R| / initial |R| (0 when no iteration was needed)
     residual0: float = 0.0  # initial |R| [kg m/s]
     backtracks: int = 0  # line-search halvings, all iterations together
+    rounds: int = 1  # solves (more than one where friction between bodies changed a bin's state)
     reason: str = ""  # why it failed, or what the near miss was
     # converged | near_miss (out of iterations, or the line search stalled, within newton_accept of the
     # tolerance) | missed | diverged | stalled (see ImplicitSolve.solve)
@@ -102,8 +110,16 @@ class ImplicitSolve:
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact  # mpm.contact.Contact, or None
         self._contact = self.contact.constraint if self.contact is not None else ()
+        self.sliding = self.contact.sliding if self.contact is not None else ()  # mpm.contact.friction
         with wp.ScopedDevice(m.device):
-            if self.contact is not None:
+            if self.sliding:  # per bin: sums of vectors and d x d blocks, the state and load
+                self.contact_num, self.rel = (wp.zeros(m.n_nodes, dtype=t.vec) for _ in range(2))
+                self.contact_den, self.rel_den = (wp.zeros(m.n_nodes, dtype=t.mat) for _ in range(2))
+                self.bnormal, self.force, self.force_after = (wp.zeros(m.n_nodes, dtype=t.vec) for _ in range(3))
+                self.bmu = wp.zeros(m.n_nodes, dtype=t.scalar)
+                self.bstate = wp.full(m.n_nodes, -1, dtype=wp.int32)
+                self.changed = wp.zeros(1, dtype=wp.int32)
+            elif self.contact is not None:
                 self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
@@ -151,6 +167,7 @@ class ImplicitSolve:
             k = n if self.contact is not None else 1
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
+            self.v_star0 = wp.zeros(n if self.sliding else 1, dtype=vec)  # v* without the sliding loads
 
     def _sum(self) -> np.ndarray:
         return self.acc.numpy()
@@ -229,21 +246,61 @@ class ImplicitSolve:
         predictor in grid_v: the approaching two-body bins, each node's bin
         and coefficient c_i (mpm.contact; the bins are zero again after)."""
         s = self.solver
-        s.contact.couple(s.grid, s.layout, self.cbin, self.coef)
+        if not self.sliding:
+            s.contact.couple(s.grid, s.layout, self.cbin, self.coef)
+            return
+        self.bstate.fill_(-1)
+        s.contact.couple(s.grid, s.layout, self.cbin, self.coef, (self.bnormal, self.bstate, self.bmu, self.force))
 
     def _project(self, mode: int, x, z=None) -> None:
         """Project x onto the contact constraints
         (mpm.contact.constraint, modes 0-2)."""
         s, m = self.solver, self.solver.model
         n = s.layout.n_nodes
-        sums, project = self._contact[1:]
         self.contact_num.zero_()
         self.contact_den.zero_()
+        if self.sliding:
+            sums, project = self.sliding[1:3]
+            wp.launch(sums, n, device=m.device, inputs=[
+                mode, self.cbin, self.coef, self.bnormal, self.free, s.grid.m, self.inv_diag, x,
+                self.contact_num, self.contact_den])
+            wp.launch(project, n, device=m.device, inputs=[
+                mode, self.cbin, self.coef, self.bnormal, self.bstate, self.free, s.grid.m, self.inv_diag,
+                self.contact_num, self.contact_den, x, z if z is not None else x, self.acc, RESIDUAL2, DOT_B])
+            return
+        sums, project = self._contact[1:]
         common = [mode, self.cbin, self.coef, self.free, s.grid.m, self.inv_diag]
         wp.launch(sums, n, device=m.device, inputs=[*common, x, self.contact_num, self.contact_den])
         wp.launch(project, n, device=m.device, inputs=[
             *common, self.contact_num, self.contact_den, x, z if z is not None else x, self.acc,
             RESIDUAL2, DOT_B])
+
+    def _slide(self) -> bool:
+        """Friction between bodies after a solve: each frictional bin's next
+        state and load from the reaction at the solution (mpm.contact.friction
+        ``classify``); where any changed, v* with the new loads and grid_v
+        projected onto the new constraints. Whether any changed."""
+        s, m = self.solver, self.solver.model
+        n = s.layout.n_nodes
+        sums, _, classify, load = self.sliding[1:5]
+        # (the last residual evaluation, at the solution, left its projection sums in contact_num, _den)
+        self.rel.zero_()
+        self.rel_den.zero_()
+        wp.launch(sums, n, device=m.device, inputs=[
+            0, self.cbin, self.coef, self.bnormal, self.free, s.grid.m, self.inv_diag, s.grid.v,
+            self.rel, self.rel_den])  # V_a - V_c per bin
+        self.changed.zero_()
+        wp.launch(classify, m.n_nodes, device=m.device, inputs=[
+            self.bnormal, self.bstate, self.bmu, self.contact_num, self.contact_den, self.rel, self.force,
+            self.t.scalar(FRICTION_TOL), self.force_after, self.changed])
+        if int(self.changed.numpy()[0]) == 0:  # (the loads stay those the solution carries)
+            return False
+        self.force, self.force_after = self.force_after, self.force
+        wp.launch(load, n, device=m.device, inputs=[
+            self.cbin, self.coef, self.bnormal, self.bstate, self.force, self.free, s.grid.m, self.v_star0,
+            self.v_star])
+        self._project(0, s.grid.v)
+        return True
 
     def begin(self) -> None:
         """The solve's start: keep the predictor v*, constrain grid_v, and the
@@ -254,6 +311,8 @@ class ImplicitSolve:
         n = s.layout.n_nodes
         self._grow(s.grid.capacity)
         wp.copy(self.v_star, s.grid.v, count=n)
+        if self.sliding:
+            wp.copy(self.v_star0, s.grid.v, count=n)
         s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n)
         if self.contact is not None:
             self._activate()
@@ -265,13 +324,15 @@ class ImplicitSolve:
         contact: the tangential velocity relative to the collider loses mu
         times the normal velocity the constraint removed (|(I - Pi) R| / m at
         the solution, while it pushes into the collider) - the explicit
-        step's rule with the implicit normal impulse."""
+        step's rule with the implicit normal impulse; and the work of
+        friction between sliding bodies (mpm.contact.friction ``work``)."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, s.buffer.status])
-        if self.contact is not None:  # friction between bodies (mpm.contact.constraint make_rub)
-            # (the last residual evaluation, at the solution, left the sums of its reaction in contact_num, _den)
-            self.contact.rub(s.grid, s.layout, self.cbin, self.contact_num, self.contact_den, s.buffer.status)
+        if self.sliding:  # the work of friction between bodies (mpm.contact.friction)
+            wp.launch(self.sliding[5], s.layout.n_nodes, device=m.device, inputs=[
+                self.cbin, self.coef, self.bnormal, self.bstate, self.force, self.free, m.kernel.n_grids,
+                s.grid.v, s.buffer.status])
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
@@ -300,18 +361,35 @@ class ImplicitSolve:
         """The grid velocities of the step: on entry ``solver.grid.v`` holds the
         predictor v* (momentum / mass + dt g) and ``solver.grid.q`` the node
         positions; on exit grid_v holds the solution, before the boundary
-        conditions' friction and the explicit contact pass (mpm.solver)."""
+        conditions' friction and the explicit contact pass (mpm.solver).
+        With friction between bodies the solve is repeated from its solution
+        while a bin's stick / slip state or load changes (:meth:`_slide`)."""
+        self.begin()
+        rep = NewtonReport()
+        goal = self._newton(state, dt, rep)
+        while self.sliding and rep.converged and rep.rounds < FRICTION_ROUNDS and self._slide():
+            rep.rounds += 1
+            self._newton(state, dt, rep, goal)
+        if rep.converged:
+            self.finish()
+        return rep
+
+    def _newton(self, state, dt, rep: NewtonReport, goal: float | None = None) -> float:
+        """Newton's method from grid_v to the residual ``goal`` (the first
+        solve of a step sets it and ``rep.residual0``); the solution in grid_v,
+        the iterations added to ``rep``. Returns the goal."""
         s, m, opt = self.solver, self.solver.model, self.options
         n = s.layout.n_nodes
         dtS = self.t.scalar(dt)
-        self.begin()
         v, v_try = s.grid.v, self.v_trial
         E, R = self._energy_residual(state, v, dtS)
-        rep = NewtonReport(residual0=R)
-        # the residual's round-off floor: F = (F^sn + dt D) F^0s carries eps, i.e. the
-        # velocities eps dx / dt, which A turns into a residual; v* carries eps |v*|
-        floor = ROUNDOFF * self.eps * (self.stiffness * float(m.dx) / float(dt) + self.momentum)
-        goal = max(opt.newton_tol * R, floor)
+        if goal is None:
+            rep.residual0 = R
+            # the residual's round-off floor: F = (F^sn + dt D) F^0s carries eps, i.e. the
+            # velocities eps dx / dt, which A turns into a residual; v* carries eps |v*|
+            floor = ROUNDOFF * self.eps * (self.stiffness * float(m.dx) / float(dt) + self.momentum)
+            goal = max(opt.newton_tol * R, floor)
+        start = rep.newton
         R_before = np.inf  # the residual before the last iteration
         while True:
             if not np.isfinite(R) or not np.isfinite(E):
@@ -320,7 +398,7 @@ class ImplicitSolve:
                 break
             if R <= goal:
                 break
-            if rep.newton >= opt.newton_max:
+            if rep.newton - start >= opt.newton_max:
                 if opt.newton_max > 1:  # (1: the semi-implicit update, one step by definition)
                     self._classify(rep, R, R_before, goal)
                 break
@@ -360,6 +438,4 @@ class ImplicitSolve:
         rep.residual = R / rep.residual0 if rep.newton > 0 else 0.0
         if v is not s.grid.v:
             wp.copy(s.grid.v, v, count=n)
-        if rep.converged:
-            self.finish()
-        return rep
+        return goal

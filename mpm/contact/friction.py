@@ -1,0 +1,226 @@
+"""Coulomb friction between bodies inside the implicit solve (mpm.implicit).
+
+The frictionless constraint of a bin g where bodies a and c touch
+(mpm.contact.constraint) asks for equal normal velocities,
+n_a . (V_a - V_c) = 0, with V_b = sum_{i in (b, g)} w_i v_i the bin's mean
+velocity of body b, w_i = m_i / (G M_bg). With friction every bin where
+two bodies touch is a constraint, approaching on the predictor or not (a
+block resting on a plate falls with it on the predictor, so the approach
+test would leave out most of its contact), and each bin with mu_ac > 0 is
+in one of two states, chosen by an active set:
+
+* stick: the whole relative velocity vanishes, V_a - V_c = 0 (d rows per
+  bin, c_i = s_i w_i I with s_i = +1 on a's nodes and -1 on c's). The rows
+  of one bin share its nodes, so B W B^T is a d x d block per bin and the
+  W-orthogonal projection is still one bin sum and one node pass:
+  lambda_g = (sum s_i w_i Pi_i W_i x_i) solved against
+  (sum w_i^2 Pi_i W_i Pi_i), x_i -= s_i w_i Pi_i lambda_g (W as in
+  mpm.contact.constraint ``make_projection``; mode 0: W = M^-1).
+* slip: the normal row only, and a tangential impulse of magnitude
+  mu lambda_n along the slip, applied as a known load: the predictor of a's
+  nodes v*_i += s_i w_i Pi_i f_g / m_i (and c's with the opposite sign),
+  f_g = -mu lambda_n u_t / |u_t|, u_t the tangential part of V_a - V_c
+  (the impulse on a opposes a's slip).
+
+With lambda_g a bin's reaction at the solution (the residual's projection
+sums: R_i = s_i w_i Pi_i lambda_g is node i's share, so the impulse on a
+is lambda_g and on c -lambda_g) the
+normal reaction is lambda_n = -n_a . lambda_g (> 0 pressing the bodies
+together) and its tangential part lambda_t. After a solve
+(:func:`make_friction_constraint` ``classify``): a stick bin whose
+|lambda_t| exceeds mu lambda_n slides, with f_g = mu lambda_n
+lambda_t / |lambda_t|; a sliding bin whose slip the load turned round
+(u_t . f_g > 0) sticks;
+a sliding bin's f_g follows its new lambda_n and slip direction; a bin
+whose lambda_n is not positive (the bodies pull at each other) lets go: no
+row for the rest of the step (the explicit pass after the solve catches a
+bin that then approaches). The solve is repeated
+from its last solution until no bin changes and the loads have settled
+(mpm.implicit.solve FRICTION_TOL, FRICTION_ROUNDS). The two
+bodies' impulses are equal and opposite in every state (momentum kept);
+a stuck pair does no work, a sliding one the work of f_g against its slip
+(``contact_work``).
+"""
+
+import functools
+
+import warp as wp
+
+from .lattice import make_bins, make_occupancy, make_outward
+from ..lattice import make_lattice
+from ..launch import warp_kernel
+from ..stepping.status import StepStatus
+from ..types import Types
+
+NONE, STICK, SLIP, FREE = 0, 1, 2, 3  # a bin's state: frictionless, stuck, sliding, let go (-1: no contact)
+SINGULAR = 1.0e-8  # det / trace^d of a stick block below which its bin keeps only the normal row
+
+
+@functools.cache
+def make_friction_constraint(t: Types, normal: str = "difference"):
+    """``frame``, ``sums``, ``project``, ``classify``, ``load``, ``work``:
+    the kernels of friction inside the implicit solve (module docstring)."""
+    S = t.scalar
+    f64 = wp.float64
+    vec, mat = t.vec, t.mat
+    Lattice = make_lattice(t)
+    Bins = make_bins(t)
+    outward = make_outward(t, normal)
+    occupancy = make_occupancy(t)
+
+    @wp.func
+    def reaction(state: int, n: vec, num: vec, den: mat):
+        """lambda_g from the bin's sums: the d x d solve of a stuck bin, none
+        for a bin let go, the normal row's otherwise."""
+        if state == FREE:
+            return vec()
+        if state == STICK:
+            tr = wp.trace(den)
+            if tr > S(0.0) and wp.determinant(den) > S(SINGULAR) * wp.pow(tr, S(wp.static(t.dim))):
+                return wp.inverse(den) * num
+        s = wp.dot(n, den * n)
+        if s > S(0.0):
+            return n * (wp.dot(n, num) / s)
+        return vec()
+
+    @warp_kernel
+    def frame(lat: Lattice, bins: Bins, cbin: wp.array(dtype=wp.int32), bnormal: wp.array(dtype=vec),
+              state: wp.array(dtype=wp.int32), mu: wp.array(dtype=S), force: wp.array(dtype=vec)):
+        """Per active bin (between mpm.contact ``bin`` and ``unbin``): n_a as
+        ``couple`` found it, mu_ac, no load, and the start: stuck where mu_ac > 0."""
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0:
+            return
+        _present, _m, _p, _volume, a, c = occupancy(lat, bins, g)
+        bnormal[g] = outward(lat, bins, a, g)  # (every node of the bin writes the same)
+        mu_ac = bins.mu[a * lat.n_bodies + c]
+        mu[g] = mu_ac
+        force[g] = vec()
+        if mu_ac > S(0.0):
+            state[g] = STICK
+        else:
+            state[g] = NONE
+
+    @warp_kernel
+    def sums(mode: int, cbin: wp.array(dtype=wp.int32), coef: wp.array(dtype=vec),
+             bnormal: wp.array(dtype=vec), free: wp.array(dtype=mat), m: wp.array(dtype=S),
+             inv_diag: wp.array(dtype=vec), x: wp.array(dtype=vec),
+             num: wp.array(dtype=vec),  # per bin: sum s w Pi W x (mode 0: sum s w x)
+             den: wp.array(dtype=mat)):  # per bin: sum w^2 Pi W Pi
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0:
+            return
+        sw = wp.dot(coef[i], bnormal[g])  # s_i w_i
+        Pi = free[i]
+        if mode == 0:
+            wp.atomic_add(num, g, sw * x[i])
+            wp.atomic_add(den, g, (sw * sw / m[i]) * (Pi * wp.transpose(Pi)))
+        else:
+            W = wp.diag(inv_diag[i])
+            wp.atomic_add(num, g, sw * (Pi * (W * x[i])))
+            wp.atomic_add(den, g, (sw * sw) * (Pi * W * wp.transpose(Pi)))
+
+    @warp_kernel
+    def project(mode: int, cbin: wp.array(dtype=wp.int32), coef: wp.array(dtype=vec),
+                bnormal: wp.array(dtype=vec), state: wp.array(dtype=wp.int32), free: wp.array(dtype=mat),
+                m: wp.array(dtype=S), inv_diag: wp.array(dtype=vec), num: wp.array(dtype=vec),
+                den: wp.array(dtype=mat), x: wp.array(dtype=vec), z: wp.array(dtype=vec),
+                acc: wp.array(dtype=f64), r2: int, rz: int):
+        """As mpm.contact.constraint ``project``, with a stuck bin's d rows."""
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0:
+            return
+        n = bnormal[g]
+        Pi = free[i]
+        ct = Pi * (wp.dot(coef[i], n) * reaction(state[g], n, num[g], den[g]))
+        if mode == 0:
+            x[i] = x[i] - ct / m[i]
+            return
+        r = x[i] - ct
+        x[i] = r
+        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
+        if mode == 2:
+            zi = Pi * wp.cw_mul(inv_diag[i], r)
+            z[i] = zi
+            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
+
+    @warp_kernel
+    def classify(bnormal: wp.array(dtype=vec), state: wp.array(dtype=wp.int32), mu: wp.array(dtype=S),
+                 num: wp.array(dtype=vec), den: wp.array(dtype=mat), rel: wp.array(dtype=vec),
+                 force: wp.array(dtype=vec), tol: S, after: wp.array(dtype=vec),
+                 changed: wp.array(dtype=wp.int32)):
+        """Per bin, after a solve with the loads ``force``: its next state and
+        load f_g into ``after`` (module docstring); ``num``, ``den`` the
+        residual's sums at the solution, ``rel`` V_a - V_c (mode-0 sums of
+        the solution), ``mu`` per bin. Counts the bins that changed state or
+        whose f_g moved by more than ``tol`` of mu lambda_n (none: the solve
+        stands with ``force`` and ``state`` as they were)."""
+        g = wp.tid()
+        st = state[g]
+        f = force[g]
+        after[g] = f
+        if st < NONE or st == FREE:
+            return
+        n = bnormal[g]
+        lam = reaction(st, n, num[g], den[g])
+        lam_n = -wp.dot(lam, n)
+        if not (lam_n > S(0.0)):  # the bodies pull at each other: no constraint
+            state[g] = FREE
+            after[g] = vec()
+            wp.atomic_add(changed, 0, 1)
+            return
+        if st == NONE:
+            return
+        limit = mu[g] * lam_n
+        if st == STICK:
+            lam_t = lam - wp.dot(lam, n) * n
+            lt = wp.length(lam_t)
+            if lt > limit:
+                state[g] = SLIP
+                after[g] = lam_t * (limit / lt)
+                wp.atomic_add(changed, 0, 1)
+            return
+        u = rel[g] - wp.dot(rel[g], n) * n
+        if wp.dot(u, f) > S(0.0):  # the load turned the slip round: the bin sticks
+            state[g] = STICK
+            after[g] = vec()
+            wp.atomic_add(changed, 0, 1)
+            return
+        lu = wp.length(u)
+        f_new = f * (limit / wp.max(wp.length(f), S(1.0e-30)))
+        if lu > S(0.0):
+            f_new = u * (-limit / lu)
+        if wp.length(f_new - f) > tol * limit:
+            wp.atomic_add(changed, 0, 1)
+        after[g] = f_new
+
+    @warp_kernel
+    def load(cbin: wp.array(dtype=wp.int32), coef: wp.array(dtype=vec), bnormal: wp.array(dtype=vec),
+             state: wp.array(dtype=wp.int32), force: wp.array(dtype=vec), free: wp.array(dtype=mat),
+             m: wp.array(dtype=S), v_star0: wp.array(dtype=vec), v_star: wp.array(dtype=vec)):
+        """The predictor with the sliding bins' loads: v* = v*0 + s w Pi f / m."""
+        i = wp.tid()
+        v = v_star0[i]
+        g = cbin[i]
+        if g >= 0 and m[i] > S(0.0):
+            if state[g] == SLIP:
+                v = v + free[i] * (wp.dot(coef[i], bnormal[g]) * force[g]) / m[i]
+        v_star[i] = v
+
+    @warp_kernel
+    def work(cbin: wp.array(dtype=wp.int32), coef: wp.array(dtype=vec), bnormal: wp.array(dtype=vec),
+             state: wp.array(dtype=wp.int32), force: wp.array(dtype=vec), free: wp.array(dtype=mat),
+             n_grids: int, v: wp.array(dtype=vec), status: StepStatus):
+        """The sliding bins' work on the solution: sum_i J_i . v_i with
+        J_i = s w Pi f / G the node's impulse [kg m/s] (each grid holds the full mass)."""
+        i = wp.tid()
+        g = cbin[i]
+        if g < 0 or state[g] != SLIP:
+            return
+        J = (free[i] * (wp.dot(coef[i], bnormal[g]) * force[g])) / S(n_grids)
+        wp.atomic_add(status.contact_work, 0, f64(wp.dot(J, v[i])))
+
+    return frame, sums, project, classify, load, work
