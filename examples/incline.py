@@ -29,6 +29,7 @@ import warp as wp
 wp.config.log_level = wp.LOG_ERROR  # no start-up banner or module-load lines
 
 import mpm  # noqa: E402
+from mpm.inclines import rolling, sliding  # noqa: E402
 from _args import Parser, bounded, choice, device, integer, positive  # noqa: E402 (this folder)
 
 G = 9.81  # [m/s^2]
@@ -77,15 +78,13 @@ def slide(scheme: str = "tlmpm", integrator: str = "explicit", friction: float =
 
 
 def expected(angle: float, friction: float, speed: float = SPEED, body: str = "block") -> float:
-    """The body's acceleration [m/s^2]: a block sliding, g (sin theta -
-    mu cos theta), or 0 at rest that friction holds (tan theta <= mu); a
-    solid disk, (2/3) g sin theta rolling (mu >= tan(theta) / 3), else
-    slipping as the block slides."""
-    theta = np.radians(angle)
-    a = G * (np.sin(theta) - friction * np.cos(theta))
-    if body == "disk" and friction >= np.tan(theta) / 3:
-        return float(2.0 / 3.0 * G * np.sin(theta))
-    return 0.0 if speed == 0.0 and a <= 0.0 else float(a)
+    """The body's acceleration [m/s^2] in closed form (mpm.inclines): a
+    block sliding, g (sin theta - mu cos theta), or 0 at rest that friction
+    holds (tan theta <= mu); a solid disk, (2/3) g sin theta rolling
+    (mu >= tan(theta) / 3), else slipping as the block slides."""
+    if body == "disk":
+        return rolling(angle, G, friction)
+    return sliding(angle, G, friction, speed)
 
 
 def acceleration(t: np.ndarray, v: np.ndarray, speed: float = SPEED) -> float:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from mpm.inclines import rolling, sliding
+
 from ..common import absent, fmt, md_table, write_csv
 from ..jobs import Job
 from ..registry import section
@@ -44,20 +46,6 @@ def incline(job: Job) -> dict | None:
     response = (job.metrics.get("responses") or {}).get("acceleration") or {}
     return {"theta": math.degrees(math.atan2(gx, -gy)), "g": math.hypot(gx, gy), "mu": mu, "speed": speed,
             "a": response.get("value")}
-
-
-def sliding(theta: float, g: float, mu: float, speed: float) -> float:
-    """A block's acceleration down the plane [m/s^2]: g (sin - mu cos), or
-    0 from rest where friction holds it (tan theta <= mu)."""
-    a = g * (math.sin(math.radians(theta)) - mu * math.cos(math.radians(theta)))
-    return 0.0 if speed == 0.0 and a <= 0.0 else a
-
-
-def rolling(theta: float, g: float, mu: float) -> float:
-    """A solid disk's: (2/3) g sin theta rolling (mu >= tan theta / 3), else sliding."""
-    if mu >= math.tan(math.radians(theta)) / 3.0:
-        return 2.0 / 3.0 * g * math.sin(math.radians(theta))
-    return sliding(theta, g, mu, 0.0)
 
 
 def _rows(have: list[Job], closed) -> list[list]:
