@@ -93,6 +93,28 @@ def make_couple(t: Types, normal: str = "difference", touching: bool = False):
 
 
 @functools.cache
+def make_remove(t: Types):
+    """``remove(mode, i, reaction, Pi, inv_diag, x, z, acc, r2, rz)``: modes 1
+    and 2 of a projection at node i (:func:`make_projection`): r = x_i - the
+    constraint's reaction, |r|^2 into ``acc[r2]``; mode 2 also z_i = Pi W r
+    and r . z into ``acc[rz]``."""
+    f64 = wp.float64
+
+    @wp.func
+    def remove(mode: int, i: int, reaction: t.vec, Pi: t.mat, inv_diag: wp.array(dtype=t.vec),
+               x: wp.array(dtype=t.vec), z: wp.array(dtype=t.vec), acc: wp.array(dtype=f64), r2: int, rz: int):
+        r = x[i] - reaction
+        x[i] = r
+        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
+        if mode == 2:
+            zi = Pi * wp.cw_mul(inv_diag[i], r)
+            z[i] = zi
+            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
+
+    return remove
+
+
+@functools.cache
 def make_projection(t: Types):
     """``sums`` and ``project``: the W-orthogonal projection onto B v = 0
     in three modes, Pi_i the node's boundary projector and c~_i = Pi_i c_i:
@@ -107,6 +129,7 @@ def make_projection(t: Types):
     a difference of the reaction's square would drown a converged residual)."""
     S = t.scalar
     f64 = wp.float64
+    remove = make_remove(t)
 
     @warp_kernel
     def sums(
@@ -162,12 +185,6 @@ def make_projection(t: Types):
         if mode == 0:
             x[i] = x[i] - ct * (lam / m[i])
             return
-        r = x[i] - ct * lam
-        x[i] = r
-        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
-        if mode == 2:
-            zi = Pi * wp.cw_mul(inv_diag[i], r)
-            z[i] = zi
-            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
+        remove(mode, i, ct * lam, Pi, inv_diag, x, z, acc, r2, rz)
 
     return sums, project

@@ -46,6 +46,7 @@ import functools
 
 import warp as wp
 
+from .constraint import make_remove
 from .lattice import make_bins, make_occupancy, make_outward
 from ..lattice import make_lattice
 from ..launch import warp_kernel
@@ -67,6 +68,7 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
     Bins = make_bins(t)
     outward = make_outward(t, normal)
     occupancy = make_occupancy(t)
+    remove = make_remove(t)
 
     @wp.func
     def reaction(state: int, n: vec, num: vec, den: mat):
@@ -139,13 +141,7 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
         if mode == 0:
             x[i] = x[i] - ct / m[i]
             return
-        r = x[i] - ct
-        x[i] = r
-        wp.atomic_add(acc, r2, f64(wp.dot(r, r)))
-        if mode == 2:
-            zi = Pi * wp.cw_mul(inv_diag[i], r)
-            z[i] = zi
-            wp.atomic_add(acc, rz, f64(wp.dot(r, zi)))
+        remove(mode, i, ct, Pi, inv_diag, x, z, acc, r2, rz)
 
     @warp_kernel
     def classify(bnormal: wp.array(dtype=vec), state: wp.array(dtype=wp.int32), mu: wp.array(dtype=S),

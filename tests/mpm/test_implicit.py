@@ -14,6 +14,7 @@ from helpers import DEVICE, compose_cfg, spec_for
 from mpm.integrators import Implicit
 from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
+from contact_step import contact_step, touching
 from reference_mpm import ImplicitSystem
 
 
@@ -421,48 +422,15 @@ def contact_kkt(solver, state, dt, scene):
     hold: R = 0 elsewhere, R_a = -R_b parallel to n_a and pushing the bodies
     apart there. The state is left at the step's start; returns the number
     of constrained nodes."""
-    s = state.numpy()
+    step = contact_step(solver, state, dt, scene)
+    assert step.report.converged
+    M, V, R, v, scale = step.M, step.v_star, step.R, step.v, step.scale
     mat = scene.bodies[0].material
-    dx, d = solver.model.dx, 2
-    body = solver.model.body.numpy()
-    lay = solver.layout
-    systems, nodes = [], []
-    for b in range(2):
-        sel = body == b
-        sb = {k: v[sel] for k, v in s.items() if len(v) == len(sel)}
-        system = ImplicitSystem(sb, solver.model.mass.numpy()[sel], solver.model.volume.numpy()[sel], mat.name,
-                                mat.packed(), dx, scene.gravity, dt)
-        lo, shape, offset = lay.lo_d.numpy()[b], lay.shape_d.numpy()[b], lay.offset_d.numpy()[b]
-        flat = [offset + int(np.dot(np.array(n) - lo, [shape[1], 1])) for n in system.nodes]
-        systems.append(system)
-        nodes.append(flat)
-    # the solve's velocities, without the explicit contact pass after it
-    solver.contact.resolve = lambda *args: None
-    try:
-        solver.schedule(dt)
-        report = solver.attempt(state)
-    finally:
-        del solver.contact.resolve
-    assert report.converged
-    grid_v = solver.grid.v.numpy()
-    M = [dict(zip(sy.nodes, sy.m)) for sy in systems]
-    V = [dict(zip(sy.nodes, sy.v_star)) for sy in systems]
-    R = [dict(zip(sy.nodes, sy.residual(grid_v[f]))) for sy, f in zip(systems, nodes)]
-    v = [dict(zip(sy.nodes, grid_v[f])) for sy, f in zip(systems, nodes)]
-    scale = max(np.linalg.norm(sy.residual(sy.v_star)) for sy in systems)
-    active = {}
-    for n in set(M[0]) & set(M[1]):
-        if (M[0][n] + M[1][n]) / (mat.rho * dx**d) < scene.contact_fill:
-            continue
-        grad = np.array([sum((M[1].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)
-                              - M[0].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)) * e for e in (1, -1))
-                         for k in range(d)])
-        normal = grad / np.linalg.norm(grad)
-        if np.dot(V[0][n] - V[1][n], normal) > 0:
-            active[n] = normal
+    active = {n: normal for n, normal in touching(step, scene.contact_fill, mat.rho * solver.model.dx**2).items()
+              if np.dot(V[0][n] - V[1][n], normal) > 0}
     cbin = solver.implicit.cbin.numpy()
-    assert sorted(n for f in nodes for n in f if cbin[n] >= 0) == sorted(
-        f for sy, fl in zip(systems, nodes) for n, f in zip(sy.nodes, fl) if n in active)
+    assert sorted(n for f in step.nodes for n in f if cbin[n] >= 0) == sorted(
+        f for lat, fl in zip(step.lattice, step.nodes) for n, f in zip(lat, fl) if n in active)
     for b in range(2):
         for n, r in R[b].items():
             if n not in active:

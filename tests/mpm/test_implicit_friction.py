@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import mpm
+from contact_step import contact_step, touching
 from helpers import DEVICE
 from mpm.contact.friction import FREE, SLIP, STICK
 from mpm.implicit.solve import FRICTION_ROUNDS, FRICTION_TOL
 from mpm.integrators import Implicit
-from reference_mpm import ImplicitSystem
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -50,49 +50,19 @@ def coulomb_kkt(solver, state, dt, scene, mu) -> dict:
     FRICTION_TOL, the settled load). The work recorded for the step is the
     sliding nodes' sum_n R_a,t . u (G = 1: the residual is the impulse).
     Returns the count per state."""
-    s = state.numpy()
-    mat = scene.bodies[0].material
-    dx, d = solver.model.dx, 2
-    body = solver.model.body.numpy()
-    lay = solver.layout
-    systems, nodes = [], []
-    for b in range(2):
-        sel = body == b
-        sb = {k: v[sel] for k, v in s.items() if len(v) == len(sel)}
-        system = ImplicitSystem(sb, solver.model.mass.numpy()[sel], solver.model.volume.numpy()[sel], mat.name,
-                                mat.packed(), dx, scene.gravity, dt)
-        lo, shape, offset = lay.lo_d.numpy()[b], lay.shape_d.numpy()[b], lay.offset_d.numpy()[b]
-        nodes.append([offset + int(np.dot(np.array(n) - lo, [shape[1], 1])) for n in system.nodes])
-        systems.append(system)
-    solver.contact.resolve = lambda *args: None  # the solve's velocities, without the explicit pass after it
-    try:
-        solver.schedule(dt)
-        report = solver.attempt(state)
-    finally:
-        del solver.contact.resolve
-    assert report.converged and report.rounds < FRICTION_ROUNDS
-    grid_v = solver.grid.v.numpy()
-    M = [dict(zip(sy.nodes, sy.m)) for sy in systems]
-    R = [dict(zip(sy.nodes, sy.residual(grid_v[f]))) for sy, f in zip(systems, nodes)]
-    v = [dict(zip(sy.nodes, grid_v[f])) for sy, f in zip(systems, nodes)]
-    scale = max(np.linalg.norm(sy.residual(sy.v_star)) for sy in systems)
-    tol = 1e-7 * scale
-    cols = solver.model.n_nodes  # the lattice: (cells + 1)^2 nodes, row-major
-    side = int(round(np.sqrt(cols)))
+    step = contact_step(solver, state, dt, scene)
+    assert step.report.converged and step.report.rounds < FRICTION_ROUNDS
+    R, v = step.R, step.v
+    tol = 1e-7 * step.scale
+    side = int(round(np.sqrt(solver.model.n_nodes)))  # the square lattice: (cells + 1)^2 nodes, row-major
     state_of = solver.implicit.bstate.numpy()
     counts = {STICK: 0, SLIP: 0, FREE: 0}
-    touching, work = set(), 0.0
-    for n in set(M[0]) & set(M[1]):
-        if (M[0][n] + M[1][n]) / (mat.rho * dx**d) < scene.contact_fill:
-            continue
-        touching.add(n)
+    contact = touching(step, scene.contact_fill, scene.bodies[0].material.rho * solver.model.dx**2)
+    work = 0.0
+    for n, normal in contact.items():
         st = int(state_of[n[0] * side + n[1]])
         assert st in counts, (n, st)
         counts[st] += 1
-        grad = np.array([sum((M[1].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)
-                              - M[0].get(n[:k] + (n[k] + e,) + n[k + 1:], 0.0)) * e for e in (1, -1))
-                         for k in range(d)])
-        normal = grad / np.linalg.norm(grad)
         Ra, Rb = R[0][n], R[1][n]
         if st == FREE:
             assert np.linalg.norm(Ra) <= tol and np.linalg.norm(Rb) <= tol
@@ -113,7 +83,7 @@ def coulomb_kkt(solver, state, dt, scene, mu) -> dict:
             work += np.dot(Rt, ut)
     for b in range(2):
         for n, r in R[b].items():
-            if n not in touching:
+            if n not in contact:
                 assert np.linalg.norm(r) <= tol
     recorded = float(solver.buffer.read()["contact_work"][0])
     assert recorded <= 0.0 and recorded == pytest.approx(work, rel=1e-6, abs=1e-12)
