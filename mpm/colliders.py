@@ -1,20 +1,28 @@
 """Rigid colliders: static or moving solids other than the domain's walls.
 
 A collider is a solid described by a signed distance phi(q) (negative inside
-the solid) and its outward normal n(q) = grad phi. It acts on the grid, on
-every node whose current position q_i lies inside it (phi(q_i) < 0), after
-the walls and before the kinematic regions (mpm.grid), so it works for every
-scheme and kernel. With the collider's velocity u and the node's relative
-velocity v_r = v_i - u, v_n = v_r . n:
+the solid) and its outward normal n(q) = grad phi. It acts on the grid at
+the nodes where a body touches it, judged at the node's current position
+q_i by the volume fractions of the solid and of the body there
+(mpm.surface; ``Scene.boundary_rule`` "nodes": on every node inside it,
+phi(q_i) < 0, as earlier versions did), after the walls and before the
+kinematic regions (mpm.grid), so it works for every scheme and kernel; a
+particle the grid lets into the solid is put back on its surface
+(mpm.keep_out). With the collider's velocity u and the body's relative
+velocity v_r = v - u at the surface point below the node (the node's own,
+extrapolated by its velocity gradient where friction or a sticky collider
+needs it, mpm.surface), v_n = v_r . n:
 
-* ``sticky``:   v_i = u;
+* ``sticky``:   v = u;
 * ``slip``:     the normal part of v_r is removed (no separation either);
-* ``separate``: as slip, but only when v_n < 0 (the node moves into the
-  solid); a node moving away is left free;
+* ``separate``: as slip, but only when v_n < 0 (the body moves into the
+  solid); a body moving away is left free (the boundary for bodies that
+  roll or bounce);
 
 and slip and separate apply Coulomb friction to the tangential part
 v_t = v_r - v_n n: |v_t| shrinks by mu |v_n| and stops at zero,
-    v_i = u + max(0, 1 - mu |v_n| / |v_t|) v_t.
+    v = u + max(0, 1 - mu |v_n| / |v_t|) v_t;
+the node's velocity changes by what the rule changes v by.
 
 A collider may move with a constant ``velocity`` [m/s] while
 ``start <= t < end`` [s]; its shape is then displaced by
@@ -48,9 +56,11 @@ BOUNDARIES = ("sticky", "slip", "separate")
 """what a node inside a collider does (Collider.boundary; module docstring)"""
 INSIDE_DEPTH = 1.0
 """a particle counts as inside a collider when deeper than this many cells:
-the nodes inside a collider stop particles within about a cell of its
-surface (a fast splash particle in a container reaches 0.3-0.85 cells deep,
-tests/mpm/test_colliders.py), so deeper ones have gone through it"""
+under the surface rule none is inside at all after a step (mpm.keep_out);
+under the node rule the nodes inside a collider stop particles within
+about a cell of its surface (a fast splash particle in a container reached
+0.3-0.85 cells deep, tests/mpm/test_colliders.py), so deeper ones have gone
+through it"""
 
 
 def _unit(v) -> tuple[float, ...]:

@@ -13,19 +13,31 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .collider_device import build_meshes, kinds_of, make_inside_count, pack
+from .collider_device import build_meshes, kinds_of, make_inside_count
+from .collider_shapes import pack
 from .colliders import INSIDE_DEPTH
 from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
 from .scene import WALL_TYPES
+from .surface import pack_profile, reach
 
 OPEN = WALL_TYPES.index("open")
+
+
+def needs_gradients(scene) -> bool:
+    """Whether the boundary conditions read the nodes' velocity gradients
+    (summed in P2G): the surface rule with a collider that holds a body's
+    surface tangentially (friction, or sticky), mpm.surface."""
+    return scene.boundary_rule == "surface" and any(c.friction > 0 or c.boundary == "sticky"
+                                                     for c in scene.colliders)
 
 
 class Conditions:
     """``model``'s walls, regions and colliders. ``separate``: they act after
     contact or the implicit solve rather than in the grid update;
     ``implicit``: also compile the solve's constraints; ``lattice``: the
-    nodes sit on the lattice (the Eulerian scheme; no summed positions)."""
+    nodes sit on the lattice (the Eulerian scheme; no summed positions).
+    ``gradients``: the nodes' velocity gradients are summed in P2G
+    (:func:`needs_gradients`)."""
 
     def __init__(self, model, launch, control, separate: bool, implicit: bool, lattice: bool,
                  batched: bool = False):
@@ -33,16 +45,23 @@ class Conditions:
         self.model, self.launch, self.control = model, launch, control
         self.regions = len(scene.regions) > 0
         self.collider_kinds = kinds_of(scene.colliders)
-        self.band = (scene.wall_cells - 0.5) * model.dx  # [m] walls act on nodes closer than this
+        rule, self.gradients = scene.boundary_rule, needs_gradients(scene)
+        self.band = (scene.wall_cells - 0.5) * model.dx  # [m] the node rule's walls act on nodes this close
+        # [m] walls act on nodes closer than this to the domain's face (a node the kernel's reach from a face)
+        self.wall_reach = self.band if rule == "nodes" else (scene.wall_cells + reach(model.kernel)) * model.dx
         self.closed = (np.array(model.wall_codes[0]) != OPEN, np.array(model.wall_codes[1]) != OPEN)
         self.open = not (self.closed[0].all() and self.closed[1].all())  # particles leave at open faces
+        rules = dict(rule=rule, gradients=self.gradients)
         self.grid_update = make_grid_update(t, not separate, self.regions, self.collider_kinds,
-                                            lattice=lattice, n_grids=model.kernel.n_grids, batched=batched)
-        self.boundary = make_boundary(t, self.regions, self.collider_kinds, batched) if separate else None
+                                            lattice=lattice, n_grids=model.kernel.n_grids, batched=batched, **rules)
+        self.boundary = (make_boundary(t, self.regions, self.collider_kinds, batched, **rules)
+                         if separate else None)
         self.constraints = (make_constraints(t, self.regions, self.collider_kinds,
-                                             any(c.friction > 0 for c in scene.colliders))
+                                             any(c.friction > 0 for c in scene.colliders), **rules)
                             if implicit else None)
         self.inside = make_inside_count(t, self.collider_kinds) if scene.colliders else None
+        # particles put back out of the solids in G2P (mpm.keep_out)
+        self.keep_out = rule == "surface" and bool(scene.colliders or self.closed[0].any() or self.closed[1].any())
         self.collider_speed = max([c.speed() for c in scene.colliders], default=0.0)  # [m/s]
         with wp.ScopedDevice(model.device):
             self._meshes = build_meshes(scene.colliders, model.device)  # kept alive for their ids
@@ -65,6 +84,12 @@ class Conditions:
         data = make_boundary_data(t)()
         data.domain = t.vec(*m.domain)
         data.band = t.scalar(self.band)
+        face = m.scene.wall_cells * m.dx
+        data.face_lo = t.vec(*([face] * d))
+        data.face_hi = t.vec(*[L - face for L in m.domain])
+        data.profile = pack_profile(t, m.kernel, m.dx, m.device)
+        data.rest_mass = wp.array([b.material.rho * m.dx**d for b in m.scene.bodies], dtype=t.scalar,
+                                  device=m.device)
         data.wall_lo = t.ivec(*m.wall_codes[0])
         data.wall_hi = t.ivec(*m.wall_codes[1])
         dtype = np.float32 if t.precision == "float32" else np.float64
@@ -94,13 +119,14 @@ class Conditions:
         """The conditions as a pass of their own (after contact), at the step's start."""
         self.launch(self.boundary, layout.n_nodes, [grid.lattice, self.control, self.data, status])
 
-    def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n) -> None:
+    def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n, friction_shift) -> None:
         """The implicit solve's constraints on the first ``n`` nodes: the
         constrained velocity in ``grid.v``, the projector onto the free
         velocities in ``free`` and, with friction, its coefficient, the
-        collider's velocity and normal per node (mpm.grid.make_constraints)."""
+        collider's velocity and normal per node and the extrapolation to
+        its surface (mpm.grid.make_constraints)."""
         wp.launch(self.constraints, n, device=self.model.device, inputs=[
-            grid.lattice, time, self.data, free, friction, friction_u, friction_n])
+            grid.lattice, time, self.data, free, friction, friction_u, friction_n, friction_shift])
 
     def inside_colliders(self, x, time: float) -> np.ndarray:
         """Per collider, the particles of ``x`` deeper inside it than

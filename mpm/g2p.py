@@ -76,6 +76,8 @@ import warp as wp
 
 from .g2p_stages import (make_advance, make_affine, make_commit, make_figures, make_removal,
                          make_velocity_sums, transfer_flags)
+from .grid import make_boundary_data
+from .keep_out import make_keep_out
 from .kernels import Kernel
 from .launch import warp_kernel
 from .stepping.status import StepControl, StepStatus
@@ -88,9 +90,10 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
              lagrangian: bool, track_compression: bool, track_energy: bool = False,
              track_inversion: bool = False, removal: bool = False, fused: bool = False,
              bound_reach: bool = False, commit: bool = False, project=None, batched: bool = False,
-             loads: bool = False, compensate: bool = False):
+             loads: bool = False, compensate: bool = False, keep_out: bool = False, colliders: tuple = ()):
     """G2P for all particles, for the step ``control.dt``; the flags are the
-    module docstring's."""
+    module docstring's; ``keep_out``: put the particles back out of the
+    closed walls and the colliders (the shapes ``colliders``), mpm.keep_out."""
     S = t.scalar
     f64 = wp.float64
     vec, mat = t.vec, t.mat
@@ -103,6 +106,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     advance, store = make_advance(t, compensate, commit)
     commit_reference, commit_compensated = make_commit(t, kernel, transfer, project)
     remove, parked = make_removal(t, kernel, transfer, project, commit)
+    Boundary = make_boundary_data(t)
+    put_out = make_keep_out(t, colliders, kernel.n_grids) if keep_out else None
     deformation, motion = make_figures(t, record_dJ, count_marked, lagrangian, track_compression, track_energy,
                                        track_inversion, bound_reach)
 
@@ -147,6 +152,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         # with compensate: the running errors of the sums of x [m] and of F^sn (F^0s with commit)
         xc: wp.array(dtype=t.vec),
         Fc: wp.array(dtype=t.mat),
+        # with keep_out: the walls and colliders (mpm.grid)
+        boundary: Boundary,
     ):
         if wp.static(batched):
             if control.skip[0] != f64(0.0):
@@ -164,6 +171,8 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
             v_new = vp + flip_share * (v[p] - S(inv_G) * v_transferred)
         Cp, grad_v = affine_C(p, B, grad_v, K, cache)
         xp, xc_new, Fsn_old, Fs, Fc_new = advance(p, dt, vp, grad_v, x, xc, Fsn, Fc)
+        if wp.static(put_out is not None):
+            xp, v_new = put_out(xp, v_new, mass[p], S(control.t[0]) + dt, boundary, inside_lo, inside_hi, status)
         if wp.static(removal):
             if remove(p, b, xp, Fsn_old, inside_lo, inside_hi, open_lo, open_hi, x, v, C, mass, volume,
                       status, body_params, F0s, Fsn, cache, dx):

@@ -5,11 +5,13 @@ On every node with mass:
 then (after contact, when bodies can touch: mpm.contact) the boundary
 conditions, evaluated at the node's current position q_i:
 
-* walls act on nodes within the wall band of a face: closer than
-  ``(wall_cells - 1/2) dx`` to it, i.e. the first ``wall_cells`` lattice
-  nodes of an Eulerian grid. Sticky walls set v_i = 0, slip walls remove the
-  velocity component pointing into the wall (separation and tangential motion
-  are free), open faces do nothing;
+* walls (mpm.walls) act where a body touches them: a wall is the solid
+  behind its face, ``wall_cells`` cells inside the domain's face, and acts
+  on the nodes where the body and the wall fill a node together
+  (mpm.surface; ``Scene.boundary_rule`` "nodes": on the first
+  ``wall_cells`` lattice nodes, as in earlier versions). Sticky walls set
+  v_i = 0, slip walls remove the velocity component pointing into the wall
+  (separation and tangential motion are free), open faces do nothing;
 * kinematic regions (mpm.scene.KinematicRegion) set the velocity of every
   node that draws at least half its mass from a region's particles (less
   ``KINEMATIC_TIE``, so that an exact tie is kinematic in every precision),
@@ -17,7 +19,8 @@ conditions, evaluated at the node's current position q_i:
   gradient (the skew matrix of its angular velocity omega, so that
   G r = omega x r, plus any prescribed ``velocity_gradient``).
 
-Between the two, rigid colliders (mpm.colliders) act on the nodes inside them.
+Between the two, rigid colliders (mpm.colliders) act on the nodes where a
+body touches them, by the same rule (mpm.collider_device).
 
 The impulse of the conditions on a node, J = m_i (v_bc - v_i), is summed
 into the step's status (``boundary_impulse``, per axis: with gravity's
@@ -35,48 +38,14 @@ import warp as wp
 from .launch import warp_kernel
 from .stepping.status import StepControl, StepStatus
 
-from .collider_device import make_collide, make_collider_data, make_constrain, make_remove_direction
+from .collider_device import make_collide, make_constrain
+from .collider_shapes import make_collider_data
+from .contact.lattice import make_node_body
 from .lattice import make_lattice, make_node_mass
-from .scene import WALL_TYPES
 from .stencil import make_node_position
+from .surface import make_profile_type
 from .types import Types
-
-STICKY = WALL_TYPES.index("sticky")
-SLIP = WALL_TYPES.index("slip")
-
-
-@functools.cache
-def make_wall(t: Types):
-    S = t.scalar
-    vec = t.vec
-
-    @wp.func
-    def wall(v: t.vec, d: int, outward: S, kind: int):
-        if kind == STICKY:
-            return vec()
-        if kind == SLIP and v[d] * outward > S(0.0):
-            v[d] = S(0.0)
-        return v
-
-    return wall
-
-
-@functools.cache
-def make_walls(t: Types):
-    """``walls(v, q, domain, band, wall_lo, wall_hi) -> v``."""
-    S = t.scalar
-    wall = make_wall(t)
-
-    @wp.func
-    def walls(v: t.vec, q: t.vec, domain: t.vec, band: S, wall_lo: t.ivec, wall_hi: t.ivec):
-        for d in range(wp.static(t.dim)):
-            if q[d] < band:
-                v = wall(v, d, S(-1.0), wall_lo[d])
-            if q[d] > domain[d] - band:
-                v = wall(v, d, S(1.0), wall_hi[d])
-        return v
-
-    return walls
+from .walls import make_wall_constraints, make_walls
 
 
 # A node is kinematic when the region's share of its mass is at least
@@ -122,13 +91,18 @@ def make_boundary_data(t: Types):
     kinematic regions."""
     U, G, Cc, Win = region_types(t)
     Collider = make_collider_data(t)
+    Profile = make_profile_type(t)
 
     @wp.struct
     class BoundaryData:
         domain: t.vec  # domain size [m]
-        band: t.scalar  # wall band [m]: (wall_cells - 1/2) dx
+        band: t.scalar  # wall band of the node rule [m]: (wall_cells - 1/2) dx
         wall_lo: t.ivec  # wall type of the low face per axis (mpm.scene.WALL_TYPES)
         wall_hi: t.ivec
+        face_lo: t.vec  # the walls' faces [m] (the surface rule): wall_cells dx
+        face_hi: t.vec  # domain - wall_cells dx
+        profile: Profile  # the kernel's cumulative profile (mpm.surface)
+        rest_mass: wp.array(dtype=t.scalar)  # per body rho dx^d [kg]
         region_u: wp.array(dtype=U)  # per region: velocity [m/s]
         region_gradient: wp.array(dtype=G)  # velocity gradient [1/s]
         region_center: wp.array(dtype=Cc)  # centre at start [m]
@@ -139,21 +113,25 @@ def make_boundary_data(t: Types):
 
 
 @functools.cache
-def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
-    """``conditions(v, q, m, kin_m, kin_id, time, data) -> v``: walls, the
-    colliders (the shapes named in ``colliders``; none: compiled out), then
-    regions."""
+def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), rule: str = "surface",
+                    gradients: bool = False):
+    """``conditions(v, q, m, V, G, kin_m, kin_id, time, data) -> v``: walls,
+    the colliders (the shapes named in ``colliders``; none: compiled out),
+    then regions, by the boundary ``rule`` (mpm.scene.BOUNDARY_RULES) on a
+    node of body volume fraction ``V`` and velocity gradient ``G`` (with
+    ``gradients``; mpm.surface)."""
     S = t.scalar
-    walls = make_walls(t)
+    walls = make_walls(t, rule)
     kinematic = make_kinematic(t)
-    collide = make_collide(t, colliders)
+    collide = make_collide(t, colliders, rule, gradients)
     Data = make_boundary_data(t)
 
     @wp.func
-    def conditions(v: t.vec, q: t.vec, m: S, kin_m: S, kin_id: int, time: S, data: Data):
-        v = walls(v, q, data.domain, data.band, data.wall_lo, data.wall_hi)
+    def conditions(v: t.vec, q: t.vec, m: S, V: S, G: t.mat, kin_m: S, kin_id: int, time: S, data: Data):
+        v = walls(v, q, V, data.domain, data.band, data.wall_lo, data.wall_hi, data.face_lo, data.face_hi,
+                  data.profile)
         if wp.static(len(colliders) > 0):
-            v = collide(v, q, time, data.colliders)
+            v = collide(v, q, V, G, time, data.colliders, data.profile)
         if wp.static(with_regions):
             active, v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
                                   data.region_center, data.region_window)
@@ -163,36 +141,51 @@ def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (
 
 
 @functools.cache
+def make_node_state(t: Types, rule: str, gradients: bool):
+    """``node_state(lat, i, m, data) -> (V, G)``: node i's body volume
+    fraction m / (rho dx^d) and velocity gradient (summed in P2G with
+    ``gradients``, else 0) for the surface rule; (0, 0) for the node rule."""
+    S = t.scalar
+    Lattice = make_lattice(t)
+    Data = make_boundary_data(t)
+    node_body = make_node_body(t)
+
+    @wp.func
+    def node_state(lat: Lattice, i: int, m: S, data: Data):
+        V = S(0.0)
+        G = t.mat()
+        if wp.static(rule == "surface"):
+            V = m / data.rest_mass[node_body(lat, i)]
+            if wp.static(gradients):
+                G = lat.G[i] / m
+        return V, G
+
+    return node_state
+
+
+@functools.cache
 def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = (),
-                     with_friction: bool = False):
+                     with_friction: bool = False, rule: str = "surface", gradients: bool = False):
     """The boundary conditions as constraints of the implicit solve
     (mpm.implicit): on every node with mass, from the predicted velocity v*,
     the constrained velocity and the orthogonal projector Pi onto the
-    velocities the solve may still change (I: free, 0: fixed). Sticky walls
-    and kinematic regions fix the node; a slip wall the node moves into, or
-    a slip collider, fixes the normal component. ``with_friction``: per node
-    the friction coefficient, velocity and normal of its frictional collider
-    (mu = 0: none), for the friction after the solve. Nodes without mass get
+    velocities the solve may still change (I: free, 0: fixed), where the
+    ``rule`` puts a node in contact (mpm.walls, mpm.collider_device). Sticky
+    walls and kinematic regions fix the node; a slip wall the node moves
+    into, or a slip collider, fixes the normal component. ``with_friction``:
+    per node the friction coefficient, velocity and normal of its frictional
+    collider (mu = 0: none) and the extrapolation from the node to the
+    surface, for the friction after the solve. Nodes without mass get
     Pi = 0 (not part of the system)."""
     S = t.scalar
-    vec, mat = t.vec, t.mat
+    mat = t.mat
     dim = t.dim
     kinematic = make_kinematic(t)
-    constrain = make_constrain(t, colliders)
-    remove_direction = make_remove_direction(t)
+    constrain = make_constrain(t, colliders, rule, gradients)
+    walls = make_wall_constraints(t, rule)
+    node_state = make_node_state(t, rule, gradients)
     Data = make_boundary_data(t)
     Lattice = make_lattice(t)
-
-    @wp.func
-    def wall(v: t.vec, Pi: t.mat, d: int, outward: S, kind: int):
-        if kind == STICKY:
-            return vec(), mat()
-        if kind == SLIP and v[d] * outward > S(0.0):
-            v[d] = S(0.0)
-            e = vec()
-            e[d] = S(1.0)
-            Pi = remove_direction(Pi, e)
-        return v, Pi
 
     @warp_kernel
     def constraints(
@@ -203,6 +196,7 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
         friction: wp.array(dtype=S),  # out (with_friction): mu
         friction_u: wp.array(dtype=t.vec),  # out (with_friction): the collider's velocity
         friction_n: wp.array(dtype=t.vec),  # out (with_friction): its normal
+        friction_shift: wp.array(dtype=t.vec),  # out (with_friction): the surface's velocity minus the node's
     ):
         i = wp.tid()
         m = lat.m[i]
@@ -213,18 +207,17 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
             return
         v = lat.v[i]
         q = lat.q[i]
+        V, G = node_state(lat, i, m, data)
         Pi = wp.identity(n=dim, dtype=S)
-        for d in range(wp.static(dim)):
-            if q[d] < data.band:
-                v, Pi = wall(v, Pi, d, S(-1.0), data.wall_lo[d])
-            if q[d] > data.domain[d] - data.band:
-                v, Pi = wall(v, Pi, d, S(1.0), data.wall_hi[d])
+        v, Pi = walls(v, Pi, q, V, data.domain, data.band, data.wall_lo, data.wall_hi, data.face_lo, data.face_hi,
+                      data.profile)
         if wp.static(len(colliders) > 0):
-            v, Pi, mu, uf, nf = constrain(v, Pi, q, time, data.colliders)
+            v, Pi, mu, uf, nf, sf = constrain(v, Pi, q, V, G, time, data.colliders, data.profile)
             if wp.static(with_friction):
                 friction[i] = mu
                 friction_u[i] = uf
                 friction_n[i] = nf
+                friction_shift[i] = sf
         if wp.static(with_regions):
             active, vk = kinematic(v, q, m, lat.kin[i], lat.kin_id[i], time, data.region_u,
                                    data.region_gradient, data.region_center, data.region_window)
@@ -261,19 +254,22 @@ def make_work(t: Types):
 
 
 @functools.cache
-def make_apply_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = ()):
+def make_apply_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), rule: str = "surface",
+                          gradients: bool = False):
     """``apply_conditions(lat, i, m, v, q, time, data, status) -> v_bc``:
     the conditions at node i (mass m, velocity v, position q), their
     impulse and work into ``status`` (:func:`make_work`)."""
     S = t.scalar
-    conditions = make_conditions(t, with_regions, colliders)
+    conditions = make_conditions(t, with_regions, colliders, rule, gradients)
+    node_state = make_node_state(t, rule, gradients)
     Data = make_boundary_data(t)
     Lattice = make_lattice(t)
     work = make_work(t)
 
     @wp.func
     def apply_conditions(lat: Lattice, i: int, m: S, v: t.vec, q: t.vec, time: S, data: Data, status: StepStatus):
-        vb = conditions(v, q, m, lat.kin[i], lat.kin_id[i], time, data)
+        V, G = node_state(lat, i, m, data)
+        vb = conditions(v, q, m, V, G, lat.kin[i], lat.kin_id[i], time, data)
         work(m, v, vb, status)
         return vb
 
@@ -283,7 +279,7 @@ def make_apply_conditions(t: Types, with_regions: bool, colliders: tuple[str, ..
 @functools.cache
 def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
                      colliders: tuple[str, ...] = (), lattice: bool = False, n_grids: int = 1,
-                     batched: bool = False):
+                     batched: bool = False, rule: str = "surface", gradients: bool = False):
     """Momentum to velocity and gravity over the step ``control.dt``, at the
     step's start ``control.t``; the boundary conditions too unless
     ``with_boundary`` is False (contact comes first, then :func:`make_boundary`).
@@ -299,7 +295,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
     Data = make_boundary_data(t)
     Lattice = make_lattice(t)
     node_mass = make_node_mass(t, batched)
-    apply_conditions = make_apply_conditions(t, with_regions, colliders)
+    apply_conditions = make_apply_conditions(t, with_regions, colliders, rule, gradients)
 
     @warp_kernel
     def grid_update(
@@ -332,14 +328,15 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
 
 
 @functools.cache
-def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), batched: bool = False):
+def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), batched: bool = False,
+                  rule: str = "surface", gradients: bool = False):
     """The boundary conditions as a pass of their own (after contact), at the
     step's start ``control.t`` (``batched``: nothing in a skipped step)."""
     S = t.scalar
     Data = make_boundary_data(t)
     Lattice = make_lattice(t)
     node_mass = make_node_mass(t, batched)
-    apply_conditions = make_apply_conditions(t, with_regions, colliders)
+    apply_conditions = make_apply_conditions(t, with_regions, colliders, rule, gradients)
 
     @warp_kernel
     def boundary(lat: Lattice, control: StepControl, data: Data, status: StepStatus):

@@ -25,6 +25,7 @@ def make_lattice(t: Types):
         m: wp.array(dtype=S)  # node mass [kg]
         v: wp.array(dtype=t.vec)  # momentum [kg m/s], then velocity [m/s]
         q: wp.array(dtype=t.vec)  # mass-weighted position [kg m], then position [m]
+        G: wp.array(dtype=t.mat)  # mass-weighted velocity gradient [kg/s], then gradient [1/s] (surface rule)
         kin: wp.array(dtype=S)  # mass drawn from a kinematic region [kg] (one entry without regions)
         kin_id: wp.array(dtype=wp.int32)  # that region's number + 1 (0: none)
         lo: wp.array(dtype=t.ivec)  # per box b * n_grids + g: its first node (lattice index)
@@ -49,6 +50,7 @@ def pack_lattice(layout, grid):
     nodes = np.asarray(layout.cells) + 1
     lat = make_lattice(t)()
     lat.m, lat.v, lat.q, lat.kin, lat.kin_id = grid.m, grid.v, grid.q, grid.kin, grid.kin_id
+    lat.G = grid.G
     lat.lo, lat.shape, lat.offset = layout.lo_d, layout.shape_d, layout.offset_d
     lat.n_boxes = len(layout.lo)
     lat.n_grids = layout.kernel.n_grids

@@ -18,7 +18,7 @@ from .materials import Material
 from .params import violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
-from .scene import CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
+from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
 from .types import Types, make_types
 
 
@@ -221,6 +221,8 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
             raise SceneError("domain", f"{L} along axis {a} is not a multiple of dx = {dx:g}")
     if len(scene.gravity) != d:
         raise SceneError("gravity", f"{list(scene.gravity)}; accepted: {d} components")
+    if scene.boundary_rule not in BOUNDARY_RULES:
+        raise SceneError("boundary_rule", f"{scene.boundary_rule!r}; accepted: {', '.join(BOUNDARY_RULES)}")
     if len(scene.walls) != 2 * d or any(w not in WALL_TYPES for w in scene.walls):
         raise SceneError("walls", f"{list(scene.walls)}; accepted: {2 * d} of {', '.join(WALL_TYPES)}")
     if scene.ppc < 1:

@@ -116,10 +116,12 @@ class GridArrays:
     its tables as the grid kernels take them (mpm.lattice), packed anew
     whenever the arrays are."""
 
-    def __init__(self, t: Types, device, regions: bool, flip: bool = False, layout: GridLayout | None = None):
+    def __init__(self, t: Types, device, regions: bool, flip: bool = False, layout: GridLayout | None = None,
+                 gradients: bool = False):
         self.t, self.device, self.regions, self.flip, self.layout = t, device, regions, flip, layout
+        self.gradients = gradients
         self.capacity = 0
-        self.m = self.v = self.q = self.kin = self.kin_id = self.p0 = self.lattice = None
+        self.m = self.v = self.q = self.kin = self.kin_id = self.p0 = self.lattice = self.G = None
         self._views = None  # (node count, m, views) of live()
 
     def reserve(self, n: int) -> None:
@@ -136,6 +138,7 @@ class GridArrays:
             self.kin = wp.zeros(n_kin, dtype=t.scalar)
             self.kin_id = wp.zeros(n_kin, dtype=wp.int32)
             self.p0 = wp.zeros(self.capacity if self.flip else 1, dtype=t.vec)
+            self.G = wp.zeros(self.capacity if self.gradients else 1, dtype=t.mat)
         if self.layout is not None:
             self.lattice = pack_lattice(self.layout, self)
 
@@ -155,6 +158,8 @@ class GridArrays:
         v.zero_()
         if self.flip:
             p0.zero_()
+        if self.gradients:
+            self.G[:n].zero_()
         if positions:
             q.zero_()
         if self.regions:

@@ -32,6 +32,13 @@ surface, as in master-slave contact), bodies of equal stiffness by the
 largest volume gradient: a face keeps its normal under a softer body's
 corner or curve, which would otherwise turn sliding into approach and
 drag."""
+BOUNDARY_RULES = ("surface", "nodes")
+"""Where walls and colliders act (Scene.boundary_rule): "surface", on the
+nodes where a body touches the solid, judged by the two volume fractions
+(mpm.surface), so a surface acts where it lies between the nodes;
+"nodes", on every node inside the solid (a wall: the first wall_cells
+lattice nodes), the rule of earlier versions, kept to reproduce their
+results"""
 WALL_TYPES = ("sticky", "slip", "open")
 """sticky: grid velocity set to zero; slip: the velocity component into the
 wall is removed (tangential motion and separation are free); open: no wall."""
@@ -305,7 +312,10 @@ class Scene:
     walls: tuple[str, ...] = ("slip", "slip", "slip", "slip")
     """wall type per face: (x_lo, x_hi, y_lo, y_hi[, z_lo, z_hi])"""
     wall_cells: int = 3
-    """wall thickness [cells]: nodes this close to a face obey its wall"""
+    """wall thickness [cells]: a wall's face lies this far inside the domain's face (mpm.walls)"""
+    boundary_rule: str = "surface"
+    """where walls and colliders act (BOUNDARY_RULES): "surface" (where a body touches the solid) or
+    "nodes" (on the nodes inside the solid, as earlier versions did)"""
     ppc: int = 4
     """particles per cell (total, not per axis); a perfect d-th power samples a
     regular sub-lattice, anything else uniform random points per cell"""

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .conditions import Conditions, Removals
+from .conditions import Conditions, Removals, needs_gradients
 from .reference_update import References
 from .contact.passes import Contact
 from .stepping.criterion import Criterion
@@ -146,7 +146,8 @@ class Solver:
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
         self.const = GridConstants.of(model)
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
-        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout)
+        self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout,
+                               gradients=needs_gradients(scene))  # the conditions read the velocity gradients
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
                         if nb > 1 and scene.contact in ("frictionless", "friction") else None)
@@ -155,8 +156,7 @@ class Solver:
                                      separate=self.contact is not None or implicit, batched=batched)
         # a moving grid needs node positions only where a condition can reach a node: with walls
         # alone, P2G sums them only in steps where a body comes near a closed face (mpm.stepping.criterion)
-        self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact
-                                or implicit)
+        self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact or implicit)
         projections = {b.material.project for b in scene.bodies}
         fused = opt.fuse if opt.fuse is not None else (k.moment is not None or opt.compensate) and len(projections) == 1
         self.fused = fused and eulerian and not implicit
@@ -168,12 +168,12 @@ class Solver:
             record_dJ=opt.record_dJ, marks=scheme.tracks_marks(), epsilon=getattr(scheme, "epsilon", None) or 0.0,
             track_energy=opt.track_energy, track_J=opt.track_J, removal=self.conditions.open,
             bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
-            batched=batched, flip=opt.flip, compensate=opt.compensate)
+            batched=batched, flip=opt.flip, compensate=opt.compensate, gradients=self.grid.gradients,
+            boundary=self.conditions.data, keep_out=self.conditions.keep_out)
         per_particle_K = k.moment is None and opt.transfer not in AFFINE_FREE  # K_p cached per particle
         self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
-                                     affine=scheme.affine,
-                                     gradients=opt.transfer != "mls" or k.gradient_affine, fused=self.fused,
-                                     moment=per_particle_K, compensate=opt.compensate)
+                                     affine=scheme.affine, gradients=opt.transfer != "mls" or k.gradient_affine,
+                                     fused=self.fused, moment=per_particle_K, compensate=opt.compensate)
         self.criterion = Criterion(model, self.launch, self.buffer, self.layout, scheme, self.conditions,
                                    free_flight=self.free_flight, commits=self.g2p_commits, batched=batched)
         self.diagnostics = Diagnostics(model, self.launch, self.buffer, per_particle_K, batched)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .collider_device import kinds_of
 from .g2p import make_g2p
 from .loads import Loads
 from .p2g import make_p2g
@@ -68,19 +69,27 @@ class Transfers:
     def __init__(self, model, launch, buffer, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
                  with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
                  track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None,
-                 batched: bool = False, flip: float = 0.0, compensate: bool = False):
+                 batched: bool = False, flip: float = 0.0, compensate: bool = False, gradients: bool = False,
+                 boundary=None, keep_out: bool = False):
         t, k = model.types, model.kernel
         self.model, self.launch, self.buffer = model, launch, buffer
         self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
         self.forcing = forcing
         body_force = forcing is not None or model.loads is not None
+        # the factor of F whose sum G2P compensates (mpm.g2p): F^0s with the commit of an unprojected
+        # F^0s, F^sn without a commit, none with a projected commit
+        compensated = "" if not compensate else ("sn" if not commit else ("0s" if project is None else ""))
         self.p2g = [(make_p2g(t, k, transfer, g.cls, regions, body_force, lagrangian=lagrangian,
-                              with_stress=with_stress, fused=fused, batched=batched), g) for g in model.groups]
+                              with_stress=with_stress, fused=fused, batched=batched, gradients=gradients,
+                              compensated=compensated), g)
+                    for g in model.groups]
         self.g2p = make_g2p(t, k, transfer, record_dJ, marks, lagrangian=lagrangian,
                             track_compression=any(b.material.stiffens for b in model.scene.bodies),
                             track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
                             bound_reach=bound_reach, commit=commit, project=project, batched=batched,
-                            loads=model.loads is not None, compensate=compensate)
+                            loads=model.loads is not None, compensate=compensate, keep_out=keep_out,
+                            colliders=kinds_of(model.scene.colliders) if keep_out else ())
+        self.boundary = boundary  # the walls and colliders, for keep_out (mpm.grid)
         margin = k.margin * model.dx
         open_code = WALL_TYPES.index("open")
         self.inside_lo = t.vec(*([margin] * t.dim))
@@ -116,9 +125,9 @@ class Transfers:
         for kernel, g in self.p2g:
             self.launch(kernel, g.count, [
                 m.mass, m.volume, m.body, m.body_params, layout.shape_d, state.x, state.v, state.C,
-                state.F0s, state.Fsn, self.body_force, state.history, state.stencils, const.dx, const.K,
-                g.start, int(write), grid.m, grid.v, grid.q, grid.p0, m.region, grid.kin, grid.kin_id, b.status,
-                b.control])
+                state.F0s, state.Fsn, self.body_force, state.history, state.Fc, state.stencils, const.dx, const.K,
+                g.start, int(write), grid.m, grid.v, grid.q, grid.p0, grid.G, m.region, grid.kin, grid.kin_id,
+                b.status, b.control])
 
     def interpolate(self, state, grid, layout, const) -> None:
         """G2P over the device's step: velocities, affine matrices, positions,
@@ -129,4 +138,4 @@ class Transfers:
             self.epsilon,
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
             m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force,
-            state.xc, state.Fc])
+            state.xc, state.Fc, self.boundary])

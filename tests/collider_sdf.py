@@ -1,11 +1,11 @@
 """The signed distance of a rigid collider at given points, evaluated by the
-solver's own Warp function (mpm.collider_device.make_sdf), for the tests."""
+solver's own Warp function (mpm.collider_shapes.make_sdf), for the tests."""
 
 import numpy as np
 import warp as wp
 
 from helpers import DEVICE
-from mpm.collider_device import make_sdf, pack
+from mpm.collider_shapes import make_sdf, pack
 from mpm.colliders import Collider
 from mpm.launch import warp_kernel
 from mpm.types import make_types
@@ -13,7 +13,7 @@ from mpm.types import make_types
 
 def _sdf_kernel(t, kinds):
     sdf = make_sdf(t, kinds)
-    from mpm.collider_device import make_collider_data
+    from mpm.collider_shapes import make_collider_data
     Data = make_collider_data(t)
 
     @warp_kernel

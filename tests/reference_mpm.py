@@ -39,8 +39,53 @@ def quadratic_weights(fx):
     return np.array([0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2])
 
 
+def quadratic_cdf(x):
+    """The share of a quadratic B-spline node's weight below x cells from it:
+    the integral of N(d) = 3/4 - d^2 (|d| < 1/2), (3/2 - |d|)^2 / 2 (|d| < 3/2)."""
+    if x <= -1.5:
+        return 0.0
+    if x < -0.5:
+        return (x + 1.5) ** 3 / 6.0
+    if x < 0.5:
+        return 0.5 + 0.75 * x - x**3 / 3.0
+    if x < 1.5:
+        return 1.0 - (1.5 - x) ** 3 / 6.0
+    return 1.0
+
+
+def wall_contacts(q, V, domain, walls, wall_cells, dx):
+    """The surface rule (mpm.surface) for the walls of a node at q with the
+    body volume fraction V: per closed face it touches, (axis, side, kind).
+    A wall is the solid behind the plane wall_cells dx inside the domain's
+    face; the node touches it where phi / dx < 1/2 (phi the node's distance
+    from the plane), V >= 0.1 and V + A(-phi / dx) >= 0.9, or lies half a
+    cell or more behind the plane with any mass."""
+    out = []
+    for a in range(len(q)):
+        for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+            if kind == "open":
+                continue
+            phi = q[a] - wall_cells * dx if side == 0 else domain[a] - wall_cells * dx - q[a]
+            if (phi / dx < 0.5 and V >= 0.1 and V + quadratic_cdf(-phi / dx) >= 0.9) or (phi / dx <= -0.5 and V > 0):
+                out.append((a, side, kind))
+    return out
+
+
+def keep_out(x, v, domain, walls, wall_cells, dx):
+    """A particle behind a closed wall's plane put back on it, its velocity
+    into the wall removed (mpm.keep_out)."""
+    x, v = x.copy(), v.copy()
+    for a in range(len(x)):
+        for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
+            face = wall_cells * dx if side == 0 else domain[a] - wall_cells * dx
+            if kind != "open" and ((side == 0 and x[a] < face) or (side == 1 and x[a] > face)):
+                x[a] = face
+                v[a] = max(v[a], 0.0) if side == 0 else min(v[a], 0.0)
+    return x, v
+
+
 def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wall_cells=3,
-         body=None, elastic_state=None):
+         body=None, elastic_state=None, rho=None):
     """One MLS-MPM step; returns new (x, v, C, F). ``models``/``prms`` per particle.
 
     walls: per face (x_lo, x_hi, y_lo, ...) "sticky" | "slip" | "open".
@@ -48,6 +93,9 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
     (no contact between bodies).
     elastic_state: ``(p, F_p) -> (F_E, P)`` replaces the stored F by its
     elastic part and gives its stress at the start of P2G (plasticity).
+    rho: per particle its body's rest density [kg/m^d]: the walls act by the
+    surface rule (:func:`wall_contacts`, :func:`keep_out`); None: on the
+    first ``wall_cells`` node rows (the node rule).
     """
     if body is not None and len(np.unique(body)) > 1:
         out = [a.copy() for a in (x, v, C, F)]
@@ -55,7 +103,7 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
             sel = body == b
             res = step(x[sel], v[sel], C[sel], F[sel], mass[sel], vol[sel],
                        [mo for mo, s in zip(models, sel) if s], [pr for pr, s in zip(prms, sel) if s],
-                       dx, cells, gravity, walls, dt, wall_cells)
+                       dx, cells, gravity, walls, dt, wall_cells, rho=None if rho is None else rho[sel])
             for o, r in zip(out, res):
                 o[sel] = r
         return tuple(out)
@@ -85,7 +133,16 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
     has = gm > 0
     gv[has] = gmv[has] / gm[has][:, None] + dt * np.asarray(gravity)
     idx = np.indices(shape)
-    for a in range(d):
+    if rho is not None:
+        domain = np.asarray(cells) * dx
+        for node in zip(*np.nonzero(has)):
+            for a, side, kind in wall_contacts(np.array(node) * dx, gm[node] / (rho[0] * dx**d), domain, walls,
+                                               wall_cells, dx):
+                if kind == "sticky":
+                    gv[node] = 0.0
+                elif (side == 0 and gv[node][a] < 0) or (side == 1 and gv[node][a] > 0):
+                    gv[node][a] = 0.0
+    for a in range(d if rho is None else 0):
         for side, kind in ((0, walls[2 * a]), (1, walls[2 * a + 1])):
             near = idx[a] < wall_cells if side == 0 else idx[a] > cells[a] - wall_cells
             if kind == "sticky":
@@ -106,6 +163,8 @@ def step(x, v, C, F, mass, vol, models, prms, dx, cells, gravity, walls, dt, wal
             vn[p] += weight * g
             Cn[p] += Dinv * weight * np.outer(g, dpos)
         xn[p] = x[p] + dt * vn[p]
+        if rho is not None:
+            xn[p], vn[p] = keep_out(xn[p], vn[p], np.asarray(cells) * dx, walls, wall_cells, dx)
         Fn[p] = (np.eye(d) + dt * Cn[p]) @ F[p]
         if models[p] == "fluid":
             Fn[p] = np.linalg.det(Fn[p]) ** (1.0 / d) * np.eye(d)

@@ -164,6 +164,7 @@ class ImplicitSolve:
             k = n if self._friction is not None else 1
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
+            self.friction_shift = wp.zeros(k, dtype=vec)  # the surface's velocity minus the node's (mpm.surface)
             k = n if self.contact is not None else 1
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
@@ -313,7 +314,8 @@ class ImplicitSolve:
         wp.copy(self.v_star, s.grid.v, count=n)
         if self.sliding:
             wp.copy(self.v_star0, s.grid.v, count=n)
-        s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n)
+        s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n,
+                               self.friction_shift)
         if self.contact is not None:
             self._activate()
             self._project(0, s.grid.v)
@@ -336,7 +338,7 @@ class ImplicitSolve:
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
-                s.grid.v, s.buffer.status])
+                self.friction_shift, s.grid.v, s.buffer.status])
 
     # ------------------------------------------------------------ solve
     def _classify(self, rep: NewtonReport, R: float, R_before: float, goal: float) -> None:

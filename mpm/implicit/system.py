@@ -406,18 +406,18 @@ def make_friction(t: Types):
     @warp_kernel
     def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
                  mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
-                 v: wp.array(dtype=vec), status: StepStatus):
+                 shift: wp.array(dtype=vec), v: wp.array(dtype=vec), status: StepStatus):
         i = wp.tid()
         if m[i] <= S(0.0) or mu[i] <= S(0.0):
             return
         push = wp.dot(reaction[i], normal[i])  # > 0: the constraint held the node out of the collider
         if push <= S(0.0):
             return
-        vr = v[i] - u[i]
+        vr = v[i] + shift[i] - u[i]  # the surface point's velocity relative to the collider (mpm.surface)
         vt = free[i] * vr
         lt = wp.length(vt)
         if lt > S(0.0):
-            v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt)
+            v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt) - shift[i]
             work(m[i], v[i], v_new, status)
             v[i] = v_new
 

@@ -181,7 +181,7 @@ class Criterion:
         self.shifts = wp.types.vector(k.n_grids, wp.float64)(*shifts)
         self.last = t.ivec(*(np.asarray(model.cells) - (k.support - 1)))
         self.reach = model.dx * max(k.offset + 1.0, k.support - 1.0 - k.offset)
-        self.band = conditions.band + 1e-3 * model.dx
+        self.band = conditions.wall_reach + 1e-3 * model.dx
         self.domain = wp.types.vector(t.dim, wp.float64)(*model.domain)
         self.closed = (t.ivec(*conditions.closed[0].astype(int)), t.ivec(*conditions.closed[1].astype(int)))
 

@@ -20,7 +20,7 @@ from mpm.loads import LOAD_KINDS, Load
 from mpm.materials import Material
 from mpm.responses import QUANTITIES, REDUCTIONS
 from mpm.sampling import PARTICLE_VOLUMES
-from mpm.scene import CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
+from mpm.scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
 from .colliders import ColliderConfig, COLLIDERS
 from .fields import ConfigError, Context, Family, check, choice, number, plain, setting, vector
@@ -273,7 +273,11 @@ class SceneConfig:
     gravity: List[float] = setting([0.0, -9.81], "[m/s^2]", size="dim")
     walls: Any = setting("slip", f"one of {', '.join(WALL_TYPES)}, or one per face (x_lo, x_hi, y_lo, ...)",
                          parse=walls)
-    wall_cells: int = setting(3, "wall thickness [cells]", ge=1)
+    wall_cells: int = setting(3, "wall thickness [cells]: a wall's face lies this far inside the domain's face",
+                              ge=1)
+    boundary_rule: str = setting("surface", "where walls and colliders act: surface (where a body touches the "
+                                            "solid) or nodes (on the nodes inside it, as earlier versions did)",
+                                 choices=BOUNDARY_RULES)
     ppc: int = setting(4, "particles per cell", ge=1)
     jitter: float = setting(0.0, "random displacement of the lattice samples [fraction of their spacing]",
                             ge=0.0, le=1.0)
@@ -371,7 +375,8 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
             velocity=r.velocity, angular_velocity=r.angular_velocity, velocity_gradient=r.velocity_gradient,
             center=r.center, start=r.start, end=math.inf if r.end is None else r.end))
     scene = mpm.Scene(dim=dim, domain=sc.domain, resolution=sc.resolution, bodies=bodies, gravity=sc.gravity,
-                      walls=sc.walls, wall_cells=sc.wall_cells, ppc=sc.ppc, jitter=sc.jitter,
+                      walls=sc.walls, wall_cells=sc.wall_cells, boundary_rule=sc.boundary_rule, ppc=sc.ppc,
+                      jitter=sc.jitter,
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
                       contact_fill=sc.contact_fill, contact_friction=sc.contact_friction,
                       contact_normal=sc.contact_normal, contact_share=sc.contact_share,

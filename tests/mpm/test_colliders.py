@@ -127,7 +127,7 @@ def _incline(mu: float, scheme: str = "empm", boundary: str = "separate", res: i
     apex = np.array([0.8, 0.6])
     dx = 1.0 / res
     half = np.array([0.08, 0.03])  # wide and flat: well away from tipping (tan 30 deg < 0.08/0.03)
-    c = apex + 0.16 * down + n1 * (half[1] + 0.5 * dx)
+    c = apex + 0.16 * down + n1 * half[1]  # on the face: dropped onto it, an elastic block bounces
     body = mpm.Body(Rotated(mpm.Box(tuple(c), tuple(half)), rotation_matrix(np.degrees(THETA), 2)),
                     FixedCorotated(E=3e5, nu=0.3, rho=1000.0))
     wedge = Collider("wedge", boundary=boundary, friction=mu, point=tuple(apex),
@@ -171,12 +171,12 @@ def test_block_slides_down_a_wedge_at_coulomb_acceleration(scheme, mu):
 
 
 def test_block_stays_put_when_friction_exceeds_the_slope():
-    # mu > tan theta: static friction holds the block. It starts half a cell above the face and
-    # moves about a third of a cell down the slope while it drops onto it, then stops
+    # mu > tan theta: static friction holds the block. It starts on the face and moves a few
+    # hundredths of a cell while its weight settles on it (measured 0.055), then stops (1e-4)
     ts, vs, disp, _, _ = _incline(0.7, duration=0.3)
     held = ts > 0.15
-    creep = np.sum(vs[held][1:] * np.diff(ts[held]))  # [m] down the slope after landing
-    assert abs(creep) < 0.02 / 64 and abs(disp) < 0.5 / 64
+    creep = np.sum(vs[held][1:] * np.diff(ts[held]))  # [m] down the slope after the weight settled
+    assert abs(creep) < 0.005 / 64 and abs(disp) < 0.1 / 64
     assert np.abs(vs[held]).max() < 0.02  # a sliding block would be at 0.6 m/s here
 
 
@@ -186,7 +186,7 @@ def test_moving_collider_drags_a_block_by_friction():
     moves with the belt: the collider hands it the momentum m u."""
     u, mu, res = 0.5, 0.4, 64
     dx = 1.0 / res
-    body = mpm.Body(mpm.Box((0.3, 0.3 + 0.03 + 0.5 * dx), (0.08, 0.03)),
+    body = mpm.Body(mpm.Box((0.3, 0.3 + 0.03), (0.08, 0.03)),  # resting on the belt
                     FixedCorotated(E=1e6, nu=0.3, rho=1000.0))
     belt = Collider("half_space", boundary="separate", friction=mu, point=(0.5, 0.3), normal=(0.0, 1.0),
                     velocity=(u, 0.0))

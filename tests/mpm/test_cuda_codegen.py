@@ -191,6 +191,7 @@ class Case:
     # with the step's energies, which the detection needs; off without them)
     measure: bool = False  # the driver measures the diagnostics every step
     compensate: bool | None = None  # compensated sums of x and F in G2P (None: where the estimate flags the scene)
+    rule: str = "surface"  # where walls and colliders act (mpm.scene.BOUNDARY_RULES)
 
     def label(self) -> str:
         default = Case()
@@ -236,7 +237,8 @@ def scene(case: Case, dim: int) -> mpm.Scene:
     return mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, ppc=1, bodies=bodies,
                      gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact,
                      contact_friction=case.contact_friction, contact_normal=case.normal, regions=regions,
-                     colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads)
+                     colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads,
+                     boundary_rule=case.rule)
 
 
 def scheme(case: Case):
@@ -331,6 +333,9 @@ def cases(dim: int) -> list[Case]:
         out += [Case(colliders=every, friction=friction), Case(materials=two, colliders=every, friction=friction),
                 Case(scheme="tlmpm", colliders=every, friction=friction, implicit=True)]
     out += [Case(colliders=(k,)) for k in every]
+    # the node rule of earlier versions (walls and colliders on the nodes inside them)
+    out += [Case(rule="nodes", colliders=every, friction=True), Case(rule="nodes", materials=two, colliders=every),
+            Case(rule="nodes", scheme="tlmpm", colliders=every, friction=True, implicit=True)]
     return out
 
 
@@ -411,6 +416,10 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return set(mpm.CONTACT_NORMALS)
     if name == "kind":  # the scheme's update rule (mpm.schemes.rule_kind)
         return {"always", "never", "paper", "distortion"}
+    if name == "rule":  # where walls and colliders act
+        return set(mpm.scene.BOUNDARY_RULES)
+    if name == "compensated":  # the factor of F whose sum G2P compensates (mpm.p2g's exact energy)
+        return {"", "sn", "0s"}
     if parameter.annotation in (bool, "bool") or isinstance(parameter.default, bool):
         return {False, True}
     raise AssertionError(f"{factory}: no values known for argument {name!r} ({annotation}); "

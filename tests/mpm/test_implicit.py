@@ -232,10 +232,11 @@ def test_newton_says_near_miss_missed_or_diverged(tmp_path):
     is within newton_accept = 10x of it: a near miss, which a fixed step takes
     (counted) and the run completes; with newton_accept = 1 the same solve
     missed and stops the run. Without the PSD projection and the line search,
-    a sheared start's Newton iterates rise: diverged."""
+    a sheared start's Newton iterates rise: diverged. (The floor of earlier
+    versions, scene.boundary_rule=nodes: the step and residual are its.)"""
     base = ["scene=elastic_ball_2d", "scene.resolution=24", "material.E=1e8", "integrator=implicit",
             "integrator.newton_max=2", "integrator.newton_tol=3e-4", "run.dt=0.01", "run.duration=0.3",
-            "log.every=0", "log.progress=false"]
+            "log.every=0", "log.progress=false", "scene.boundary_rule=nodes"]
     near = execute(resolve(compose_cfg(base)), tmp_path / "near")
     assert near["status"] == "completed", near["reason"]
     assert near["implicit"]["near_misses"] >= 1 and near["implicit"]["newton_accept"] == 10.0
@@ -258,10 +259,12 @@ def test_a_stall_within_reach_of_the_tolerance_is_a_near_miss(tmp_path):
     potential with the residual at 1.64e-4 of the initial, 1.64x the
     tolerance - the potential's decrease is below its float32 round-off.
     Within newton_accept of the tolerance that is a near miss (counted, the
-    run completes); with newton_accept = 1 it stops the run as stalled."""
+    run completes); with newton_accept = 1 it stops the run as stalled. (The
+    floor of earlier versions, scene.boundary_rule=nodes, where the map was
+    measured.)"""
     base = ["scene=stability_ball_2d", "scene.resolution=32", "scheme=tlmpm", "kernel=linear", "material.E=1e3",
             "integrator=implicit", "run.dt=0.017359192741652964", "run.steps=100", "log.every=0",
-            "log.progress=false"]
+            "log.progress=false", "scene.boundary_rule=nodes"]
     near = execute(resolve(compose_cfg(base)), tmp_path / "near")
     assert near["status"] == "completed", near["reason"]
     assert near["implicit"]["near_misses"] >= 1

@@ -24,17 +24,18 @@ PLASTIC = {
 
 
 def impact_scene(material, dim):
-    """A block hitting a sticky floor at 4 m/s: plastic flow from the first steps."""
+    """A block hitting a sticky floor at 4 m/s: plastic flow from the first steps (the walls by the
+    node rule, as the NumPy reference has them)."""
     if dim == 2:
         body = mpm.Body(mpm.Box((0.5, 0.27), (0.12, 0.08)), material, velocity=(0.5, -4.0),
                         angular_velocity=4.0)
         return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=[body], gravity=(0.0, -9.81),
-                         walls=("slip", "slip", "sticky", "slip"), ppc=4)
+                         walls=("slip", "slip", "sticky", "slip"), ppc=4, boundary_rule="nodes")
     body = mpm.Body(mpm.Box((0.5, 0.33, 0.5), (0.1, 0.08, 0.1)), material, velocity=(0.5, -4.0, 0.2),
                     angular_velocity=(0.0, 4.0, 0.0))
     return mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=12, bodies=[body],
                      gravity=(0.0, -9.81, 0.0), walls=("slip", "slip", "sticky", "slip", "slip", "slip"),
-                     ppc=1)
+                     ppc=1, boundary_rule="nodes")
 
 
 # every model in 2D; in 3D the two with the most branches

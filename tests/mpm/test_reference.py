@@ -8,19 +8,21 @@ import mpm
 from reference_mpm import step as reference_step
 
 
-def tiny_scene(dim):
+def tiny_scene(dim, rule="nodes"):
     """Bodies far enough apart that contact never acts (each body on a grid of
-    its own, as in the reference); see assert_no_contact."""
+    its own, as in the reference; see assert_no_contact), two of them at a
+    wall; ``rule`` the walls' (Scene.boundary_rule)."""
     if dim == 2:
         bodies = [
             mpm.Body(mpm.Sphere((0.3, 0.35), 0.09), mpm.FixedCorotated(E=2e4, nu=0.3, rho=900),
                      velocity=(1.0, -0.5), angular_velocity=3.0),
-            mpm.Body(mpm.Box((0.72, 0.3), (0.08, 0.1)), mpm.Fluid(K=1e4, gamma=7.0, viscosity=0.5),
-                     velocity=(-1.0, 0.0)),
+            # on the floor's and the sticky wall's faces (3 cells in), and pushed against the wall
+            mpm.Body(mpm.Box((0.7325, 0.2875), (0.08, 0.1)), mpm.Fluid(K=1e4, gamma=7.0, viscosity=0.5),
+                     velocity=(0.5, 0.0)),
             mpm.Body(mpm.Box((0.5, 0.72), (0.12, 0.06)), mpm.NeoHookean(E=3e4, nu=0.4),
                      velocity=(0.0, -2.0)),
         ]
-        return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=bodies,
+        return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=bodies, boundary_rule=rule,
                          gravity=(0.0, -9.81), walls=("slip", "sticky", "slip", "slip"), ppc=4)
     bodies = [
         mpm.Body(mpm.Sphere((0.3, 0.45, 0.5), 0.1), mpm.FixedCorotated(E=2e4, nu=0.3),
@@ -28,7 +30,7 @@ def tiny_scene(dim):
         mpm.Body(mpm.Box((0.74, 0.4, 0.5), (0.06, 0.08, 0.08)), mpm.Fluid(K=1e4, viscosity=0.2),
                  velocity=(-1.0, 0.0, 0.0)),
     ]
-    return mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=20, bodies=bodies,
+    return mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=20, bodies=bodies, boundary_rule=rule,
                      gravity=(0.0, -9.81, 0.0), walls=("slip",) * 6, ppc=1)
 
 
@@ -76,24 +78,31 @@ def assert_no_contact(solver):
         assert solver.report().contact_nodes == 0, "bodies touched"
 
 
-@pytest.mark.parametrize("dim", [2, 3])
-def test_eulerian_step_matches_numpy_reference(dim, device):
-    scene = tiny_scene(dim)
+@pytest.mark.parametrize("dim,rule", [(2, "nodes"), (3, "nodes"), (2, "surface"), (3, "surface")])
+def test_eulerian_step_matches_numpy_reference(dim, rule, device):
+    """Both wall rules (Scene.boundary_rule): the node rule, and the surface
+    rule of mpm.surface with the particles kept out of the walls, each
+    written out in the reference (reference_mpm.wall_contacts, keep_out)."""
+    scene = tiny_scene(dim, rule)
     model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64", device)
     solver = mpm.Solver(model)
     solver.prepare(state)
     body, models, prms, mass, vol = particle_inputs(scene, model)
+    rho = np.array([scene.bodies[b].material.rho for b in body]) if rule == "surface" else None
     s = state.numpy()
     x, v, C, F = s["x"], s["v"], s["C"], s["F0s"]
     dt = 2e-4
     steps = 12 if dim == 2 else 4
+    impulse = 0.0
     for k in range(steps):
         x, v, C, F = reference_step(x, v, C, F, mass, vol, models, prms, model.dx, model.cells,
-                                    scene.gravity, scene.walls, dt, body=body)
-        solver.advance(state, dt)
+                                    scene.gravity, scene.walls, dt, body=body, rho=rho)
+        report = solver.advance(state, dt)
+        impulse += np.abs(report.boundary_impulse).sum()
         assert_no_contact(solver)
         assert_state_matches(state, x, v, C, F, k, model.dx)
     assert solver.report().reason is None
+    assert impulse > 0.0 or dim == 3  # the walls acted (in 2D: the fluid on the floor, at the sticky wall)
     # the bodies really deformed and moved: the comparison is not trivial
     assert np.abs(F - np.eye(dim)).max() > 1e-3
 

@@ -1,0 +1,79 @@
+"""Particles kept out of the solids, at the end of G2P (the surface rule,
+mpm.surface).
+
+The grid rule holds a body where it touches a wall or a collider, but a
+particle on its own - a drop of a splash, a particle in a sheet a cell
+thin - fills too little of any node for the rule to see it, and a moving
+collider can overrun a particle between two steps. A particle whose new
+position x lies inside a solid (signed distance phi(x) < 0, the solid at
+the step's end) is put back on its surface, x <- x - phi n, and loses the
+part of its velocity into the solid relative to the solid's velocity u
+(all of it relative to a sticky collider). The impulse m (v' - v) joins the
+conditions' (``boundary_impulse``, as on every kernel grid). A body in
+contact leans on the grid rule and keeps its particles outside, so this
+acts only on those the rule missed. Under the node rule (earlier versions)
+nothing is compiled.
+"""
+
+import functools
+
+import warp as wp
+
+from .collider_device import STICKY, make_motion
+from .collider_shapes import make_sdf
+from .grid import make_boundary_data
+from .scene import WALL_TYPES
+from .stepping.status import StepStatus
+from .types import Types
+
+OPEN = WALL_TYPES.index("open")
+
+
+@functools.cache
+def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
+    """``keep_out(x, v, m, time, data, inside_lo, inside_hi, status) -> (x',
+    v')``: the particle at ``x`` with velocity ``v`` and mass ``m`` put back
+    on the surface of every closed wall (unless it went beyond the interior's
+    bound ``inside_lo``, ``inside_hi``: through the wall) and every collider
+    (the shapes ``kinds``) it lies behind at ``time`` (module docstring)."""
+    S, vec = t.scalar, t.vec
+    f64 = wp.float64
+    Data = make_boundary_data(t)
+    sdf = make_sdf(t, kinds)
+    motion = make_motion(t)
+
+    @wp.func
+    def put_back(x: vec, v: vec, phi: S, n: vec, u: vec, sticky: bool):
+        x = x - phi * n
+        if sticky:
+            return x, u
+        vn = wp.dot(v - u, n)
+        if vn < S(0.0):
+            v = v - vn * n
+        return x, v
+
+    @wp.func
+    def keep_out(x: vec, v: vec, m: S, time: S, data: Data, inside_lo: vec, inside_hi: vec, status: StepStatus):
+        v0 = v
+        for d in range(wp.static(t.dim)):
+            n = vec()
+            n[d] = S(1.0)
+            # (beyond the interior's bound a particle has gone through the wall: G2P counts it outside)
+            if data.wall_lo[d] != OPEN and x[d] < data.face_lo[d] and x[d] >= inside_lo[d]:
+                x, v = put_back(x, v, x[d] - data.face_lo[d], n, vec(), False)
+            if data.wall_hi[d] != OPEN and x[d] > data.face_hi[d] and x[d] <= inside_hi[d]:
+                x, v = put_back(x, v, data.face_hi[d] - x[d], -n, vec(), False)
+        if wp.static(len(kinds) > 0):
+            for k in range(data.colliders.shape[0]):
+                c = data.colliders[k]
+                shift, u = motion(c, time)
+                phi, n = sdf(c, x - shift)
+                if phi < S(0.0):
+                    x, v = put_back(x, v, phi, n, u, c.boundary == STICKY)
+        J = (m * S(n_grids)) * (v - v0)
+        for d in range(wp.static(t.dim)):
+            if J[d] != S(0.0):
+                wp.atomic_add(status.boundary_impulse, d, f64(J[d]))
+        return x, v
+
+    return keep_out
