@@ -89,28 +89,48 @@ def make_reach(t: Types, rule: str, gradients: bool):
 
 
 @functools.cache
+def make_add_impulse(t: Types):
+    """``add_impulse(impulse, k, J)``: collider k's impulse J [N s] into its
+    row of ``impulse`` (StepStatus.collider_impulse, per collider and axis)."""
+    S = t.scalar
+
+    @wp.func
+    def add_impulse(impulse: wp.array(dtype=wp.float64), k: int, J: t.vec):
+        for d in range(wp.static(t.dim)):
+            if J[d] != S(0.0):
+                wp.atomic_add(impulse, k * wp.static(t.dim) + d, wp.float64(J[d]))
+
+    return add_impulse
+
+
+@functools.cache
 def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradients: bool = False):
-    """``collide(v, q, V, G, time, colliders, profile) -> v``: every collider's
-    boundary condition on a node at ``q`` with velocity ``v``, body volume
-    fraction ``V`` and velocity gradient ``G`` (:func:`make_reach`,
-    mpm.colliders): the change the rule makes to the velocity in contact is
-    the node's."""
+    """``collide(v, q, m, V, G, time, colliders, profile, impulse) -> v``:
+    every collider's boundary condition on a node at ``q`` with velocity
+    ``v``, mass ``m``, body volume fraction ``V`` and velocity gradient ``G``
+    (:func:`make_reach`, mpm.colliders): the change the rule makes to the
+    velocity in contact is the node's, and its momentum goes to the
+    collider's row of ``impulse``."""
     S, vec, Data = t.scalar, t.vec, make_collider_data(t)
     sdf = make_sdf(t, kinds)
     motion = make_motion(t)
     respond = make_respond(t)
     reach = make_reach(t, rule, gradients)
+    add_impulse = make_add_impulse(t)
     Profile = make_profile_type(t)
 
     @wp.func
-    def collide(v: vec, q: vec, V: S, G: t.mat, time: S, colliders: wp.array(dtype=Data), profile: Profile):
+    def collide(v: vec, q: vec, m: S, V: S, G: t.mat, time: S, colliders: wp.array(dtype=Data), profile: Profile,
+                impulse: wp.array(dtype=wp.float64)):
         for k in range(colliders.shape[0]):
             c = colliders[k]
             shift, u = motion(c, time)
             phi, n = sdf(c, q - shift)
             state, vs = reach(phi, n, V, G, v, profile)
             if state == CONTACT:
-                v = v + (respond(vs, u, n, c) - vs)
+                dv = respond(vs, u, n, c) - vs
+                v = v + dv
+                add_impulse(impulse, k, m * dv)
         return v
 
     return collide
@@ -136,7 +156,7 @@ def make_remove_direction(t: Types):
 @functools.cache
 def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradients: bool = False):
     """``constrain(v, Pi, q, V, G, time, colliders, profile) -> (v, Pi, mu, u,
-    n, shift)``: the colliders as constraints of an implicit solve, at the
+    n, shift, k)``: the colliders as constraints of an implicit solve, at the
     predicted velocity ``v`` of a node in contact (:func:`make_reach`): with
     a sticky collider the node is fixed (v_s = u, Pi = 0); with a slip
     collider, or a separating one it approaches, its normal velocity is
@@ -144,7 +164,9 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
     Friction is not a constraint: the last frictional contact's coefficient
     ``mu``, velocity ``u``, normal ``n`` and the extrapolation to the
     surface ``shift`` = v_s - v are returned for the friction applied after
-    the solve with the solve's normal reaction (mpm.implicit). Unlike the
+    the solve with the solve's normal reaction (mpm.implicit), and ``k`` the
+    last collider in contact (-1: none), whose row of the step's
+    collider_impulse takes the node's reaction. Unlike the
     explicit rule, the nodes more than half a cell inside the solid where
     the body has any mass (mpm.surface's DEEP) are constraints too, with
     friction on their own velocity: left free, over an implicit step ten
@@ -165,12 +187,14 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
         uf = vec()
         nf = vec()
         sf = vec()
+        hit = int(-1)
         for k in range(colliders.shape[0]):
             c = colliders[k]
             shift, u = motion(c, time)
             phi, n = sdf(c, q - shift)
             state, vs = reach(phi, n, V, G, v, profile)
             if state != APART:  # (DEEP too: see the docstring)
+                hit = k
                 vn = wp.dot(vs - u, n)
                 extrapolated = vs - v
                 if c.boundary == STICKY:
@@ -184,7 +208,7 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
                         uf = u
                         nf = n
                         sf = extrapolated
-        return v, Pi, mu, uf, nf, sf
+        return v, Pi, mu, uf, nf, sf, hit
 
     return constrain
 

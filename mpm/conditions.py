@@ -119,14 +119,16 @@ class Conditions:
         """The conditions as a pass of their own (after contact), at the step's start."""
         self.launch(self.boundary, layout.n_nodes, [grid.lattice, self.control, self.data, status])
 
-    def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n, friction_shift) -> None:
+    def constrain(self, grid, n: int, time, free, friction, friction_u, friction_n, friction_shift,
+                  contact_id) -> None:
         """The implicit solve's constraints on the first ``n`` nodes: the
         constrained velocity in ``grid.v``, the projector onto the free
         velocities in ``free`` and, with friction, its coefficient, the
         collider's velocity and normal per node and the extrapolation to
-        its surface (mpm.grid.make_constraints)."""
+        its surface, and the collider in contact per node ``contact_id``
+        (mpm.grid.make_constraints)."""
         wp.launch(self.constraints, n, device=self.model.device, inputs=[
-            grid.lattice, time, self.data, free, friction, friction_u, friction_n, friction_shift])
+            grid.lattice, time, self.data, free, friction, friction_u, friction_n, friction_shift, contact_id])
 
     def inside_colliders(self, x, time: float) -> np.ndarray:
         """Per collider, the particles of ``x`` deeper inside it than

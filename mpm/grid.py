@@ -115,10 +115,11 @@ def make_boundary_data(t: Types):
 @functools.cache
 def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (), rule: str = "surface",
                     gradients: bool = False):
-    """``conditions(v, q, m, V, G, kin_m, kin_id, time, data) -> v``: walls,
-    the colliders (the shapes named in ``colliders``; none: compiled out),
-    then regions, by the boundary ``rule`` (mpm.scene.BOUNDARY_RULES) on a
-    node of body volume fraction ``V`` and velocity gradient ``G`` (with
+    """``conditions(v, q, m, V, G, kin_m, kin_id, time, data, status) -> v``:
+    walls, the colliders (the shapes named in ``colliders``; none: compiled
+    out; each one's impulse into ``status.collider_impulse``), then regions,
+    by the boundary ``rule`` (mpm.scene.BOUNDARY_RULES) on a node of mass
+    ``m``, body volume fraction ``V`` and velocity gradient ``G`` (with
     ``gradients``; mpm.surface)."""
     S = t.scalar
     walls = make_walls(t, rule)
@@ -127,11 +128,12 @@ def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (
     Data = make_boundary_data(t)
 
     @wp.func
-    def conditions(v: t.vec, q: t.vec, m: S, V: S, G: t.mat, kin_m: S, kin_id: int, time: S, data: Data):
+    def conditions(v: t.vec, q: t.vec, m: S, V: S, G: t.mat, kin_m: S, kin_id: int, time: S, data: Data,
+                   status: StepStatus):
         v = walls(v, q, V, data.domain, data.band, data.wall_lo, data.wall_hi, data.face_lo, data.face_hi,
                   data.profile)
         if wp.static(len(colliders) > 0):
-            v = collide(v, q, V, G, time, data.colliders, data.profile)
+            v = collide(v, q, m, V, G, time, data.colliders, data.profile, status.collider_impulse)
         if wp.static(with_regions):
             active, v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
                                   data.region_center, data.region_window)
@@ -197,11 +199,14 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
         friction_u: wp.array(dtype=t.vec),  # out (with_friction): the collider's velocity
         friction_n: wp.array(dtype=t.vec),  # out (with_friction): its normal
         friction_shift: wp.array(dtype=t.vec),  # out (with_friction): the surface's velocity minus the node's
+        contact_id: wp.array(dtype=wp.int32),  # out (colliders): the collider in contact, or -1
     ):
         i = wp.tid()
         m = lat.m[i]
         if wp.static(with_friction):
             friction[i] = S(0.0)
+        if wp.static(len(colliders) > 0):
+            contact_id[i] = -1
         if m <= S(0.0):
             free[i] = mat()
             return
@@ -212,7 +217,8 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
         v, Pi = walls(v, Pi, q, V, data.domain, data.band, data.wall_lo, data.wall_hi, data.face_lo, data.face_hi,
                       data.profile)
         if wp.static(len(colliders) > 0):
-            v, Pi, mu, uf, nf, sf = constrain(v, Pi, q, V, G, time, data.colliders, data.profile)
+            v, Pi, mu, uf, nf, sf, hit = constrain(v, Pi, q, V, G, time, data.colliders, data.profile)
+            contact_id[i] = hit
             if wp.static(with_friction):
                 friction[i] = mu
                 friction_u[i] = uf
@@ -226,6 +232,8 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
                 Pi = mat()
                 if wp.static(with_friction):
                     friction[i] = S(0.0)
+                if wp.static(len(colliders) > 0):
+                    contact_id[i] = -1
         lat.v[i] = v
         free[i] = Pi
 
@@ -269,7 +277,7 @@ def make_apply_conditions(t: Types, with_regions: bool, colliders: tuple[str, ..
     @wp.func
     def apply_conditions(lat: Lattice, i: int, m: S, v: t.vec, q: t.vec, time: S, data: Data, status: StepStatus):
         V, G = node_state(lat, i, m, data)
-        vb = conditions(v, q, m, V, G, lat.kin[i], lat.kin_id[i], time, data)
+        vb = conditions(v, q, m, V, G, lat.kin[i], lat.kin_id[i], time, data, status)
         work(m, v, vb, status)
         return vb
 

@@ -9,7 +9,8 @@ position x lies inside a solid (signed distance phi(x) < 0, the solid at
 the step's end) is put back on its surface, x <- x - phi n, and loses the
 part of its velocity into the solid relative to the solid's velocity u
 (all of it relative to a sticky collider). The impulse m (v' - v) joins the
-conditions' (``boundary_impulse``, as on every kernel grid). A body in
+conditions' (``boundary_impulse``, and a collider's ``collider_impulse``, as
+on every kernel grid). A body in
 contact leans on the grid rule and keeps its particles outside, so this
 acts only on those the rule missed. Under the node rule (earlier versions)
 nothing is compiled.
@@ -19,7 +20,7 @@ import functools
 
 import warp as wp
 
-from .collider_device import STICKY, make_motion
+from .collider_device import STICKY, make_add_impulse, make_motion
 from .collider_shapes import make_sdf
 from .grid import make_boundary_data
 from .scene import WALL_TYPES
@@ -41,6 +42,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
     Data = make_boundary_data(t)
     sdf = make_sdf(t, kinds)
     motion = make_motion(t)
+    add_impulse = make_add_impulse(t)
 
     @wp.func
     def put_back(x: vec, v: vec, phi: S, n: vec, u: vec, sticky: bool):
@@ -69,7 +71,9 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
                 shift, u = motion(c, time)
                 phi, n = sdf(c, x - shift)
                 if phi < S(0.0):
+                    v_in = v
                     x, v = put_back(x, v, phi, n, u, c.boundary == STICKY)
+                    add_impulse(status.collider_impulse, k, (m * S(n_grids)) * (v - v_in))
         J = (m * S(n_grids)) * (v - v0)
         for d in range(wp.static(t.dim)):
             if J[d] != S(0.0):

@@ -148,14 +148,14 @@ class Solver:
         self.layout = GridLayout(t, k, model.dx, model.cells, nb, dev, shared=scene.contact == "shared")
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout,
                                gradients=needs_gradients(scene))  # the conditions read the velocity gradients
-        self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads)
+        self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads,
+                                 n_colliders=len(scene.colliders))
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
                         if nb > 1 and scene.contact in ("frictionless", "friction") else None)
         # the conditions act in the grid update, or after contact or the implicit solve
         self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
                                      separate=self.contact is not None or implicit, batched=batched)
-        # a moving grid needs node positions only where a condition can reach a node: with walls
-        # alone, P2G sums them only in steps where a body comes near a closed face (mpm.stepping.criterion)
+        # node positions only where a condition can reach a node (walls alone: near a face, mpm.stepping.criterion)
         self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact or implicit)
         projections = {b.material.project for b in scene.bodies}
         fused = opt.fuse if opt.fuse is not None else (k.moment is not None or opt.compensate) and len(projections) == 1

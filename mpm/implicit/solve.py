@@ -165,6 +165,8 @@ class ImplicitSolve:
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
             self.friction_shift = wp.zeros(k, dtype=vec)  # the surface's velocity minus the node's (mpm.surface)
+            k = n if self.solver.model.scene.colliders else 1
+            self.contact_id = wp.full(k, -1, dtype=wp.int32)  # the collider in contact per node
             k = n if self.contact is not None else 1
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
@@ -315,7 +317,7 @@ class ImplicitSolve:
         if self.sliding:
             wp.copy(self.v_star0, s.grid.v, count=n)
         s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n,
-                               self.friction_shift)
+                               self.friction_shift, self.contact_id)
         if self.contact is not None:
             self._activate()
             self._project(0, s.grid.v)
@@ -330,7 +332,7 @@ class ImplicitSolve:
         friction between sliding bodies (mpm.contact.friction ``work``)."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
-            s.grid.m, self.reaction, s.grid.v, s.buffer.status])
+            s.grid.m, self.reaction, s.grid.v, self.contact_id, s.buffer.status])
         if self.sliding:  # the work of friction between bodies (mpm.contact.friction)
             wp.launch(self.sliding[5], s.layout.n_nodes, device=m.device, inputs=[
                 self.cbin, self.coef, self.bnormal, self.bstate, self.force, self.free, m.kernel.n_grids,
@@ -338,7 +340,7 @@ class ImplicitSolve:
         if self._friction is not None:
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
-                self.friction_shift, s.grid.v, s.buffer.status])
+                self.friction_shift, self.contact_id, s.grid.v, s.buffer.status])
 
     # ------------------------------------------------------------ solve
     def _classify(self, rep: NewtonReport, R: float, R_before: float, goal: float) -> None:

@@ -10,6 +10,7 @@ import functools
 
 import warp as wp
 
+from ..collider_device import make_add_impulse
 from ..grid import make_work
 from ..kernels import Kernel
 from ..launch import warp_kernel
@@ -377,19 +378,25 @@ def make_boundary_work(t: Types):
     """Kernel: the impulse of the constraints on each node at the solution,
     J = m reaction (v - reaction: the velocity without it), into the step's
     ``status.boundary_impulse``, and its work, the positive part of J . v,
-    into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stepping.detection).
-    The Coulomb friction applied after the solve (:func:`make_friction`)
-    adds its own."""
+    into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stepping.detection),
+    and that of a node a collider constrains (``contact_id``, mpm.grid
+    ``make_constraints``; one entry without colliders) into its row of
+    ``status.collider_impulse``. The Coulomb friction applied after the solve
+    (:func:`make_friction`) adds its own."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
+    add_impulse = make_add_impulse(t)
 
     @warp_kernel
     def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
-                      status: StepStatus):
+                      contact_id: wp.array(dtype=wp.int32), status: StepStatus):
         i = wp.tid()
         if m[i] > S(0.0):
             work(m[i], v[i] - reaction[i], v[i], status)
+            if contact_id.shape[0] > i:
+                if contact_id[i] >= 0:
+                    add_impulse(status.collider_impulse, contact_id[i], m[i] * reaction[i])
 
     return boundary_work
 
@@ -402,11 +409,13 @@ def make_friction(t: Types):
     S = t.scalar
     vec = t.vec
     work = make_work(t)
+    add_impulse = make_add_impulse(t)
 
     @warp_kernel
     def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
                  mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
-                 shift: wp.array(dtype=vec), v: wp.array(dtype=vec), status: StepStatus):
+                 shift: wp.array(dtype=vec), contact_id: wp.array(dtype=wp.int32), v: wp.array(dtype=vec),
+                 status: StepStatus):
         i = wp.tid()
         if m[i] <= S(0.0) or mu[i] <= S(0.0):
             return
@@ -419,6 +428,8 @@ def make_friction(t: Types):
         if lt > S(0.0):
             v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt) - shift[i]
             work(m[i], v[i], v_new, status)
+            if contact_id[i] >= 0:
+                add_impulse(status.collider_impulse, contact_id[i], m[i] * (v_new - v[i]))
             v[i] = v_new
 
     return friction

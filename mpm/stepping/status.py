@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD = "step", "body", "box", "trip", "diag", "axis", "load"
+STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER = "step", "body", "box", "trip", "diag", "axis", "load", "collider"
 TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stepping.detection)
 
 # why the steps stopped: the host acts, then (PAUSE, REGRID) the run goes on
@@ -39,7 +39,8 @@ HALTS = ("running", "done", "pause", "regrid", "nonfinite", "outside", "detectio
 class Field:
     name: str
     per: str
-    """STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis)"""
+    """STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis),
+    COLLIDER (collider and axis)"""
     reset: float
     """the value before a step (the identity of its reduction), or at the start"""
     doc: str
@@ -54,7 +55,7 @@ def _fields(table: str) -> tuple[Field, ...]:
             out[-1][3] += " " + line.strip()
             continue
         name, per, reset, doc = line.split(maxsplit=3)
-        if per not in (STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD):
+        if per not in (STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER):
             raise ValueError(f"unknown extent {per!r} of field {name!r}")
         out.append([name, per, float(reset), doc])
     return tuple(Field(*f) for f in out)
@@ -68,6 +69,7 @@ boundary_work     step  0     positive work of the boundary conditions on the gr
 load_work         step  0     work of the external loads over the step [J] (mpm.loads)
 boundary_impulse  axis  0     momentum the boundary conditions gave the grid in the step,
                               sum m_i (v_bc - v_i) per axis, all grids [N s] (mpm.grid)
+collider_impulse  collider 0  the part of it each collider gave, per axis, all grids [N s] (mpm.collider_device)
 kinetic           step  0     kinetic energy of the new state [J] (track_energy)
 potential         step  0     its gravitational potential energy -sum m g . x [J] (track_energy)
 elastic           step  0     elastic energy of the state the step started from [J] (P2G)
@@ -148,11 +150,11 @@ class StepBuffer:
     ``flat`` (one row of the history)."""
 
     def __init__(self, n_bodies: int, dim: int, n_diagnostics: int, device, max_trips: int | None = None,
-                 n_loads: int = 0):
-        self.n_bodies, self.dim, self.n_loads = n_bodies, dim, n_loads
+                 n_loads: int = 0, n_colliders: int = 0):
+        self.n_bodies, self.dim, self.n_loads, self.n_colliders = n_bodies, dim, n_loads, n_colliders
         self.max_trips = max_trips if max_trips is not None else 1 + 3 * n_bodies
         sizes = {STEP: 1, BODY: n_bodies, BOX: n_bodies * dim, TRIP: TRIP_SIZE * self.max_trips,
-                 DIAG: n_diagnostics, AXIS: dim, LOAD: max(n_loads, 1) * dim}
+                 DIAG: n_diagnostics, AXIS: dim, LOAD: max(n_loads, 1) * dim, COLLIDER: max(n_colliders, 1) * dim}
         self.slices: dict[str, slice] = {}
         start = 0
         for f in FIELDS + CONTROL:
@@ -250,6 +252,8 @@ class StepReport:
     grid in the step, summed over the kernel's grids: the bodies receive it
     divided by the kernel's ``n_grids`` (2 for the compact kernel), as every
     grid carries their full mass"""
+    collider_impulse: np.ndarray | None = None
+    """[N s] per collider and axis: its part of ``boundary_impulse`` (all grids)"""
     load_position: np.ndarray | None = None
     """per load: its particles' mean position at the step's start [m]"""
     kinetic: float = float("nan")
@@ -312,6 +316,7 @@ class StepReport:
             max_F_norm=v["max_F_norm"].copy() if reach else None,
             boundary_work=float(v["boundary_work"][0]), load_work=float(v["load_work"][0]),
             boundary_impulse=v["boundary_impulse"].copy(),
+            collider_impulse=v["collider_impulse"].reshape(-1, dim).copy(),
             load_position=v["load_position"].reshape(-1, dim).copy(), contact_nodes=int(v["contact_nodes"][0]),
             contact_work=float(v["contact_work"][0]),
             removed=removed.astype(np.int64) if removed.any() else None,

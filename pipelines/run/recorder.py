@@ -22,6 +22,7 @@ from mpm import analytic
 
 from . import announce, run_metrics
 from .progress import Progress
+from .collider_track import ColliderForces
 from .load_track import LoadTrack
 from .run_metrics import Drift, median, particle_fields, peak_rss_mb
 from ..recording.sinks import RunMeta, Sink
@@ -69,6 +70,7 @@ class Recorder(mpm.Observer):
         self._pieces = None  # (fracture per body, fragments per body) at the last count
         self.inside_max = None  # per collider: the most particles seen inside it
         self.loads: LoadTrack | None = None  # the external loads' track
+        self.forces: ColliderForces | None = None  # the colliders' forces
         self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
         self.error_last: dict | None = None
         self._error_step = -1
@@ -156,6 +158,8 @@ class Recorder(mpm.Observer):
         self.started = True
         self.X0 = self.solver.X0  # initial positions [m], float64
         self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
+        self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
+                       if self.spec.scene.colliders else None)
         self._pending[:] = [0, 0.0, driver.initial.copy(), {
             "config_updates": 0.0, **(self.errors() if self.solution is not None else {})}]
         if log.particles:
@@ -186,7 +190,9 @@ class Recorder(mpm.Observer):
             self.record_removed(report)
         self.record_updates(report)
         self.contact_work += report.contact_work
-        row = self.loads.add(report) if self.loads is not None else None  # the step's start: load, load point
+        row = self.loads.add(report) if self.loads is not None else {}  # the step's start: load, load point
+        if self.forces is not None:  # the colliders' forces over the step
+            row.update(self.forces.add(report))
         if row and log.scalars:
             self.sink.scalars(max(report.step - 1, 0), report.time - report.dt, row)
         self.sink.timings(self.step, self.t, {"step_time_ms": self.step_ms[-1], **(
@@ -471,6 +477,8 @@ class Recorder(mpm.Observer):
             m["spilled"] = spilled
         if self.loads is not None:
             m["loads"] = self.loads.summary(self.state.x.numpy().astype(np.float64), self.t)
+        if self.forces is not None:
+            m["collider_forces"] = self.forces.summary()
         pieces = self.solver.fracture.fragments()  # exact at the end
         m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
         run_metrics.save_final_state(self.out_dir / "final_state.npz", self.model, self.state, self.X0, self.step,

@@ -276,3 +276,38 @@ def test_a_bad_collider_is_refused_naming_its_field(collider, key):
     with pytest.raises(mpm.SceneError) as e:
         mpm.build(scene, mpm.QUADRATIC)
     assert e.value.key == key, str(e.value)
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "implicit"])
+def test_each_collider_reports_its_force(integrator):
+    """A block on a frictional floor collider, gravity tilted by the friction
+    it needs to hold (g_x = 0.25 g < mu g): the floor's impulse over a span of
+    steps is the block's change of momentum less gravity's impulse (to
+    round-off), its time-mean the block's weight and the friction that
+    holds it (within 5 %: the block still vibrates), and all of the
+    boundaries' impulse (no wall is reached)."""
+    res = 32
+    body = mpm.Body(mpm.Box((0.5, 0.35), (0.1, 0.1)), FixedCorotated(E=1e5, nu=0.3, rho=1000.0))
+    floor = Collider.half_space((0.5, 0.25), (0.0, 1.0), friction=0.5, boundary="separate", name="floor")
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[body], gravity=(0.25 * G, -G),
+                      colliders=[floor])
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64")
+    solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
+    solver.prepare(state)
+    m = model.mass.numpy()
+    t, report, J, J_all, span, P0 = 0.0, None, np.zeros(2), np.zeros(2), 0.0, None
+    while t < 0.6:
+        dt = solver.timestep.stable_dt(0.4, report) * (5.0 if integrator == "implicit" else 1.0)
+        if t > 0.2 and P0 is None:
+            P0 = m @ state.v.numpy()
+        report = solver.advance(state, dt)
+        t += dt
+        if P0 is not None:
+            J, J_all, span = J + report.collider_impulse[0], J_all + report.boundary_impulse, span + dt
+    M = m.sum()
+    gravity = M * np.array([0.25 * G, -G])
+    # explicit: round-off; implicit: the reaction at the solution, converged to newton_tol = 1e-4 of the residual
+    tol = 1e-9 if integrator == "explicit" else 1e-4
+    np.testing.assert_allclose(J, m @ state.v.numpy() - P0 - gravity * span, atol=tol * M * G * span)
+    np.testing.assert_allclose(J / span, -gravity, rtol=0.05)
+    np.testing.assert_array_equal(J, J_all)
