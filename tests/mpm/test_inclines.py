@@ -37,3 +37,19 @@ def test_a_disk_rolls_by_its_energy_and_slips_below_the_threshold(theta):
     assert rolling(theta, G, threshold) == pytest.approx(sliding(theta, G, threshold), rel=1e-9)
     below = 0.9 * threshold
     assert rolling(theta, G, below) == sliding(theta, G, below) > rolling(theta, G, 1.0)
+
+
+@pytest.mark.parametrize("theta", [10.0, 30.0, 60.0])
+def test_a_sphere_rolls_by_its_energy_and_slips_below_the_threshold(theta):
+    """A solid sphere (I = (2/5) M R^2) from rest: M g h = (1/2) M v^2 +
+    (1/2) (2/5) M R^2 (v / R)^2 gives v^2 = (10/7) g s sin theta, a =
+    (5/7) g sin theta; the friction needed, (2/7) M g sin, equals
+    mu M g cos at mu = (2/7) tan."""
+    t = math.radians(theta)
+    s = 0.3  # [m] along the plane
+    v2 = 10.0 / 7.0 * G * s * math.sin(t)
+    threshold = 2.0 / 7.0 * math.tan(t)
+    assert rolling(theta, G, 1.0, "sphere") == pytest.approx(v2 / (2 * s), rel=1e-12)
+    assert rolling(theta, G, threshold, "sphere") == pytest.approx(sliding(theta, G, threshold), rel=1e-9)
+    below = 0.9 * threshold
+    assert rolling(theta, G, below, "sphere") == sliding(theta, G, below) > rolling(theta, G, 1.0, "sphere")
