@@ -90,6 +90,21 @@ def bounded_list(lo: float, hi: float, unit: str, most: int = 8):
     return check
 
 
+def integer_list(lo: int, hi: int, most: int = 8):
+    """1 to ``most`` comma-separated integers from lo to hi."""
+    accepted = f"1 to {most} comma-separated integers from {lo} to {hi}"
+
+    def check(text: str) -> list[int]:
+        try:
+            values = [int(part) for part in text.split(",")]
+        except ValueError:
+            _refuse(text, accepted)
+        if not 1 <= len(values) <= most or any(not lo <= n <= hi for n in values):
+            _refuse(text, accepted)
+        return values
+    return check
+
+
 def choice(names):
     """One of ``names``."""
     names = list(names)

@@ -59,7 +59,6 @@ SHARE = 0.1
 """the volume fraction a body takes at least of a node in contact"""
 FILL = 0.9
 """the volume fraction they fill together at a node in contact (module docstring)"""
-"""the volume fraction they fill together at a node in contact (1: touching)"""
 STEPS = 64
 """intervals of the cumulative profile's table (linear between them: within 3e-4 of A)"""
 APART, CONTACT, DEEP = 0, 1, 2

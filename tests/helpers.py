@@ -3,6 +3,8 @@ command line."""
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import os
 import subprocess
 import sys
@@ -15,12 +17,36 @@ from pipelines.config.validate import resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
+EXAMPLES = ROOT / "examples"
 DEVICE = os.environ.get("MPM_TEST_DEVICE", "cpu")  # set by conftest (pytest --device, default cpu)
 # the papers' scenes (conf/scene/): each has a default and a paper size
 PAPER_SCENES = {"snow_bunnies", "water_bunny", "bowl_fsi", "viscous_cup", "falling_bodies", "dam_break",
                 "dam_break_water", "dam_break_2d", "sand_bodies", "bullet_tungsten", "pumpkins",
                 "cookie_drop", "sandcastle", "hydrant"}
 schema.register()
+
+
+@functools.cache
+def load_example(name: str):
+    """An example as a module, loaded by path. Its folder goes on the path
+    first, as when Python runs it as a script (the scripts share examples/_args.py)."""
+    if str(EXAMPLES) not in sys.path:
+        sys.path.insert(0, str(EXAMPLES))
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # (a dataclass resolves its annotations through it)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_example(name: str, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """``python examples/<name>.py args``. A script's own folder comes first
+    on its path, not the working directory: PYTHONPATH names the checkout,
+    so that the script imports this checkout's packages (as the tests do),
+    not another installed copy."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=ROOT, env=env)
 
 
 def group_options(group: str) -> list[str]:

@@ -5,42 +5,16 @@ anything."""
 from __future__ import annotations
 
 import csv
-import functools
-import importlib.util
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import warp as wp
 
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES = ROOT / "examples"
-SCRIPTS = ("drop_ball", "slope_push", "stiffness_study", "incline")
+from helpers import load_example as load, run_example as script
 
-
-@functools.cache
-def load(name: str):
-    """An example as a module, loaded by path. Its folder goes on the path
-    first, as when Python runs it as a script (the scripts share examples/_args.py)."""
-    if str(EXAMPLES) not in sys.path:
-        sys.path.insert(0, str(EXAMPLES))
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def script(name: str, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    """``python examples/<name>.py args``. A script's own folder comes first
-    on its path, not the working directory: PYTHONPATH names the checkout,
-    so that the script imports this checkout's packages (as the tests do),
-    not another installed copy."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=ROOT, env=env)
+SCRIPTS = ("drop_ball", "slope_push", "stiffness_study", "incline", "rolling", "plane_shift", "resting", "hertz",
+           "piston")
 
 
 def test_drop_ball_falls_freely_under_the_driver(device):
@@ -174,6 +148,13 @@ BAD = [(name, "--duration", value) for name in SCRIPTS for value in DURATIONS] +
     ("incline", "--friction", "-0.1"), ("incline", "--integrator", "rk4"),
     ("incline", "--share", "1"), ("incline", "--fill", "0"), ("incline", "--angle", "90"), ("incline", "--speed", "-1"),
     ("stiffness_study", "--E", "1e12"), ("stiffness_study", "--out", "FILE"), ("stiffness_study", "--out", "FILE/sub"),
+    ("rolling", "--dim", "1"), ("rolling", "--on", "wall"), ("rolling", "--resolutions", "32,8"),
+    ("rolling", "--resolutions", "32,,64"), ("rolling", "--friction", "-1"), ("rolling", "--kernel", "sinc"),
+    ("plane_shift", "--shifts", "0,2"), ("plane_shift", "--slide", "10,0.5"), ("plane_shift", "--hold", "40,0.5"),
+    ("plane_shift", "--slide", "30"), ("plane_shift", "--rule", "cells"),
+    ("resting", "--on", "wall,floor"), ("resting", "--schemes", "empm,mls"), ("resting", "--shift", "1.5"),
+    ("hertz", "--approach", "40"), ("hertz", "--resolutions", "x"), ("hertz", "--on", "wall"),
+    ("piston", "--speed", "0"), ("piston", "--K", "1e3"), ("piston", "--rule", "x"),
 ]
 
 
