@@ -2,7 +2,8 @@
 particle the energy, residual and Hessian action of the incremental
 potential (``make_evaluate``, ``make_apply``), per node the passes of
 Newton's method and of conjugate gradients (``make_node_kernels``), the
-constraints' work and Coulomb friction after a solve. Sums go into one
+constraints' work and Coulomb friction after a solve, and the rounds of
+the one-sided constraints (``make_side_kernels``). Sums go into one
 float64 accumulator at the slots below.
 """
 
@@ -433,3 +434,30 @@ def make_friction(t: Types):
             v[i] = v_new
 
     return friction
+
+
+@functools.cache
+def make_side_kernels(t: Types):
+    """Kernels of the one-sided constraints' rounds (mpm.implicit.solve
+    ``ImplicitSolve._sides``): ``unconstrained`` turns the solution v into
+    the velocity without the constraints' reaction, v - reaction, which the
+    constraints then classify as they classify the predictor (a node held
+    while its reaction pushes stays held; one the solution moves into a
+    solid is held; one whose constraint pulls is let go); ``changed``
+    counts the nodes whose projector Pi the classification changed."""
+    S = t.scalar
+
+    @warp_kernel
+    def unconstrained(m: wp.array(dtype=S), reaction: wp.array(dtype=t.vec), v: wp.array(dtype=t.vec)):
+        i = wp.tid()
+        if m[i] > S(0.0):
+            v[i] = v[i] - reaction[i]
+
+    @warp_kernel
+    def changed(free: wp.array(dtype=t.mat), before: wp.array(dtype=t.mat), count: wp.array(dtype=wp.int32)):
+        i = wp.tid()
+        d = free[i] - before[i]
+        if wp.ddot(d, d) > S(0.0):
+            wp.atomic_add(count, 0, 1)
+
+    return unconstrained, changed

@@ -90,7 +90,8 @@ class Event:
     values: dict = field(default_factory=dict)
     """the figures behind it, by name"""
     kind: str = ""
-    """"detection": a warning of the blow-up detection; "halving": an implicit step halved"""
+    """"detection": a warning of the blow-up detection; "halving": an implicit step halved;
+    "unsettled": an implicit step's contact rounds ran out (mpm.implicit.solve ROUNDS)"""
 
 
 @dataclass
@@ -181,6 +182,7 @@ class Driver:
         self.binding: collections.Counter = collections.Counter()  # steps per binding term of the rule
         self.reference_factors: list[float] = []  # per step: dt / fresh dt of the binding body
         self.halved = 0  # implicit steps retried with half the step
+        self.unsettled = 0  # implicit steps whose contact rounds ran out unsettled (mpm.implicit.solve ROUNDS)
         self.initial: np.ndarray | None = None  # diagnostics of the initial state (mpm.diagnostics)
         self.v0 = 0.0  # [m/s] the fastest initial particle
         self.current = True  # the device holds the state of driver.step (observers may read it)
@@ -346,6 +348,13 @@ class Driver:
         self._landing = bool(v["landing_step"][0])
         if self.detector is not None:
             self.detector.sync(v)
+        if report.newton is not None and report.newton.unsettled:
+            self.unsettled += 1
+            if self.unsettled == 1:  # one line; the rest are counted (Driver.unsettled)
+                self._event(f"implicit step {report.step}: {report.newton.unsettled} contact node(s) or bin(s) "
+                            f"still changing after {report.newton.rounds} solves; the last solve kept (later "
+                            "such steps are counted, not announced)", "WARN", "unsettled",
+                            unsettled=report.newton.unsettled, rounds=report.newton.rounds)
         if report.halvings:
             self._event(f"implicit step halved {report.halvings} time(s) to {report.dt:.3g} s after a Newton "
                         "solve that failed or missed narrowly", "WARN", "halving", halvings=report.halvings,

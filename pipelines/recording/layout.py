@@ -36,6 +36,7 @@ _UNITS = {
     "config_updates": ("count", "count"), "fragments": ("count", "count"), "contact_nodes": ("count", "count"),
     "removed": ("count", "count"), "inside_colliders": ("count", "count"),
     "newton_iterations": ("count", "count"), "cg_iterations": ("count", "count"),
+    "solve_rounds": ("count", "count"), "unsettled": ("count", "count"),
     "fracture": ("fraction", "fraction"), "marked_fraction": ("fraction", "fraction"),
     "min_stretch": ("ratio", "ratio"), "newton_residual": ("ratio", "ratio"),
 }

@@ -27,7 +27,7 @@ from .load_track import LoadTrack
 from .run_metrics import Drift, median, particle_fields, peak_rss_mb
 from ..recording.sinks import RunMeta, Sink
 
-IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual"]
+IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
 
 
 def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
@@ -185,7 +185,7 @@ class Recorder(mpm.Observer):
             self.emit(report.elastic)
         if report.newton is not None:
             n = report.newton
-            self.newton.append((n.newton, n.cg, n.residual, n.outcome == "near_miss"))
+            self.newton.append((n.newton, n.cg, n.residual, n.outcome == "near_miss", n.rounds, n.unsettled))
         if report.removed is not None:
             self.record_removed(report)
         self.record_updates(report)
@@ -288,7 +288,8 @@ class Recorder(mpm.Observer):
         if self.solver.conditions.open:
             extra["removed"] = float(self.solver.removals.removed.sum())
         if (n := report.newton) is not None:
-            extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg), newton_residual=n.residual)
+            extra.update(newton_iterations=float(n.newton), cg_iterations=float(n.cg), newton_residual=n.residual,
+                         solve_rounds=float(n.rounds), unsettled=float(n.unsettled))
         return extra
 
     def errors(self) -> dict:

@@ -168,17 +168,22 @@ def plastic_summary(model, state) -> dict:
 
 def implicit_summary(integrator, newton: list[tuple], halvings: int) -> dict:
     """metrics.json ``implicit``: Newton and CG iterations per step (``newton``:
-    per step the Newton and CG iterations, the residual and whether the step
-    took a near miss, mpm.implicit); ``near_misses`` counts those steps."""
+    per step the Newton and CG iterations, the residual, whether the step
+    took a near miss, its solves and the contact nodes and bins it left
+    unsettled, mpm.implicit); ``near_misses`` counts the near misses,
+    ``unsettled_steps`` the steps whose contact rounds ran out (mpm.implicit.solve
+    ROUNDS: the last solve kept)."""
     out = {"newton_max": integrator.newton_max, "newton_tol": integrator.newton_tol,
            "newton_accept": integrator.newton_accept, "cg_max": integrator.cg_max, "cg_tol": integrator.cg_tol,
-           "halvings": halvings, "near_misses": int(sum(bool(row[3]) for row in newton))}
+           "halvings": halvings, "near_misses": int(sum(bool(row[3]) for row in newton)),
+           "unsettled_steps": int(sum(row[5] > 0 for row in newton))}
     if newton:
         a = np.array(newton, dtype=float)
         out.update(newton_mean=float(a[:, 0].mean()), newton_max_seen=int(a[:, 0].max()),
                    cg_mean=float(a[:, 1].mean()), cg_max_seen=int(a[:, 1].max()),
                    cg_per_newton=float(a[:, 1].sum() / max(a[:, 0].sum(), 1.0)),
-                   residual_max=float(a[:, 2].max()))
+                   residual_max=float(a[:, 2].max()), rounds_mean=float(a[:, 4].mean()),
+                   rounds_max_seen=int(a[:, 4].max()), unsettled_max=int(a[:, 5].max()))
     return out
 
 

@@ -11,6 +11,7 @@ import warp as wp
 
 import mpm
 from helpers import DEVICE, compose_cfg, spec_for
+from mpm.implicit.solve import ROUNDS
 from mpm.integrators import Implicit
 from pipelines.run.runner import execute
 from pipelines.config.validate import resolve
@@ -289,6 +290,7 @@ def test_implicit_config_and_metrics(tmp_path):
     imp = m["implicit"]
     assert 1 <= imp["newton_mean"] <= imp["newton_max_seen"] <= spec.integrator.newton_max
     assert imp["cg_per_newton"] >= 1 and imp["cg_mean"] >= imp["newton_mean"] and imp["halvings"] == 0
+    assert imp["rounds_mean"] >= 1 and imp["rounds_max_seen"] <= ROUNDS and imp["unsettled_steps"] == 0
     assert set(m["dt_binding"]) <= {"displacement", "dt_max"}
     with pytest.raises(ValueError, match="integrator.newton_tol"):
         spec_for(["integrator=implicit", "integrator.newton_tol=2"])

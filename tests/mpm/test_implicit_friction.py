@@ -14,7 +14,7 @@ import mpm
 from contact_step import contact_step, touching
 from helpers import DEVICE
 from mpm.contact.friction import FREE, SLIP, STICK
-from mpm.implicit.solve import FRICTION_ROUNDS, FRICTION_TOL
+from mpm.implicit.solve import FRICTION_TOL, ROUNDS
 from mpm.integrators import Implicit
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -51,7 +51,7 @@ def coulomb_kkt(solver, state, dt, scene, mu) -> dict:
     sliding nodes' sum_n R_a,t . u (G = 1: the residual is the impulse).
     Returns the count per state."""
     step = contact_step(solver, state, dt, scene)
-    assert step.report.converged and step.report.rounds < FRICTION_ROUNDS
+    assert step.report.converged and step.report.rounds < ROUNDS
     R, v = step.R, step.v
     tol = 1e-7 * step.scale
     side = int(round(np.sqrt(solver.model.n_nodes)))  # the square lattice: (cells + 1)^2 nodes, row-major
@@ -126,6 +126,47 @@ def test_discs_meet_the_coulomb_conditions_and_keep_their_momentum(mu, sliding):
     assert after[names.index("kinetic_energy")] + after[names.index("elastic_energy")] < e0
     if sliding:
         assert work < 0.0
+
+
+def test_a_step_whose_rounds_run_out_says_so_and_counts_what_is_unsettled(monkeypatch):
+    """The sliding discs (mu = 0.1) settle every contact step within ROUNDS
+    solves; with the cap at one solve each contact step keeps its first
+    solve (every bin stuck), counts the bins its solution leaves outside
+    Coulomb's cone (NewtonReport.unsettled), and the driver says so once (a
+    WARN event naming the step) and counts the steps (Driver.unsettled).
+    Counting leaves the solve's bins as they were: the recorded friction
+    work is that of its bins (stuck: none, to round-off)."""
+    import mpm.implicit.solve as solve
+
+    def run():
+        solver, state = make(discs(0.1, 1.2))
+        rows, events = [], []
+
+        class Watch(mpm.Observer):
+            def on_step(self, driver, report):
+                rows.append((report.newton.rounds, report.newton.unsettled, report.contact_work))
+
+            def on_event(self, driver, event):
+                events.append(event)
+
+        dt = 5 * solver.timestep.stable_dt(0.4, max_speed=1.5)
+        driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=0.15, dt=dt), observers=[Watch()])
+        assert driver.run().status == "completed"
+        return np.array(rows), events, driver
+
+    rows, events, driver = run()
+    sliding = rows[:, 2].sum()  # [J] friction's work while the discs slide (< 0)
+    assert rows[:, 0].max() > 1 and not rows[:, 1].any() and driver.unsettled == 0 and sliding < 0
+    assert not [e for e in events if e.kind == "unsettled"]
+    monkeypatch.setattr(solve, "ROUNDS", 1)
+    rows, events, driver = run()
+    assert (rows[:, 0] == 1).all()
+    assert (rows[:, 1] > 0).sum() >= 5 and driver.unsettled == (rows[:, 1] > 0).sum()
+    assert np.abs(rows[:, 2]).sum() < 1e-9 * -sliding  # every bin stuck in the kept solve: no sliding work
+    warned = [e for e in events if e.kind == "unsettled"]
+    assert len(warned) == 1 and warned[0].level == "WARN", warned
+    first = int(np.argmax(rows[:, 1] > 0)) + 1
+    assert f"implicit step {first}:" in warned[0].text and "still changing after 1 solves" in warned[0].text
 
 
 def incline():
