@@ -10,7 +10,7 @@
 
 from dataclasses import dataclass
 
-from .params import param
+from .params import Names, param
 
 
 @dataclass
@@ -52,5 +52,5 @@ class Implicit:
         return []
 
 
-INTEGRATORS = {"explicit": Explicit, "implicit": Implicit}
+INTEGRATORS = Names("integrator", {"explicit": Explicit, "implicit": Implicit})
 """name -> integrator options class"""

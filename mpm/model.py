@@ -12,14 +12,15 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .kernels import Kernel
+from .kernels import KERNELS, Kernel
+from .kernels.registry import kernel_problem
 from .loads import LoadError, LoadTable, resolve
 from .materials import Material
-from .params import violations
+from .params import instance_problem, violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
 from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
-from .types import Types, make_types
+from .types import PRECISIONS, Types, make_types
 
 
 class SceneError(ValueError):
@@ -206,8 +207,64 @@ def check_contact(scene: Scene) -> None:
                                     "(or contact_friction 0 and no contact_pairs)")
 
 
+def _numbers(value, count: int) -> np.ndarray | None:
+    """``value`` as ``count`` finite floats (None: it is not)."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return a if a.shape == (count,) and np.all(np.isfinite(a)) else None
+
+
+def _one_line(value) -> str:
+    """A value (a nested list, an array) printed on one line."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    return " ".join(repr(value).split())[:120]
+
+
+def check_body(i: int, b, d: int) -> None:
+    """Raise :class:`SceneError` for body ``i``'s own fields: instances for
+    its shape and material, its velocities and initial deformation."""
+    key = f"bodies[{i}]"
+    if not hasattr(b, "shape") or not hasattr(b, "material"):
+        raise SceneError(key, f"{type(b).__name__}; accepted: an mpm.Body(shape, material)")
+    problem = instance_problem(b.material, Material, "a material instance", "mpm.FixedCorotated(E=1e5)")
+    if problem:
+        raise SceneError(f"{key}.material", problem)
+    if isinstance(b.shape, type) or not callable(getattr(b.shape, "bounds", None)):
+        raise SceneError(f"{key}.shape", instance_problem(b.shape, type(None), "a shape instance",
+                                                          "mpm.Box(center, half_extents)").replace(
+            "NoneType", "shape"))
+    if b.velocity is not None and _numbers(b.velocity, d) is None:
+        raise SceneError(f"{key}.velocity", f"{_one_line(b.velocity)}; accepted: {d} finite numbers [m/s]")
+    if b.angular_velocity is not None:
+        n = 1 if d == 2 else 3
+        w = b.angular_velocity if d == 3 or np.ndim(b.angular_velocity) else [b.angular_velocity]
+        if _numbers(w, n) is None:
+            raise SceneError(f"{key}.angular_velocity", f"{_one_line(b.angular_velocity)}; accepted: "
+                             + ("one finite number [rad/s]" if d == 2 else "3 finite numbers [rad/s]"))
+    if b.ppc is not None and (not isinstance(b.ppc, (int, np.integer)) or isinstance(b.ppc, bool) or b.ppc < 1):
+        raise SceneError(f"{key}.ppc", f"{_one_line(b.ppc)}; accepted: an integer >= 1, or None (the scene's)")
+    if b.deformation is not None:
+        try:
+            F = np.asarray(b.deformation, float)
+        except (TypeError, ValueError):
+            F = np.zeros(0)
+        if (F.shape != (d, d) or not np.all(np.isfinite(F)) or np.linalg.det(F) <= 0.0
+                or np.linalg.svd(F, compute_uv=False).min() < MIN_INITIAL_STRETCH):
+            raise SceneError(f"{key}.deformation",
+                             f"{_one_line(b.deformation)}; accepted: {d} rows of {d} finite numbers with det F > 0 "
+                             f"and every singular value >= {MIN_INITIAL_STRETCH:g} (no inverted or degenerate start)")
+
+
 def check_scene(scene: Scene, kernel: Kernel) -> None:
     """Raise :class:`SceneError` for anything that would make the scene unbuildable."""
+    if not isinstance(scene, Scene):
+        raise SceneError("scene", instance_problem(scene, Scene, "an mpm.Scene", "mpm.Scene(dim=2, ...)"))
+    problem = kernel_problem(kernel, factories=False)
+    if problem:
+        raise SceneError("kernel", problem)
     d = scene.dim
     if d not in (2, 3):
         raise SceneError("dim", f"{d} not supported; accepted: 2, 3")
@@ -219,8 +276,8 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
     for a, L in enumerate(scene.domain):
         if abs(L / dx - round(L / dx)) > 1e-9 * L / dx:
             raise SceneError("domain", f"{L} along axis {a} is not a multiple of dx = {dx:g}")
-    if len(scene.gravity) != d:
-        raise SceneError("gravity", f"{list(scene.gravity)}; accepted: {d} components")
+    if _numbers(scene.gravity, d) is None:
+        raise SceneError("gravity", f"{_one_line(scene.gravity)}; accepted: {d} finite numbers [m/s^2]")
     if scene.boundary_rule not in BOUNDARY_RULES:
         raise SceneError("boundary_rule", f"{scene.boundary_rule!r}; accepted: {', '.join(BOUNDARY_RULES)}")
     if len(scene.walls) != 2 * d or any(w not in WALL_TYPES for w in scene.walls):
@@ -235,13 +292,7 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
                                              or not np.all(np.isfinite(scene.lattice_offset))):
         raise SceneError("lattice_offset", f"{scene.lattice_offset}; accepted: {d} finite numbers [cells]")
     for i, b in enumerate(scene.bodies):
-        if b.deformation is not None:
-            F = np.asarray(b.deformation, float)
-            if (F.shape != (d, d) or not np.all(np.isfinite(F)) or np.linalg.det(F) <= 0.0
-                    or np.linalg.svd(F, compute_uv=False).min() < MIN_INITIAL_STRETCH):
-                raise SceneError(f"bodies[{i}].deformation",
-                                 f"{b.deformation}; accepted: {d} rows of {d} finite numbers with det F > 0 and every "
-                                 f"singular value >= {MIN_INITIAL_STRETCH:g} (no inverted or degenerate start)")
+        check_body(i, b, d)
     if not scene.bodies:
         raise SceneError("bodies", "empty; accepted: at least one body")
     check_contact(scene)
@@ -338,10 +389,15 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
 
 def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str = "cpu",
           seed: int = 0, samples: list[BodySample] | None = None) -> tuple[Model, State]:
-    """Sample the bodies and allocate the model and initial state on ``device``.
+    """Sample the bodies and allocate the model and initial state on ``device``
+    (``kernel``: a Kernel, or its name in mpm.KERNELS).
     ``samples``: the bodies' particles already drawn by :func:`sample_bodies`
     for this scene and seed (a config check's), used instead of sampling again."""
+    if isinstance(kernel, str):  # a kernel's name (mpm.KERNELS)
+        kernel = KERNELS[kernel]
     check_scene(scene, kernel)
+    if precision not in PRECISIONS:
+        raise SceneError("precision", f"{precision!r}; accepted: {', '.join(PRECISIONS)}")
     t = make_types(scene.dim, precision)
     d, dx, dxp = scene.dim, scene.dx, scene.particle_dx
 

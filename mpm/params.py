@@ -66,3 +66,33 @@ def violations(obj: Any) -> Iterator[tuple[str, Any, str]]:
             ok = False
         if not ok:
             yield f.name, value, accepted_range(f.name, meta)
+
+
+class UnknownName(KeyError, ValueError):
+    """A name a registry does not hold; its message is one line naming the
+    kind and the accepted names (a KeyError that prints without quotes)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class Names(dict):
+    """A registry by name (``mpm.KERNELS``, ``mpm.SCHEMES``, ...): a dict whose
+    missing key raises :class:`UnknownName` naming what is accepted."""
+
+    def __init__(self, kind: str, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.kind = kind
+
+    def __missing__(self, key):
+        raise UnknownName(f"{self.kind} {key!r}; accepted: {', '.join(sorted(map(str, self)))}")
+
+
+def instance_problem(value, cls, what: str, example: str) -> str | None:
+    """Why ``value`` is not an instance of ``cls`` (None: it is): a class
+    given for its instance, or another type."""
+    if isinstance(value, cls):
+        return None
+    if isinstance(value, type):
+        return (f"the class {value.__name__}, not an instance; accepted: {what}, e.g. {example}")
+    return f"{type(value).__name__} {value!r:.60}; accepted: {what}, e.g. {example}"

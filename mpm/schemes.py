@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from .params import param
+from .params import Names, param
 
 AFFINE = ("keep", "transform", "rotate")
 CRITERIA = ("paper", "distortion")
@@ -180,7 +180,7 @@ class AULMPM:
         return not math.isinf(self.epsilon)
 
 
-SCHEMES = {"empm": EMPM, "tlmpm": TLMPM, "aulmpm": AULMPM}
+SCHEMES = Names("scheme", {"empm": EMPM, "tlmpm": TLMPM, "aulmpm": AULMPM})
 """name -> scheme class: Eulerian (every step), total Lagrangian (never) and
 adaptively updated Lagrangian (when the criterion says) reference updates"""
 

@@ -40,7 +40,8 @@ from .reference_grids import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
 from .precision import compensates, resolution
-from .schemes import AULMPM, EMPM, scene_kind
+from .params import instance_problem, violations
+from .schemes import AULMPM, EMPM, TLMPM, scene_kind
 from .stepping.status import StepBuffer, StepReport
 from .stencil import fuse
 from .stepping.timestep import StepRule
@@ -104,9 +105,41 @@ class SolverOptions:
     def check(self) -> None:
         """ValueError naming the option for a transfer or blend out of range."""
         if self.transfer not in TRANSFERS:
-            raise ValueError(f"transfer {self.transfer!r}; accepted: {', '.join(TRANSFERS)}")
+            raise ValueError(f"options.transfer: {self.transfer!r}; accepted: {', '.join(TRANSFERS)}")
         if not 0.0 <= self.flip <= 1.0:
-            raise ValueError(f"flip {self.flip!r}; accepted: 0 <= flip <= 1")
+            raise ValueError(f"options.flip: {self.flip!r}; accepted: 0 <= flip <= 1")
+
+
+def check_solver_inputs(model, scheme, options) -> None:
+    """TypeError or ValueError, one line naming the argument, for a model
+    that is not mpm.build's, a scheme or options that are not instances
+    (a class given for its instance, a name), or out of range."""
+    problem = instance_problem(model, Model, "the Model of mpm.build", "mpm.build(scene, mpm.QUADRATIC)[0]")
+    if problem:
+        raise TypeError(f"model: {problem}")
+    if scheme is not None:
+        problem = instance_problem(scheme, (EMPM, TLMPM, AULMPM), "a scheme instance", "mpm.EMPM(), mpm.TLMPM(), "
+                                   "mpm.AULMPM()")
+        if problem:
+            raise TypeError(f"scheme: {problem}")
+        for name, value, accepted in violations(scheme):
+            raise ValueError(f"scheme.{name}: {value!r}; accepted: {accepted}")
+        for name, message in scheme.problems():
+            raise ValueError(f"scheme.{name}: {message}")
+    if options is not None:
+        problem = instance_problem(options, SolverOptions, "SolverOptions", "mpm.SolverOptions(transfer='apic')")
+        if problem:
+            raise TypeError(f"options: {problem}")
+        integrator = options.integrator
+        problem = instance_problem(integrator, (Explicit, Implicit), "an integrator instance",
+                                   "mpm.Explicit(), mpm.Implicit()")
+        if problem:
+            raise TypeError(f"options.integrator: {problem}")
+        for name, value, accepted in violations(integrator):
+            raise ValueError(f"options.integrator.{name}: {value!r}; accepted: {accepted}")
+        for name, message in integrator.problems():
+            raise ValueError(f"options.integrator.{name}: {message}")
+        options.check()
 
 
 def resolved(options: SolverOptions, scene, precision: str = "float32") -> SolverOptions:
@@ -128,13 +161,13 @@ class Solver:
     ``removals``, ``fracture``, ``diagnostics``. :meth:`prepare` a state before stepping it."""
 
     def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
+        check_solver_inputs(model, scheme, options)
         self.model = model
         scheme = scheme or EMPM()
         if isinstance(scheme, AULMPM):
             scheme = scheme.resolved(scene_kind(b.material for b in model.scene.bodies))
         self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene, model.types.precision)
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
-        opt.check()
         if scene.contact == "shared" and not isinstance(scheme, EMPM):
             raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
         implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched

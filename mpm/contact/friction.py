@@ -36,7 +36,7 @@ whose lambda_n is not positive (the bodies pull at each other) lets go: no
 row for the rest of the step (the explicit pass after the solve catches a
 bin that then approaches). The solve is repeated
 from its last solution until no bin changes and the loads have settled
-(mpm.implicit.solve FRICTION_TOL, ROUNDS). The two
+(mpm.implicit.rounds FRICTION_TOL, mpm.implicit.solve ROUNDS). The two
 bodies' impulses are equal and opposite in every state (momentum kept);
 a stuck pair does no work, a sliding one the work of f_g against its slip
 (``contact_work``).

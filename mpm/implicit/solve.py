@@ -70,15 +70,14 @@ import numpy as np
 import warp as wp
 
 from .system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, make_apply,
-                              make_boundary_work, make_evaluate, make_friction, make_node_kernels,
-                     make_side_kernels)
+                              make_boundary_work, make_evaluate, make_friction, make_node_kernels)
 from ..materials.differential import make_tangent_type
+from .rounds import Rounds
 
 ARMIJO = 1.0e-4  # sufficient decrease of E along the Newton direction
 BACKTRACKS = 12  # halvings of the Newton step before the line search gives up
 ROUNDOFF = 10.0  # the residual's floor in units of its round-off (ImplicitSolve.solve)
 ROUNDS = 8  # solves per step at most (friction's stick / slip changes, the one-sided constraints)
-FRICTION_TOL = 1.0e-2  # a sliding bin's load settled: it moved by less than this fraction of mu lambda_n
 
 
 @dataclass
@@ -122,8 +121,6 @@ class ImplicitSolve:
         self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
         self._friction = make_friction(t) if self.with_friction else None
         self._work = make_boundary_work(t)
-        # the one-sided constraints' rounds (module docstring): the surface rule's; the node rule as it was
-        self._sides = make_side_kernels(t) if m.scene.boundary_rule == "surface" else None
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact  # mpm.contact.Contact, or None
         self._contact = self.contact.constraint if self.contact is not None else ()
@@ -136,15 +133,14 @@ class ImplicitSolve:
                 self.bmu = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.bstate = wp.full(m.n_nodes, -1, dtype=wp.int32)
                 self.changed = wp.zeros(1, dtype=wp.int32)
-                self.bstate_kept = wp.full(m.n_nodes, -1, dtype=wp.int32)
             elif self.contact is not None:
                 self.contact_num = wp.zeros(m.n_nodes, dtype=t.scalar)
                 self.contact_den = wp.zeros(m.n_nodes, dtype=t.scalar)
             self.tangent = wp.zeros(m.n_particles, dtype=make_tangent_type(t))
             self.visc = wp.zeros(m.n_particles if self.viscous else 1, dtype=t.scalar)
             self.acc = wp.zeros(6, dtype=wp.float64)
-            self.side_changes = wp.zeros(1, dtype=wp.int32)
         self._capacity = 0
+        self.rounds = Rounds(self)  # after a solve: what its solution changes (mpm.implicit.rounds)
         self._backup = None  # F^0s and history before the step (plastic models, for a retry)
 
     def save(self, state) -> None:
@@ -169,6 +165,7 @@ class ImplicitSolve:
                                                   self._cg_start, self._cg_step, self._cg_direction,
                                                   self._trial, self._work]
                 + ([self._friction] if self._friction else [])
+                + list(self.rounds.sides or ())
                 + list(self._contact))
 
     def _grow(self, n: int) -> None:
@@ -190,10 +187,7 @@ class ImplicitSolve:
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
             self.v_star0 = wp.zeros(n if self.sliding else 1, dtype=vec)  # v* without the sliding loads
-            k = n if self._sides is not None else 1  # the last solve's classification, kept during a round
-            self.kept = (wp.zeros(k, dtype=vec), wp.zeros(k, dtype=self.t.mat), wp.zeros_like(self.friction),
-                         wp.zeros_like(self.friction_u), wp.zeros_like(self.friction_n),
-                         wp.zeros_like(self.friction_shift), wp.zeros_like(self.contact_id))
+        self.rounds.grow(n)
 
     def _sum(self) -> np.ndarray:
         return self.acc.numpy()
@@ -216,7 +210,7 @@ class ImplicitSolve:
             s.grid.m, v, self.v_star, self.free, self.residual, self.diag, self.inv_diag, self.reaction,
             self.cbin, int(self.contact is not None), self.acc])
         if self.contact is not None:
-            self._project(1, self.residual)
+            self.project(1, self.residual)
         a = self._sum()
         self.momentum = float(np.sqrt(a[MOMENTUM2]))
         self.stiffness = float(np.sqrt(a[STIFFNESS2]))
@@ -244,7 +238,7 @@ class ImplicitSolve:
             self.residual, self.free, self.inv_diag, self.delta, self.r, self.z, self.d, self.cbin,
             int(self.contact is not None), self.acc])
         if self.contact is not None:
-            self._project(2, self.r, self.z)
+            self.project(2, self.r, self.z)
             wp.copy(self.d, self.z, count=n)
         rz = float(self._sum()[DOT_B])
         if rz <= 0.0:
@@ -259,7 +253,7 @@ class ImplicitSolve:
                 S(alpha), self.d, self.Ad, self.free, self.inv_diag, self.delta, self.r, self.z, self.cbin,
                 int(self.contact is not None), self.acc])
             if self.contact is not None:
-                self._project(2, self.r, self.z)
+                self.project(2, self.r, self.z)
             a = self._sum()
             if np.sqrt(a[RESIDUAL2]) <= tol:
                 return it
@@ -278,7 +272,7 @@ class ImplicitSolve:
         self.bstate.fill_(-1)
         s.contact.couple(s.grid, s.layout, self.cbin, self.coef, (self.bnormal, self.bstate, self.bmu, self.force))
 
-    def _project(self, mode: int, x, z=None) -> None:
+    def project(self, mode: int, x, z=None) -> None:
         """Project x onto the contact constraints
         (mpm.contact.constraint, modes 0-2)."""
         s, m = self.solver, self.solver.model
@@ -301,69 +295,6 @@ class ImplicitSolve:
             *common, self.contact_num, self.contact_den, x, z if z is not None else x, self.acc,
             RESIDUAL2, DOT_B])
 
-    def _slide(self, commit: bool = True) -> int:
-        """Friction between bodies after a solve: each frictional bin's next
-        state and load from the reaction at the solution (mpm.contact.friction
-        ``classify``); where any changed and ``commit``, v* with the new loads
-        and grid_v projected onto the new constraints (else the bins' states
-        stay as the solve had them). The bins that changed."""
-        s, m = self.solver, self.solver.model
-        n = s.layout.n_nodes
-        sums, _, classify, load = self.sliding[1:5]
-        # (the last residual evaluation, at the solution, left its projection sums in contact_num, _den)
-        self.rel.zero_()
-        self.rel_den.zero_()
-        wp.launch(sums, n, device=m.device, inputs=[
-            0, self.cbin, self.coef, self.bnormal, self.free, s.grid.m, self.inv_diag, s.grid.v,
-            self.rel, self.rel_den])  # V_a - V_c per bin
-        if not commit:
-            wp.copy(self.bstate_kept, self.bstate)
-        self.changed.zero_()
-        wp.launch(classify, m.n_nodes, device=m.device, inputs=[
-            self.bnormal, self.bstate, self.bmu, self.contact_num, self.contact_den, self.rel, self.force,
-            self.t.scalar(FRICTION_TOL), self.force_after, self.changed])
-        changed = int(self.changed.numpy()[0])
-        if not commit:
-            wp.copy(self.bstate, self.bstate_kept)
-        if changed == 0 or not commit:  # (the loads stay those the solution carries)
-            return changed
-        self.force, self.force_after = self.force_after, self.force
-        wp.launch(load, n, device=m.device, inputs=[
-            self.cbin, self.coef, self.bnormal, self.bstate, self.force, self.free, s.grid.m, self.v_star0,
-            self.v_star])
-        self._project(0, s.grid.v)
-        return changed
-
-    def _side(self, commit: bool = True) -> int:
-        """The one-sided constraints after a solve (module docstring): the
-        boundary conditions classify the velocity without their reaction,
-        v - reaction; where a node's projector changed and ``commit``, grid_v
-        starts the next solve from it, constrained anew (projected onto the
-        contact constraints between bodies); else the solve's solution and
-        classification stay. The nodes that changed."""
-        s, m = self.solver, self.solver.model
-        n = s.layout.n_nodes
-        unconstrained, changed = self._sides
-        arrays = (s.grid.v, self.free, self.friction, self.friction_u, self.friction_n, self.friction_shift,
-                  self.contact_id)
-        for kept, a in zip(self.kept, arrays):
-            if a.shape[0] >= n:
-                wp.copy(kept, a, count=n)
-        wp.launch(unconstrained, n, device=m.device, inputs=[s.grid.m, self.reaction, s.grid.v])
-        s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u,
-                               self.friction_n, self.friction_shift, self.contact_id)
-        self.side_changes.zero_()
-        wp.launch(changed, n, device=m.device, inputs=[self.free, self.kept[1], self.side_changes])
-        count = int(self.side_changes.numpy()[0])
-        if count == 0 or not commit:
-            for kept, a in zip(self.kept, arrays):
-                if a.shape[0] >= n:
-                    wp.copy(a, kept, count=n)
-            return count
-        if self.contact is not None:
-            self._project(0, s.grid.v)
-        return count
-
     def begin(self) -> None:
         """The solve's start: keep the predictor v*, constrain grid_v, and the
         projectors onto the free velocities (and the frictional contacts);
@@ -379,7 +310,7 @@ class ImplicitSolve:
                                self.friction_shift, self.contact_id)
         if self.contact is not None:
             self._activate()
-            self._project(0, s.grid.v)
+            self.project(0, s.grid.v)
 
     def finish(self) -> None:
         """The constraints' work (:func:`make_boundary_work`), then Coulomb
@@ -427,16 +358,14 @@ class ImplicitSolve:
         conditions' friction and the explicit contact pass (mpm.solver).
         With friction between bodies, or one-sided constraints under the
         surface rule, the solve is repeated from its solution while a bin's
-        stick / slip state or load (:meth:`_slide`), or a node's
-        classification (:meth:`_side`), changes (module docstring)."""
+        stick / slip state or load, or a node's classification, changes
+        (mpm.implicit.rounds)."""
         self.begin()
         rep = NewtonReport()
         goal = self._newton(state, dt, rep)
         while rep.converged:
             last = rep.rounds == ROUNDS  # the last solve: count what it leaves unsettled, keep it
-            changes = self._slide(commit=not last) if self.sliding else 0
-            if not changes and self._sides is not None:  # friction settled: the one-sided constraints
-                changes = self._side(commit=not last)
+            changes = self.rounds.changes(commit=not last)
             if not changes:
                 break
             if last:

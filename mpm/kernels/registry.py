@@ -16,11 +16,12 @@ import sys
 from numbers import Real
 
 from ..factories import probe
+from ..params import Names
 from .base import Kernel
 
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a name usable as a config option and a key
 
-KERNELS: dict[str, Kernel] = {}
+KERNELS: dict[str, Kernel] = Names("kernel")
 """name -> kernel: the built-in ones and those registered (the ``kernel`` config group's options)"""
 
 

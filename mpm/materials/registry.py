@@ -18,13 +18,14 @@ import re
 from typing import Callable
 
 from ..factories import probe
+from ..params import Names
 from ..types import N_MATERIAL_PARAMS
 from .base import Material
 from .plastic import Plastic
 
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a name usable as a config option and a key
 
-MATERIALS: dict[str, type[Material]] = {}
+MATERIALS: dict[str, type[Material]] = Names("material")
 """model name -> material class: the built-in ones and those registered (the ``material`` config
 group's options)"""
 

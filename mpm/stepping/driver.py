@@ -45,7 +45,7 @@ import numpy as np
 import warp as wp
 
 from ..launch import load
-from ..params import param
+from ..params import instance_problem, param, violations
 from .policy import Policy
 from .detection import Detection, Detector
 from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, TRIP_SIZE, StepReport
@@ -70,9 +70,15 @@ class StepPolicy:
                                        "of the first [-]", ge=0.0, le=1.0)
 
     def problems(self) -> list[tuple[str, str]]:
+        """(field, message) for each field out of its range, a step count
+        that is not an integer, or not exactly one of ``steps`` and ``duration``."""
+        out = [(name, f"{value!r}; accepted: {accepted}") for name, value, accepted in violations(self)]
+        if self.steps is not None and (isinstance(self.steps, bool) or not isinstance(self.steps, (int, np.integer))):
+            out.append(("steps", f"{self.steps!r}; accepted: an integer >= 1"))
         if (self.steps is None) == (self.duration is None):
-            return [("steps", "give exactly one of steps and duration")]
-        return []
+            given = "both" if self.steps is not None else "neither"
+            out.append(("steps", f"{given} of steps and duration given; accepted: exactly one of them"))
+        return out
 
 
 @dataclass
@@ -153,8 +159,15 @@ class Driver:
     def __init__(self, solver, state, policy: StepPolicy, detection: Detection | None = None,
                  observers: list[Observer] | tuple = (), sync_every: int | None = None, graph: bool | None = None,
                  measure: bool = False):
+        if not isinstance(policy, StepPolicy):
+            raise TypeError(f"policy: {instance_problem(policy, StepPolicy, 'a StepPolicy', 'StepPolicy(duration=1.0)')}")
         for name, message in policy.problems():
-            raise ValueError(f"{name}: {message}")
+            raise ValueError(f"policy.{name}: {message}")
+        if detection is not None:
+            if not isinstance(detection, Detection):
+                raise TypeError(f"detection: {instance_problem(detection, Detection, 'a Detection', 'Detection()')}")
+            for name, message in detection.problems():
+                raise ValueError(f"detection.{name}: {message}")
         opt, device = solver.options, wp.get_device(solver.model.device)
         k = sync_every if sync_every is not None else (SYNC_EVERY_CUDA if opt.batched and device.is_cuda else 1)
         if k > 1 and not opt.batched:
@@ -266,7 +279,13 @@ class Driver:
         """A batch of up to ``sync_every`` steps (one under the implicit
         integrator, with its retries), one read-back, then the host's turn:
         the reports in order, the configuration updates the device left, the
-        checks, and the observers."""
+        checks, and the observers. Only between :meth:`start` and the end
+        (RuntimeError, one line, otherwise)."""
+        if self.initial is None:
+            raise RuntimeError("advance: the driver has not started; accepted: start() first (run() does both)")
+        if not self.running:
+            raise RuntimeError(f"advance: the run has ended ({self.outcome.status} at step {self.step}, "
+                               f"t = {self.time:.6g} s); accepted: a new Driver to go on")
         if self.solver.implicit is not None:
             self._advance_implicit()
             return

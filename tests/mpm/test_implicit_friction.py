@@ -14,7 +14,8 @@ import mpm
 from contact_step import contact_step, touching
 from helpers import DEVICE
 from mpm.contact.friction import FREE, SLIP, STICK
-from mpm.implicit.solve import FRICTION_TOL, ROUNDS
+from mpm.implicit.rounds import FRICTION_TOL
+from mpm.implicit.solve import ROUNDS
 from mpm.integrators import Implicit
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
