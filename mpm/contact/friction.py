@@ -15,7 +15,12 @@ in one of two states, chosen by an active set:
   W-orthogonal projection is still one bin sum and one node pass:
   lambda_g = (sum s_i w_i Pi_i W_i x_i) solved against
   (sum w_i^2 Pi_i W_i Pi_i), x_i -= s_i w_i Pi_i lambda_g (W as in
-  mpm.contact.constraint ``make_projection``; mode 0: W = M^-1).
+  mpm.contact.constraint ``make_projection``; mode 0: W = M^-1). Where
+  a wall or a collider holds every node of the bin along one direction,
+  the block is singular there: it is solved on its range (its
+  pseudo-inverse), so the bin still sticks, or slides, along the
+  directions left free (earlier versions kept the normal row only: the
+  bin stayed stuck with no tangential reaction, and never slid).
 * slip: the normal row only, and a tangential impulse of magnitude
   mu lambda_n along the slip, applied as a known load: the predictor of a's
   nodes v*_i += s_i w_i Pi_i f_g / m_i (and c's with the opposite sign),
@@ -54,7 +59,8 @@ from ..stepping.status import StepStatus
 from ..types import Types
 
 NONE, STICK, SLIP, FREE = 0, 1, 2, 3  # a bin's state: frictionless, stuck, sliding, let go (-1: no contact)
-SINGULAR = 1.0e-8  # det / trace^d of a stick block below which its bin keeps only the normal row
+SINGULAR = 1.0e-8  # det / trace^d of a stick block below which it is solved on its range (pseudo-inverse)
+RANK = 1.0e-6  # an eigenvalue of a singular stick block below this fraction of its largest: out of its range
 
 
 @functools.cache
@@ -71,15 +77,50 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
     remove = make_remove(t)
 
     @wp.func
+    def pseudo_solve(den: mat, num: vec):
+        """den^+ num for a symmetric semi-definite block: the solve on the
+        eigenvectors whose eigenvalues exceed RANK of the largest (a bin
+        whose nodes a wall or collider holds along one direction has no
+        row there; its other directions still stick)."""
+        out = vec()
+        if wp.static(t.dim == 2):
+            a = den[0, 0]
+            b = S(0.5) * (den[0, 1] + den[1, 0])
+            c = den[1, 1]
+            mean = S(0.5) * (a + c)
+            r = wp.sqrt(S(0.25) * (a - c) * (a - c) + b * b)
+            phi = S(0.5) * wp.atan2(S(2.0) * b, a - c)
+            e1 = vec(wp.cos(phi), wp.sin(phi))  # eigenvector of mean + r
+            e2 = vec(-e1[1], e1[0])
+            top = mean + r
+            if top > S(0.0):
+                out = e1 * (wp.dot(e1, num) / top)
+                if mean - r > S(RANK) * top:
+                    out = out + e2 * (wp.dot(e2, num) / (mean - r))
+        else:
+            Q = mat()
+            d = vec()
+            wp.eig3(S(0.5) * (den + wp.transpose(den)), Q, d)
+            top = wp.max(d[0], wp.max(d[1], d[2]))
+            for k in range(3):
+                if top > S(0.0) and d[k] > S(RANK) * top:
+                    e = vec(Q[0, k], Q[1, k], Q[2, k])
+                    out = out + e * (wp.dot(e, num) / d[k])
+        return out
+
+    @wp.func
     def reaction(state: int, n: vec, num: vec, den: mat):
-        """lambda_g from the bin's sums: the d x d solve of a stuck bin, none
-        for a bin let go, the normal row's otherwise."""
+        """lambda_g from the bin's sums: the d x d solve of a stuck bin (on
+        the block's range where it is singular), none for a bin let go, the
+        normal row's otherwise."""
         if state == FREE:
             return vec()
         if state == STICK:
             tr = wp.trace(den)
             if tr > S(0.0) and wp.determinant(den) > S(SINGULAR) * wp.pow(tr, S(wp.static(t.dim))):
                 return wp.inverse(den) * num
+            if tr > S(0.0):
+                return pseudo_solve(den, num)
         s = wp.dot(n, den * n)
         if s > S(0.0):
             return n * (wp.dot(n, num) / s)

@@ -9,14 +9,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import warp as wp
 
 import mpm
 from contact_step import contact_step, touching
 from helpers import DEVICE
-from mpm.contact.friction import FREE, SLIP, STICK
+from mpm.contact.friction import FREE, SLIP, STICK, make_friction_constraint
 from mpm.implicit.rounds import FRICTION_TOL
 from mpm.implicit.solve import ROUNDS
 from mpm.integrators import Implicit
+from mpm.types import make_types
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -194,3 +196,35 @@ def test_a_block_slides_or_holds_on_another_body_under_the_implicit_integrator(s
     assert example.acceleration(t, v, 0.0) == pytest.approx(example.expected(30.0, 0.5, 0.0), rel=0.03)
     t, v, travel = example.slide(scheme, "implicit", 0.5, 64, duration=0.2, angle=15.0, speed=0.0, device=DEVICE)
     assert example.expected(15.0, 0.5, 0.0) == 0.0 and np.abs(travel).max() < 0.1 / 64
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_a_stuck_bin_that_a_wall_holds_along_one_direction_still_slides(precision):
+    """A 3D bin whose nodes a wall holds along x (its block of sums
+    singular there: den = diag(0, 2, 3)), normal n = y, mu = 0.3: with the
+    sums num = (0.7, -2, 3) its reaction on the block's range is
+    den^+ num = (0, -1, 1), lambda_n = 1 and |lambda_t| = 1 > mu lambda_n,
+    so classify makes it slide with the load mu lambda_n along lambda_t. The
+    fallback to the normal row found no tangential reaction: the bin stayed
+    stuck, friction lost there. A regular block (den = diag(1, 2, 3)) is
+    solved as before: lambda = den^-1 num."""
+    t = make_types(3, precision)
+    sliding = make_friction_constraint(t)
+    classify = sliding[3]
+
+    def run(den):
+        arrays = dict(
+            bnormal=wp.array([[0.0, 1.0, 0.0]], dtype=t.vec), state=wp.array([STICK], dtype=wp.int32),
+            mu=wp.array([0.3], dtype=t.scalar), num=wp.array([[0.7, -2.0, 3.0]], dtype=t.vec),
+            den=wp.array([den], dtype=t.mat), rel=wp.zeros(1, dtype=t.vec), force=wp.zeros(1, dtype=t.vec))
+        after, changed = wp.zeros(1, dtype=t.vec), wp.zeros(1, dtype=wp.int32)
+        wp.launch(classify, 1, inputs=[*arrays.values(), t.scalar(FRICTION_TOL), after, changed], device="cpu")
+        return int(arrays["state"].numpy()[0]), after.numpy()[0], int(changed.numpy()[0])
+
+    state, load, changed = run(np.diag([0.0, 2.0, 3.0]))
+    assert state == SLIP and changed == 1
+    np.testing.assert_allclose(load, [0.0, 0.0, 0.3], rtol=1e-6, atol=1e-7)
+    # regular: lambda = (0.7, -1, 1), lambda_n = 1, lambda_t = (0.7, 0, 1), |lambda_t| = 1.22 > 0.3
+    state, load, changed = run(np.diag([1.0, 2.0, 3.0]))
+    assert state == SLIP and changed == 1
+    np.testing.assert_allclose(load, 0.3 * np.array([0.7, 0.0, 1.0]) / np.hypot(0.7, 1.0), rtol=1e-6)
