@@ -39,8 +39,11 @@ bound along gravity), ``u`` the region's or collider's speed and ``rise``
 the time the load's profile takes to reach its largest factor; a scene's
 closed-form solution (mpm.analytic) gives its amplitudes of displacement
 ``u_a`` and velocity ``v_a``. The body's
-dominant strain source (the largest ``eps``) sets its strain increment per
-step ``d_eps = eps dt / T`` and its dominant speed its position increment
+dominant strain source (the largest increment per step, ``d_eps = eps dt /
+T``, or ``dt`` times a rate; earlier versions compared a source's total
+strain with another's per step, and a slow ramp could outrank the body's
+weight) sets its strain increment per step and its dominant speed its
+position increment
 ``d_x = v dt``; their ratios to the precision's spacing,
 
     r_F = d_eps / 2^-24,      r_x = d_x / (2^-23 x_max)
@@ -62,7 +65,10 @@ A body that nothing moves or strains is resolved (r = inf).
 The remedy, short of float64: compensated sums of x and F in G2P
 (mpm.SolverOptions.compensate, mpm.g2p), on by default where this estimate
 flags float32; they give the stiff cantilever float64's deflection to four
-digits.
+digits. The estimate assumes the step the run will take (:func:`for_policy`:
+the step policy's fixed step, CFL number and cap, or the implicit
+integrator's displacement limit); the command line and the library
+(mpm.Driver fits the solver to its policy) decide by it alike.
 """
 
 from __future__ import annotations
@@ -72,9 +78,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .stepping.timestep import cfl_dt
+from .stepping.timestep import cfl_dt, displacement_dt
 
-__all__ = ["THRESHOLD", "POSITION_THRESHOLD", "SPACING", "Source", "BodyResolution", "Resolution", "resolution"]
+__all__ = ["THRESHOLD", "POSITION_THRESHOLD", "SPACING", "Source", "BodyResolution", "Resolution", "resolution",
+           "for_policy", "compensates"]
 
 THRESHOLD = 1.0
 """r_F below this: the precision cannot resolve a step's strain increment"""
@@ -256,13 +263,28 @@ def compensates(requested: bool | None, precision: str, r: Resolution) -> bool:
     return requested if requested is not None else precision == "float32" and not r.resolved
 
 
+def for_policy(scene, precision: str, policy=None, integrator=None) -> Resolution:
+    """:func:`resolution` at the step a run will take: ``policy`` (an
+    mpm.StepPolicy; None: its defaults) gives the fixed step or the CFL
+    number and the cap, ``integrator`` (mpm.Implicit: its displacement
+    limit instead of the CFL bound; None: explicit). The one rule the
+    library (mpm.Solver, mpm.Driver) and the command line decide
+    compensated sums by."""
+    dt = getattr(policy, "dt", None)
+    cfl = getattr(policy, "cfl", 0.4)
+    dt_max = getattr(policy, "dt_max", 1.0e-3)
+    displacement = getattr(integrator, "displacement", None) if getattr(integrator, "name", "") == "implicit" else None
+    return resolution(scene, dt=dt, cfl=cfl, dt_max=dt_max, precision=precision, displacement=displacement)
+
+
 def resolution(scene, dt: float | None = None, cfl: float = 0.4, dt_max: float = 1.0e-3,
                precision: str = "float32", threshold: float = THRESHOLD,
-               position_threshold: float = POSITION_THRESHOLD) -> Resolution:
+               position_threshold: float = POSITION_THRESHOLD, displacement: float | None = None) -> Resolution:
     """The per-step increments of ``scene``'s bodies against ``precision``'s
     spacings (module docstring): with the step ``dt`` [s] when given, else
-    the smallest of the bodies' ``cfl dx / (c + v)``, capped by ``dt_max`` [s]
-    (mpm.stepping.timestep)."""
+    the smallest of the bodies' ``cfl dx / (c + v)`` (under the implicit
+    integrator, ``displacement``: its ``displacement dx / v``), capped by
+    ``dt_max`` [s] (mpm.stepping.timestep)."""
     if precision not in SPACING:
         raise ValueError(f"precision {precision!r}; accepted: {', '.join(SPACING)}")
     s_F, s_x = SPACING[precision]
@@ -278,14 +300,17 @@ def resolution(scene, dt: float | None = None, cfl: float = 0.4, dt_max: float =
         M = b.material.rho * c * c
         sources = _sources(scene, i, c, M, h, r, V, lo, hi)
         speed = max((s.speed for s in sources), default=0.0)
-        limit = cfl_dt(scene.dx, c, speed, cfl, b.material.kinematic_viscosity(), scene.dim)
+        if displacement is not None:
+            limit = displacement_dt(scene.dx, speed, displacement)
+        else:
+            limit = cfl_dt(scene.dx, c, speed, cfl, b.material.kinematic_viscosity(), scene.dim)
         found.append((BodyResolution(b.name or f"body{i}", c, M, h, sources), limit))
     step = dt if dt is not None else min([dt_max] + [limit for _, limit in found])
     bodies = []
     for br, _ in found:
         strained = [s for s in br.sources if s.strain > 0.0 or s.rate > 0.0]
         if strained:
-            top = max(strained, key=lambda s: s.strain if s.rate == 0.0 else s.rate * step)
+            top = max(strained, key=lambda s: s.strain_step(step))  # per step, every source alike
             br.strain_source, br.strain_step = top.name, top.strain_step(step)
             br.r_F = br.strain_step / s_F
         moving = [s for s in br.sources if s.speed > 0.0]

@@ -39,7 +39,7 @@ from .launch import Launches, load
 from .reference_grids import GridArrays, GridLayout
 from .memory import array_bytes
 from .model import Model, State
-from .precision import compensates, resolution
+from .precision import compensates, for_policy
 from .params import instance_problem, violations
 from .schemes import AULMPM, EMPM, TLMPM, scene_kind
 from .stepping.status import StepBuffer, StepReport
@@ -140,14 +140,46 @@ def check_solver_inputs(model, scheme, options) -> None:
         for name, message in integrator.problems():
             raise ValueError(f"options.integrator.{name}: {message}")
         options.check()
+    scene = model.scene
+    if scene.contact == "shared" and scheme is not None and not isinstance(scheme, EMPM):
+        raise ValueError("scheme: contact 'shared' (one grid for all bodies) needs the Eulerian scheme; "
+                         "accepted: mpm.EMPM()")
+    if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
+            scene.solution, "has_body_force", False)):
+        raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "
+                         "force; accepted: batched=False")
 
 
-def resolved(options: SolverOptions, scene, precision: str = "float32") -> SolverOptions:
+def resolved_scheme(scheme, scene):
+    """The scheme a solver steps by: EMPM for None, A-ULMPM's null parameters
+    taken for the scene's kind (mpm.schemes.scene_kind)."""
+    scheme = scheme or EMPM()
+    if isinstance(scheme, AULMPM):
+        scheme = scheme.resolved(scene_kind(b.material for b in scene.bodies))
+    return scheme
+
+
+def fit(solver, policy) -> None:
+    """:meth:`Solver.fit`: where ``compensate`` was left to the solver and
+    ``policy``'s step decides otherwise than the default policy's, the
+    solver is built again with the decision (nothing is compiled before a
+    run starts, so this costs only the allocations)."""
+    scheme, options = solver.given
+    if options is not None and options.compensate is not None:
+        return
+    model = solver.model
+    decided = resolved(options or SolverOptions(), model.scene, model.types.precision, policy).compensate
+    if decided != solver.options.compensate:
+        solver.__init__(model, scheme, options, policy)
+
+
+def resolved(options: SolverOptions, scene, precision: str = "float32", policy=None) -> SolverOptions:
     """``options`` with the tracking and the compensation left to the solver (None)
-    decided for ``scene`` in ``precision``."""
+    decided for ``scene`` in ``precision``, at the step of ``policy`` (an
+    mpm.StepPolicy; None: its defaults) and the integrator (mpm.precision.for_policy)."""
     compensate = options.compensate
     if compensate is None:
-        compensate = compensates(None, precision, resolution(scene, precision=precision))
+        compensate = compensates(None, precision, for_policy(scene, precision, policy, options.integrator))
     return dataclasses.replace(
         options, track_energy=True if options.track_energy is None else options.track_energy,
         track_J=(any(not b.material.invertible for b in scene.bodies) if options.track_J is None
@@ -160,20 +192,15 @@ class Solver:
     ``references``, ``criterion``, ``implicit`` (or None), ``timestep`` (the host's step rule),
     ``removals``, ``fracture``, ``diagnostics``. :meth:`prepare` a state before stepping it."""
 
-    def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None):
+    def __init__(self, model: Model, scheme=None, options: SolverOptions | None = None, policy=None):
         check_solver_inputs(model, scheme, options)
-        self.model = model
-        scheme = scheme or EMPM()
-        if isinstance(scheme, AULMPM):
-            scheme = scheme.resolved(scene_kind(b.material for b in model.scene.bodies))
-        self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene, model.types.precision)
+        self.model, self.given = model, (scheme, options)  # (as given: Solver.fit decides again)
+        scheme = resolved_scheme(scheme, model.scene)
+        self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene, model.types.precision,
+                                                     policy)
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
-        if scene.contact == "shared" and not isinstance(scheme, EMPM):
-            raise ValueError("contact 'shared' (one grid for all bodies) needs the Eulerian scheme")
         implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched
         forcing = scene.solution if getattr(scene.solution, "has_body_force", False) else None
-        if batched and (implicit or forcing):
-            raise ValueError("batched steps need the explicit integrator and no host-side body force")
         nb = self.n_bodies = len(scene.bodies)
         self.removals = Removals(model)  # particles removed at open faces
         self.launch = Launches(dev)  # the step's launches, repacking only what changed
@@ -221,6 +248,10 @@ class Solver:
         self.buffer.set(alive=self.removals.counts)
 
     # ------------------------------------------------------------------ setup
+    def fit(self, policy) -> None:
+        """Decide for the step ``policy`` (mpm.Driver's) what the options left to the solver (:func:`fit`)."""
+        fit(self, policy)
+
     def kernels(self) -> list:
         """Every kernel this run compiles."""
         parts = [self.transfers, self.conditions, self.contact, self.implicit]

@@ -168,6 +168,7 @@ class Driver:
                 raise TypeError(f"detection: {instance_problem(detection, Detection, 'a Detection', 'Detection()')}")
             for name, message in detection.problems():
                 raise ValueError(f"detection.{name}: {message}")
+        solver.fit(policy)  # what the solver left to the step policy (compensated sums: mpm.precision)
         opt, device = solver.options, wp.get_device(solver.model.device)
         k = sync_every if sync_every is not None else (SYNC_EVERY_CUDA if opt.batched and device.is_cuda else 1)
         if k > 1 and not opt.batched:

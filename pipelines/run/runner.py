@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 import mpm
-from mpm.precision import compensates, resolution
+from mpm.precision import compensates, for_policy
 from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
@@ -74,7 +74,7 @@ def precision_check(spec: RunSpec) -> tuple[dict, str]:
     ``run.compensate``, null: where they do not, in float32) and a line to
     print before compiling ("" where they do)."""
     run = spec.run
-    r = resolution(spec.scene, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max, precision=run.precision)
+    r = for_policy(spec.scene, run.precision, run, spec.integrator)  # (the library's rule: mpm.Driver)
     on = compensates(run.compensate, run.precision, r)
     entry = {"r_F": r.r_F, "r_x": r.r_x, "resolved": r.resolved, "compensate": bool(on)}
     if r.resolved:

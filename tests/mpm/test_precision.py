@@ -78,3 +78,51 @@ def test_gravity_is_the_fall_to_the_floor():
     speed = max(src.speed for src in b.sources)
     assert speed == pytest.approx(math.sqrt(2 * 9.81 * fall))
     assert isinstance(s, mpm.Scene)
+
+
+def test_the_dominant_source_is_the_largest_increment_per_step():
+    """The stiff cantilever with gravity on and its tip load 100 times the
+    beam's weight stress rho g h but ramped over 10^5 s: the load's total
+    strain is the largest, its increment per step the smaller (its rise,
+    not the transit h / c, spreads it). The estimate names the source of
+    the largest increment (gravity's) and takes it (earlier versions
+    compared the load's total strain with the rest and named the load)."""
+    s = scene("scene=cantilever_stiff_2d")
+    b = s.bodies[0]
+    h = max(hi - lo for lo, hi in zip(*b.shape.bounds()))
+    weight_stress = b.material.rho * 9.81 * h
+    load = replace(s.loads[0], force=[0.0, -100.0 * weight_stress], ramp=1.0e5, table=None)
+    r = resolution(replace(s, gravity=(0.0, -9.81), loads=[load]))
+    body = r.bodies[0]
+    sources = {src.name: src for src in body.sources}
+    tip = sources["load 'tip' (traction)"]
+    assert tip.strain > max(src.strain for name, src in sources.items() if name != tip.name)
+    top = max(sources.values(), key=lambda src: src.strain_step(r.dt))
+    assert body.strain_source == top.name != tip.name
+    assert body.strain_step == pytest.approx(top.strain_step(r.dt), rel=1e-12)
+
+
+def test_the_library_and_the_command_line_decide_compensation_by_the_same_step():
+    """One rule (mpm.precision.for_policy), from the step a run takes: the
+    stiff cantilever (r_F = 0.095 at the explicit CFL step) is resolved at
+    a fixed step 20 times longer and under the implicit integrator (its
+    displacement limit, capped at 10 ms; at the 1 ms cap r_F = 0.34), not
+    at the CFL step; the command line's
+    precision_check and the library (mpm.Solver fitted by mpm.Driver to its
+    policy) decide alike in each case (the library decided from the
+    default CFL step before, whatever the policy)."""
+    from pipelines.run.runner import precision_check
+
+    base = resolution(scene("scene=cantilever_stiff_2d"))
+    cases = [([], None, False), ([f"run.dt={20 * base.dt}"], None, True),
+             (["integrator=implicit", "run.dt_max=0.01"], mpm.Implicit(), True)]
+    for overrides, integrator, resolved in cases:
+        spec = spec_for(["scene=cantilever_stiff_2d", *overrides])
+        entry, _ = precision_check(spec)
+        assert entry["resolved"] is resolved and entry["compensate"] is (not resolved), overrides
+        model, state = mpm.build(spec.scene, mpm.QUADRATIC, "float32")
+        options = mpm.SolverOptions(integrator=integrator or mpm.Explicit())
+        solver = mpm.Solver(model, mpm.TLMPM(), options)
+        run = spec.run
+        mpm.Driver(solver, state, mpm.StepPolicy(steps=1, dt=run.dt, cfl=run.cfl, dt_max=run.dt_max))
+        assert solver.options.compensate is entry["compensate"], overrides
