@@ -23,6 +23,8 @@ NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a name usable as a config option
 
 KERNELS: dict[str, Kernel] = Names("kernel")
 """name -> kernel: the built-in ones and those registered (the ``kernel`` config group's options)"""
+BUILT_IN: dict[str, Kernel] = {}
+"""name -> kernel: mpm's own (a registered kernel may not take their names)"""
 
 
 def defined_at(kernel: Kernel) -> str:
@@ -77,9 +79,10 @@ def kernel_problem(kernel, factories: bool = True) -> str | None:
     if not isinstance(kernel.gradient_affine, bool):
         return f"gradient_affine {kernel.gradient_affine!r}; accepted: true or false"
     if factories:
-        calls = [("weights", ()), ("gradients", ())]
+        calls = [("weights", (), (1, "a vector of support weights")), ("gradients", (), (1, "the gradients"))]
         if shared:
-            calls += [("phase", (False,)), ("phase", (True,)), ("weights_at", ()), ("gradients_at", ())]
+            calls += [("phase", (False,)), ("phase", (True,)), ("weights_at", (), (1, "the weights")),
+                      ("gradients_at", (), (1, "the gradients"))]
         return probe(kernel, calls)
     return None
 
@@ -88,7 +91,7 @@ def register_kernel(kernel: Kernel) -> Kernel:
     """Add ``kernel`` to :data:`KERNELS` under ``kernel.name`` and return it.
     Registering the same kernel again does nothing; a kernel whose weights
     are defined at the same place (a reloaded module) replaces its earlier
-    self. Raises a one-line ValueError naming the kernel and what is wrong:
+    self, but not a built-in one. Raises a one-line ValueError naming the kernel and what is wrong:
     see :func:`kernel_problem`, or a name another kernel holds."""
     return _add(kernel, factories=True)
 
@@ -101,8 +104,16 @@ def _add(kernel: Kernel, factories: bool) -> Kernel:
         name = getattr(kernel, "name", None) if isinstance(kernel, Kernel) else None
         raise ValueError(f"kernel {name if isinstance(name, str) and name else repr(kernel)}: {problem}")
     held = KERNELS.get(kernel.name)
-    if held is not None and held is not kernel and defined_at(held) != defined_at(kernel):
+    if held is not None and held is not kernel and (kernel.name in BUILT_IN or defined_at(held) != defined_at(kernel)):
         raise ValueError(f"kernel {kernel.name}: name {kernel.name!r} is taken by {origin(held)}; accepted: a "
                          f"name not in {', '.join(KERNELS)}")
     KERNELS[kernel.name] = kernel
+    if not factories:
+        BUILT_IN[kernel.name] = kernel
     return kernel
+
+
+def built_in(kernel) -> bool:
+    """Whether ``kernel`` is one of mpm's own (the object, not a copy:
+    ``dataclasses.replace(mpm.QUADRATIC, ...)`` is the user's)."""
+    return BUILT_IN.get(getattr(kernel, "name", None)) is kernel

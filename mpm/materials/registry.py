@@ -28,6 +28,14 @@ NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a name usable as a config option
 MATERIALS: dict[str, type[Material]] = Names("material")
 """model name -> material class: the built-in ones and those registered (the ``material`` config
 group's options)"""
+BUILT_IN: dict[str, type[Material]] = {}
+"""model name -> class: mpm's own (a registered class may not take their names)"""
+
+
+RETURNS = {"stress_energy": (2, "P, psi"), "principal": (3, "P_hat, psi, H"), "project": (1, "F"),
+           "flow": (2, "sigma_E, history"), "elasticity": (2, "P_hat, psi"), "elasticity_hessian": (1, "H"),
+           "stiffening": (1, "factor")}
+"""what each factory's Warp function returns: how many values, and which (mpm.materials.base, .plastic)"""
 
 
 def origin(obj) -> str:
@@ -80,7 +88,7 @@ def material_problem(cls, factories: bool = True) -> str | None:
         return (f"{', '.join(missing)} missing or not callable; accepted: factories types -> Warp function "
                 "(mpm.materials.base, mpm.materials.plastic)")
     if factories:
-        problem = probe(cls, [(n, ()) for n in given])
+        problem = probe(cls, [(n, (), RETURNS[n]) for n in given])
         if problem:
             return problem
     try:
@@ -129,8 +137,16 @@ def _add(cls, factories: bool):
     if problem is not None:
         raise ValueError(f"material {where}: {problem}")
     held = MATERIALS.get(cls.name)
-    if held is not None and held is not cls and origin(held) != where:
+    if held is not None and held is not cls and (cls.name in BUILT_IN or origin(held) != where):
         raise ValueError(f"material {where}: name {cls.name!r} is taken by {origin(held)}; accepted: a name "
                          f"not in {', '.join(MATERIALS)}")
     MATERIALS[cls.name] = cls
+    if not factories:
+        BUILT_IN[cls.name] = cls
     return cls
+
+
+def built_in(cls) -> bool:
+    """Whether material class ``cls`` is one of mpm's own (the class itself:
+    a subclass defined elsewhere is the user's)."""
+    return BUILT_IN.get(getattr(cls, "name", None)) is cls

@@ -22,6 +22,7 @@ problem is a :class:`ConfigError` naming ``material``, ``kernel`` or
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
 import os
@@ -29,8 +30,10 @@ import sys
 
 import mpm
 from mpm.kernels import register_kernel
+from mpm.kernels.registry import built_in as kernel_built_in
 from mpm.kernels.registry import origin as kernel_origin
 from mpm.materials import register_material
+from mpm.materials.registry import built_in as material_built_in
 from mpm.materials.registry import origin as class_origin
 
 from .fields import ConfigError
@@ -165,16 +168,30 @@ def prepare(overrides: list[str]) -> None:
         resolve(group, value)
 
 
+def _home(obj) -> str | None:
+    """The plugin module (a dotted path's, or one of MPM_PLUGINS) holding
+    ``obj`` as a global, if any."""
+    names = [path.rpartition(".")[0] for group in GROUPS for path in ALIASES[group]] + env_modules()
+    for name in dict.fromkeys(names):
+        module = sys.modules.get(name)
+        if module is not None and any(v is obj for v in vars(module).values()):
+            return name
+    return None
+
+
 def _defined(scene: mpm.Scene, kernel: mpm.Kernel) -> list[tuple[str, str, str]]:
-    """(label, where, module) of each material and kernel of a run that
-    ``mpm`` does not define."""
+    """(label, where, module) of each material and kernel of a run that is
+    not mpm's own (a copy of a built-in kernel, ``dataclasses.replace(
+    mpm.QUADRATIC, ...)``, is the user's: its module is the one holding it)."""
     out = []
     for cls in dict.fromkeys(type(b.material) for b in scene.bodies):
-        if not cls.__module__.startswith("mpm."):
+        if not material_built_in(cls):
             out.append((f"material {cls.name}", class_origin(cls), cls.__module__))
-    module = getattr(kernel.weights, "__module__", "") or ""
-    if not module.startswith("mpm."):
-        out.append((f"kernel {kernel.name}", kernel_origin(kernel), module))
+    if not kernel_built_in(kernel):
+        home = _home(kernel)
+        module = home or getattr(kernel.weights, "__module__", "") or ""
+        names = [k for k, v in vars(sys.modules[home]).items() if v is kernel] if home else []
+        out.append((f"kernel {kernel.name}", f"{home}.{names[0]}" if names else kernel_origin(kernel), module))
     return out
 
 
@@ -185,14 +202,54 @@ def origins(scene: mpm.Scene, kernel: mpm.Kernel) -> dict[str, str]:
     return {label: where for label, where, _ in _defined(scene, kernel)}
 
 
+def _own(module) -> bool:
+    """Whether ``module`` is the user's code: a file outside mpm, pipelines,
+    the standard library and the installed packages."""
+    path = getattr(module, "__file__", None)
+    if not path or not os.path.isfile(path):
+        return False
+    path = os.path.realpath(path)
+    ours = [os.path.dirname(os.path.realpath(m.__file__)) for m in (mpm, sys.modules[__name__.split(".")[0]])]
+    installed = [os.path.realpath(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix)]
+    return not any(path.startswith(p + os.sep) for p in ours + installed)
+
+
+def imported(name: str, limit: int = 200) -> list[str]:
+    """Module ``name`` and the user's modules it uses, directly or through
+    others (a global that is a module, or a class or function defined in
+    one), in the order found; at most ``limit``."""
+    seen, queue = [], [name]
+    while queue and len(seen) < limit:
+        current = queue.pop(0)
+        module = sys.modules.get(current)
+        if current in seen or module is None or not _own(module):
+            continue
+        seen.append(current)
+        for value in list(vars(module).values()):
+            used = value.__name__ if isinstance(value, type(sys)) else getattr(value, "__module__", None)
+            if isinstance(used, str) and used not in seen:
+                queue.append(used)
+    return seen
+
+
+def _fields(kernel: mpm.Kernel) -> str:
+    """A kernel's parameters and where its factories are, as text."""
+    def text(v):
+        return f"{getattr(v, '__module__', '?')}.{getattr(v, '__qualname__', '?')}" if callable(v) else repr(v)
+    return repr([(f.name, text(getattr(kernel, f.name))) for f in dataclasses.fields(kernel)])
+
+
 def sources(scene: mpm.Scene, kernel: mpm.Kernel) -> dict[str, str]:
     """``"module <name>"`` -> SHA-256 (16 hex digits) of the source file of
     each module that defines a material or kernel of the run outside
-    ``mpm``: the run's config hash changes with their code."""
+    ``mpm``, and of the user's modules it uses (:func:`imported`), and
+    ``"kernel <name>"`` -> that of a user's kernel's parameters: the run's
+    config hash changes with their code."""
     out = {}
-    for _, _, module in _defined(scene, kernel):
-        path = getattr(sys.modules.get(module), "__file__", None)
-        if path and os.path.isfile(path):
-            with open(path, "rb") as f:
-                out[f"module {module}"] = hashlib.sha256(f.read()).hexdigest()[:16]
+    for label, _, module in _defined(scene, kernel):
+        for name in imported(module):
+            with open(sys.modules[name].__file__, "rb") as f:
+                out[f"module {name}"] = hashlib.sha256(f.read()).hexdigest()[:16]
+        if label.startswith("kernel "):
+            out[label] = hashlib.sha256(_fields(kernel).encode()).hexdigest()[:16]
     return out
