@@ -21,7 +21,12 @@ from pathlib import Path
 
 class Parser(argparse.ArgumentParser):
     """argparse whose errors (its own and the checks') take one line,
-    ``error: --option: ...``, with exit code 2."""
+    ``error: --option: ...``, with exit code 2, and whose ``--help`` shows
+    each option's default."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", argparse.ArgumentDefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"error: {message.removeprefix('argument ')}\n")

@@ -78,10 +78,17 @@ def main(argv=None) -> int:
     print(f"{out.status} after {driver.step} steps, t = {driver.time:.4g} s "
           f"(mean step {driver.time / max(driver.step, 1):.3g} s){': ' + out.reason if out.reason else ''}")
     total = tr.total()
-    lowest = int(np.argmin([c[1] for c in tr.center[:len(total)]]))  # the last state has no elastic energy
-    for label, k in (("start", 0), ("falling", len(total) // 4), ("at the floor", lowest), ("end", len(total) - 1)):
+    heights = [c[1] for c in tr.center]
+    lowest = int(np.argmin(heights[:len(total)]))  # the last state has no elastic energy
+    # it reached the floor where its centre turned back up after its lowest point (else it is still falling)
+    landed = lowest < len(total) - 1 and max(heights[lowest:]) > heights[lowest]
+    rows = [("start", 0), ("falling", len(total) // 4)] + ([("at the floor", lowest)] if landed else []) + [
+        ("end", len(total) - 1)]
+    for label, k in rows:
         print(f"{label:>13}: t = {tr.t[k]:.3f} s, centre height {tr.center[k][1]:.4f} m, kinetic "
               f"{tr.kinetic[k]:.4g} J, elastic {tr.elastic[k]:.4g} J, total {total[k]:.4g} J")
+    if not landed:
+        print(f"{'at the floor':>13}: not reached in {driver.time:.4g} s (still falling: a longer --duration)")
     return 0 if out.status == "completed" else 1
 
 

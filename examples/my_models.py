@@ -3,7 +3,7 @@ copies of the built-in neo-Hookean solid and quadratic B-spline under names
 of their own, registered so that the command line and every lookup by name
 know them (docs/extending.md walks through this file).
 
-    python examples/my_models.py     # each copy against the built-in it copies: the same bits
+    python examples/my_models.py [--steps 48] [--resolution 24] [--device cpu]   # each copy against the built-in it copies: the same bits
     python -m pipelines.run material=examples.my_models.MyNeoHookean kernel=examples.my_models.MY_QUADRATIC
 """
 
@@ -160,11 +160,18 @@ def compare(steps: int = 48, resolution: int = 24, device: str = "cpu") -> dict[
             for name, state in runs.items()}
 
 
-def main() -> int:
-    differ = compare()
+def main(argv=None) -> int:
+    from _args import Parser, device, integer  # (this folder; the module itself is imported as a plugin too)
+
+    parser = Parser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    parser.add_argument("--steps", type=integer(1, 10_000), default=48, help="steps of each run")
+    parser.add_argument("--resolution", type=integer(24, 256), default=24, help="grid cells across the 1 m box")
+    parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
+    args = parser.parse_args(argv)
+    differ = compare(args.steps, args.resolution, args.device)
     for name, fields in differ.items():
         print(f"{name}: {'the same bits as the built-in' if not fields else 'differs in ' + ', '.join(fields)} "
-              f"after 48 steps")
+              f"after {args.steps} steps")
     return 1 if any(differ.values()) else 0
 
 

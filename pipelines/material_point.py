@@ -27,6 +27,7 @@ import numpy as np
 
 PATHS = ("uniaxial", "oedometer", "isotropic", "shear")
 MAX_STEPS = 1_000_000  # steps of a path at most (a step costs a kernel launch)
+DEFAULT_OUT = Path("outputs") / "material_point" / "stress_strain.png"  # (and .csv beside)
 
 
 def strain_history(strain: float, steps: int, cycle: bool) -> np.ndarray:
@@ -100,17 +101,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate", type=float, default=1.0, help="strain rate [1/s] (sets dt)")
     parser.add_argument("--dim", type=int, choices=(2, 3), default=3)
     parser.add_argument("--cycle", action="store_true", help="load, then unload to zero strain")
-    parser.add_argument("--out", type=Path, default=Path("stress_strain.png"), help="PNG (and .csv beside)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"PNG (and .csv beside); default {DEFAULT_OUT}, its folder made")
     args = parser.parse_args(argv)
     bad = [o for o in args.overrides if not (o.startswith("material=") or o.startswith("material."))]
     if bad:
         print(f"error: {bad[0]}: not a material setting; accepted: material=<model>, material.<key>=<value>",
               file=sys.stderr)
         return 2
-    problem = (finite("--strain", args.strain) or finite("--rate", args.rate, 0.0, strict=True)
-               or output_file("--out", args.out, ".png"))
+    problem = finite("--strain", args.strain) or finite("--rate", args.rate, 0.0, strict=True)
     if args.steps < 1 or args.steps > MAX_STEPS:
         problem = f"--steps: {args.steps}; accepted: an integer from 1 to {MAX_STEPS}"
+    if not problem and args.out == DEFAULT_OUT:  # the project's outputs folder, not the working directory
+        DEFAULT_OUT.parent.mkdir(parents=True, exist_ok=True)
+    problem = problem or output_file("--out", args.out, ".png")
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2

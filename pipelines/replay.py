@@ -18,7 +18,8 @@
   --reproduce     re-run the recorded configuration (its command-line
                   overrides, with the recorded MPM_PLUGINS modules, from the
                   working directory; into a fresh directory reproduce-* beside the
-                  recording, in its run directory) and compare the two
+                  recording, in its run directory, removed if the re-run
+                  fails) and compare the two
                   recordings: bit for bit on the CPU, else the largest
                   deviation per quantity; exit code 0 on a match, 1 otherwise
   --repair        a run killed without warning (SIGKILL, power loss) leaves
@@ -37,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -64,10 +66,15 @@ def reproduce(path: Path, workdir: Path | None = None) -> dict:
     cmd = [sys.executable, "-m", "pipelines.run", *overrides, f"hydra.run.dir={tmp}"]
     modules = [m for m in rec.properties.get("provenance:mpm_plugins", []) if m]
     env = {**os.environ, "MPM_PLUGINS": ",".join(modules)} if modules else None  # the models they registered
-    run = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    if run.returncode not in (0, 3):
+    try:
+        run = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    except BaseException:  # Ctrl-C while it runs: nothing left behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if run.returncode not in (0, 3) or not (tmp / "recording.rrd").is_file():
+        shutil.rmtree(tmp, ignore_errors=True)  # a failed re-run leaves no reproduce-* folder
         return {"match": False, "problems": [f"re-run failed ({run.returncode}): {run.stderr.strip()}"],
-                "largest": {}, "notes": notes, "rerun_dir": str(tmp)}
+                "largest": {}, "notes": notes, "rerun_dir": "(removed: the re-run failed)"}
     result = recordings.compare(rec, recordings.read(tmp / "recording.rrd"))
     result.update(notes=notes, rerun_dir=str(tmp), overrides=overrides)
     return result

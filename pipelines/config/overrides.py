@@ -164,6 +164,20 @@ def check_groups(overrides: list[str]) -> None:
             raise ConfigError(group, f"{given!r} is not an option's name; accepted: {accepted}")
 
 
+def check_stability_map(overrides: list[str]) -> None:
+    """``stability_map`` is empty (null) until ``+experiment=stability`` fills
+    it, and Hydra cannot merge a mapping or a key into an empty node (it
+    failed with an internal message): without the experiment, an override of
+    it is refused, naming the way in."""
+    parsed = _parse(overrides)
+    if any(o.key_or_group.lstrip("+~") == "experiment" and "stability" in str(o.value()) for o in parsed):
+        return
+    for o in parsed:
+        if o.key_or_group.lstrip("+~").split(".")[0] == "stability_map" and not o.is_delete():
+            raise ConfigError("stability_map", f"{o.input_line}: set by +experiment=stability, not on its own; "
+                                               "accepted: -m +experiment=stability [stability_map.<key>=<value>]")
+
+
 def check_literals(cfg, overrides: list[str]) -> None:
     """A true-or-false key given a number (OmegaConf converts 0 and 2 alike)."""
     for o in _parse(overrides):

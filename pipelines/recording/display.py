@@ -73,11 +73,11 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out.mkdir(parents=True, exist_ok=True)
     L = _domain(rec, rec.positions)
     regs = regions.regions(rec)  # the kinematic regions, from the recorded config
-    fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]
+    fields = [_colours(rec, k, color) for k in range(0, len(rec.positions), every)]  # (an unknown colour: here)
     vmin, vmax = _recorded_range(rec, color) or colours.values_range(color, [v for _, v in fields])
+    out.mkdir(parents=True, exist_ok=True)  # (only once the frames can be drawn)
     unit = colours.UNITS.get(color, "")
     written = []
     for n, k in enumerate(range(0, len(rec.positions), every)):

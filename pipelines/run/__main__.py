@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from . import provenance
 from ..config import plugins, schema
 from ..config.errors import EXIT_CODES, EXIT_CONFIG, describe
-from ..config.overrides import check_groups, replace_inline_mappings
+from ..config.overrides import check_groups, check_stability_map, replace_inline_mappings
 from ..config.validate import ConfigError, validate
 from .warp_setup import init_warp
 
@@ -185,6 +185,7 @@ def main() -> None:
         plugins.prepare(sys.argv[1:])  # MPM_PLUGINS and dotted paths: registered, then offered as options
         schema.register()
         check_groups(sys.argv[1:])
+        check_stability_map(sys.argv[1:])
         _main()
     except KeyboardInterrupt:
         sys.exit(EXIT_CODES["interrupted"])

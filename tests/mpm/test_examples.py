@@ -45,6 +45,35 @@ def test_drop_ball_script_prints_its_outcome(device):
     assert out.stdout.startswith("completed after") and "at the floor" in out.stdout
 
 
+def test_drop_ball_does_not_call_a_falling_disc_at_the_floor(device, capsys):
+    """At 0.2 s the disc, 0.24 m above the floor's band at 48 cells, is
+    still falling (it lands at about 0.22 s): no "at the floor" row, a line
+    that it has not reached it (it reported its last state as at the floor)."""
+    assert load("drop_ball").main(["--duration", "0.2", "--device", device]) == 0
+    out = capsys.readouterr().out
+    assert "at the floor: t =" not in out and "at the floor: not reached in 0.2 s" in out, out
+
+
+@pytest.mark.parametrize("name", SCRIPTS + ("my_models",))
+def test_an_examples_help_shows_its_defaults(name, capsys):
+    with pytest.raises(SystemExit) as done:
+        load(name).main(["--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0 and "--device" in out and "(default: cpu)" in out, out
+
+
+def test_my_models_takes_its_arguments(device, capsys):
+    """examples/my_models.py runs the steps and size it is given (it ignored
+    every argument, --help included) and refuses a bad one in one line."""
+    example = load("my_models")
+    assert example.main(["--steps", "3", "--device", device]) == 0
+    out = capsys.readouterr().out
+    assert "my_neo_hookean: the same bits as the built-in after 3 steps" in out, out
+    with pytest.raises(SystemExit) as done:
+        example.main(["--steps", "0"])
+    assert done.value.code == 2 and capsys.readouterr().err.startswith("error: --steps: 0; accepted:")
+
+
 def test_drop_ball_reports_a_run_too_short_to_land(device, capsys):
     # a few steps: the lowest state is the last, whose elastic energy no step has measured yet
     assert load("drop_ball").main(["--duration", "0.002", "--resolution", "16", "--device", device]) == 0

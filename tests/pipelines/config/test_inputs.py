@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from helpers import compose_cfg
-from pipelines.config.overrides import check_groups, replace_inline_mappings
+from pipelines.config.overrides import check_groups, check_stability_map, replace_inline_mappings
 from pipelines.config.validate import ConfigError, check_memory, resolve, validate
 
 
@@ -328,6 +328,19 @@ def test_the_material_point_checks_its_output_and_numbers_before_computing(tmp_p
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
+def test_the_material_point_writes_into_the_outputs_folder_by_default(tmp_path, monkeypatch):
+    """Without --out its PNG and CSV go to outputs/material_point/ (made),
+    not into the working directory (where they went)."""
+    import pipelines.material_point as mp
+
+    monkeypatch.chdir(tmp_path)
+    code, err = _call(mp.main, ["--steps", "5", "--dim", "2"])
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "outputs" / "material_point").iterdir()) == [
+        "stress_strain.csv", "stress_strain.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["outputs"]
+
+
 @pytest.mark.parametrize("argv, closed_form", [
     # the Tait fluid: p = K (J^-gamma - 1), J = exp(d s) on the isotropic path
     (["material=fluid", "material.K=3e5", "--path", "isotropic", "--strain", "-0.05"],
@@ -408,3 +421,19 @@ def test_the_checked_particles_are_the_run_s(monkeypatch):
     assert len(calls) == 1
     np.testing.assert_array_equal(state.x.numpy(), fresh_state.x.numpy())
     np.testing.assert_array_equal(model.mass.numpy(), fresh.mass.numpy())
+
+
+@pytest.mark.parametrize("override", ["+stability_map={steps: 0}", "stability_map={E: [1e5], dt_cfl: [0.5]}",
+                                      "stability_map.steps=0"])
+def test_a_stability_map_without_its_experiment_is_one_line(override):
+    """stability_map is empty until +experiment=stability fills it; Hydra
+    cannot merge into the empty node (an internal message, 'NoneType' object
+    has no attribute 'get'): the override is refused naming the way in; with
+    the experiment its keys are checked as any other."""
+    with pytest.raises(ConfigError) as caught:
+        check_stability_map([override])
+    message = str(caught.value)
+    assert message.startswith("stability_map: ") and "+experiment=stability" in message and "\n" not in message
+    check_stability_map(["+experiment=stability", "stability_map.steps=3"])
+    with pytest.raises(ConfigError, match=r"stability_map.steps: 0 out of range; accepted: stability_map.steps >= 1"):
+        resolve(compose_cfg(["+experiment=stability", "stability_map.steps=0"]))

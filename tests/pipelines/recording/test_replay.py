@@ -70,10 +70,12 @@ def test_frames_of_a_3d_scene_with_colliders(tmp_path):
                         str(frames), "--color", "dJ"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     assert len(sorted(frames.glob("frame_*.png"))) == 3
+    fresh = tmp_path / "frames_nope"
     r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(run_dir / "recording.rrd"), "--frames",
-                        str(frames), "--color", "nope"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+                        str(fresh), "--color", "nope"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [
         "error: --color nope: not in this recording; accepted: body, dJ"]
+    assert not fresh.exists()  # refused before its folder is made (it was left behind, empty)
 
 
 @pytest.mark.slow
@@ -143,3 +145,23 @@ def test_every_below_one_is_refused_in_one_line(tmp_path, every):
         code = main([str(tmp_path), "--frames", str(tmp_path / "f"), "--every", every])
     assert code == 2 and not (tmp_path / "f").exists()
     assert err.getvalue().strip() == f"error: --every: {every}; accepted: an integer >= 1 (every N-th logged step)"
+
+
+def test_a_failed_reproduction_leaves_no_folder(tmp_path, monkeypatch):
+    """--reproduce whose re-run fails (here: its process exits 1) says so
+    and removes the reproduce-* folder it made beside the recording (it was
+    left in the run directory)."""
+    from pipelines import replay
+
+    run_dir = tmp_path / "run"
+    p = run_cli(["scene=rotating_plate_2d", "scene.resolution=16", "run.steps=2", "log.every=1",
+                 f"hydra.run.dir={run_dir}"], cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+
+    def failing(cmd, **keys):
+        return subprocess.CompletedProcess(cmd, 1, "", "error: something broke")
+
+    monkeypatch.setattr(replay.subprocess, "run", failing)
+    r = replay.reproduce(run_dir / "recording.rrd")
+    assert not r["match"] and "re-run failed (1): error: something broke" in r["problems"][0]
+    assert not list(run_dir.glob("reproduce-*"))
