@@ -96,7 +96,6 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
     closed walls and the colliders (the shapes ``colliders``), mpm.keep_out."""
     S = t.scalar
     f64 = wp.float64
-    vec, mat = t.vec, t.mat
     comp_F0 = compensate and commit and project is None  # F^0s's sum (EMPM's commit)
     Cache = make_stencil_cache(t, kernel)
     flip = transfer_flags(kernel, transfer)[2]

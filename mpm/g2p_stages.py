@@ -378,8 +378,8 @@ def make_figures(t: Types, record_dJ: bool, count_marked: bool, lagrangian: bool
         wp.atomic_max(status.max_rate2, b, f64(rate2))
 
     @wp.func
-    def motion(p: int, b: int, mass: wp.array(dtype=S), xp: vec, v_new: vec, Fs: mat, gravity: vec, inside_lo: vec, inside_hi: vec,
-               status: StepStatus):
+    def motion(p: int, b: int, mass: wp.array(dtype=S), xp: vec, v_new: vec, Fs: mat, gravity: vec, inside_lo: vec,
+               inside_hi: vec, status: StepStatus):
         """The stability monitor and the bounding box of the new positions."""
         v2 = f64(wp.dot(v_new, v_new))
         wp.atomic_max(status.max_v2, 0, v2)

@@ -226,8 +226,8 @@ def resolve(loads: list[Load], x: np.ndarray, volume: np.ndarray, body: np.ndarr
     """The loads on the particles at positions ``x`` [m] with volumes ``volume``
     [m^d] and bodies ``body``; ``body_ranges[b]`` (start, count) of body b,
     ``spacing[b]`` [m] its sampling spacing (dx^d / ppc)^(1/d), ``dx`` [m]
-    the grid's cell, ``names[b]`` its name for messages (None: its index). Raises :class:`LoadError` for a load that selects no
-    particle, or a point load whose ``at`` lies farther than
+    the grid's cell, ``names[b]`` its name for messages (None: its index).
+    Raises :class:`LoadError` for a load that selects no particle, or a point load whose ``at`` lies farther than
     :data:`POINT_REACH` cells from every particle of its body."""
     entries = []  # (particle indices, load index, forces)
     summary = []
@@ -316,15 +316,15 @@ def make_apply_loads(t: Types):
     LoadData = make_load_data(t)
 
     @wp.func
-    def factor(loads: LoadData, l: int, time: f64):
-        """Load l's profile at ``time`` [s]: 0 outside its window, else its
+    def factor(loads: LoadData, n: int, time: f64):
+        """Load n's profile at ``time`` [s]: 0 outside its window, else its
         table interpolated at time - start, held at both ends."""
-        w = loads.window[l]
+        w = loads.window[n]
         if time < w[0] or time >= w[1]:
             return f64(0.0)
         tau = time - w[0]
-        a = loads.first[l]
-        b = loads.first[l + 1]
+        a = loads.first[n]
+        b = loads.first[n + 1]
         k = a  # the first row after tau (the times do not decrease)
         for j in range(a, b):
             if loads.table_t[j] <= tau:
@@ -347,10 +347,10 @@ def make_apply_loads(t: Types):
         xp = x[p]
         f = t.vec()
         for e in range(loads.offsets[j], loads.offsets[j + 1]):
-            l = loads.entry_load[e]
-            f = f + S(factor(loads, l, time)) * loads.entry_force[e]
+            n = loads.entry_load[e]
+            f = f + S(factor(loads, n, time)) * loads.entry_force[e]
             for k in range(wp.static(t.dim)):
-                wp.atomic_add(status.load_position, l * wp.static(t.dim) + k, loads.entry_weight[e] * f64(xp[k]))
+                wp.atomic_add(status.load_position, n * wp.static(t.dim) + k, loads.entry_weight[e] * f64(xp[k]))
         m = mass[p]
         b = t.vec()
         if m > S(0.0):

@@ -124,7 +124,6 @@ def make_present(t: Types):
     """``present_at(lat, bins, c, g) -> bool``: body c is present at global
     node g, M_cg > share rho_c dx^d (``Bins.share``: 0, any mass; above
     it, the fringe of a stencil reaching a node beside the body is not)."""
-    S = t.scalar
     Lattice = make_lattice(t)
     Bins = make_bins(t)
 

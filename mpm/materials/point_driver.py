@@ -138,7 +138,7 @@ class MaterialPoint:
         F_E[0], P[0], psi[0], _ = self.evaluate(F[0], hist[0], 0.0)
         lateral = 1.0
         for k in range(steps):
-            def attempt(l_new):
+            def attempt(l_new, k=k):  # (called in this iteration only)
                 Fn = np.diag([stretch[k + 1]] + [l_new] * (d - 1))[None]
                 dF = Fn @ np.linalg.inv(F[k])
                 L = (dF - np.eye(d)) / dt

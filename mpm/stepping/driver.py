@@ -160,7 +160,8 @@ class Driver:
                  observers: list[Observer] | tuple = (), sync_every: int | None = None, graph: bool | None = None,
                  measure: bool = False):
         if not isinstance(policy, StepPolicy):
-            raise TypeError(f"policy: {instance_problem(policy, StepPolicy, 'a StepPolicy', 'StepPolicy(duration=1.0)')}")
+            example = "StepPolicy(duration=1.0)"
+            raise TypeError(f"policy: {instance_problem(policy, StepPolicy, 'a StepPolicy', example)}")
         for name, message in policy.problems():
             raise ValueError(f"policy.{name}: {message}")
         if detection is not None:

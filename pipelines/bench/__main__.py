@@ -135,7 +135,8 @@ def bench_schemes(workdir: Path, steps: int | None) -> list[dict]:
         best = interleaved(runs, [], workdir / f"schemes_{case}")
         for (place, sch), m in best.items():
             rows.append({"case": case, "place": place, "scheme": sch, "particles": m["particles"],
-                         "step_ms": m["step_time_ms"], "vs_empm": m["step_time_ms"] / best[place, "empm"]["step_time_ms"],
+                         "step_ms": m["step_time_ms"],
+                         "vs_empm": m["step_time_ms"] / best[place, "empm"]["step_time_ms"],
                          "update_ms": m["update_time_ms"], "updates": m["config_updates"]["total"]})
     return rows
 
@@ -252,16 +253,18 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 TABLES = ("speed", "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
           "profile", "precision", "paper", "scaling", "large", "sweep", "order")
-SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel", "materials": "material",
-             "integrators": "integrator", "fused": "fused-against-cached EMPM",
+# tables in the default run: --no-<table> leaves one out
+SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel",
+             "materials": "material", "integrators": "integrator", "fused": "fused-against-cached EMPM",
              "sync": "read-backs every k steps", "stages": "optional-stage",
-             "profile": "per-kernel profile", "precision": "precision"}  # tables in the default run: --no-<table> leaves one out
+             "profile": "per-kernel profile", "precision": "precision"}
 
 
 def main(argv=None) -> None:
     from ..config.arguments import Parser, output_file
 
-    p = Parser(prog="python -m pipelines.bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = Parser(prog="python -m pipelines.bench", description=__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("cases", nargs="*", default=list(CASES), help=f"subset of {', '.join(CASES)}")
     p.add_argument("--steps", type=int, default=None, help="steps per timed run")
     p.add_argument("--cold", action="store_true", help="compile into an empty kernel cache")

@@ -30,7 +30,8 @@ def bench_precision(workdir: Path, steps: int | None = None) -> list[dict]:
     rows = []
     for case, (over, n) in CASES.items():
         for scheme in SCHEMES:
-            runs = {v: over + [f"scheme={scheme}", "detect.action=off"] + extra + QUIET for v, extra in VARIANTS.items()}
+            runs = {v: over + [f"scheme={scheme}", "detect.action=off"] + extra + QUIET
+                    for v, extra in VARIANTS.items()}
             best = interleaved(runs, [f"run.steps={steps or n}"], workdir / f"precision_{case}_{scheme}", ROUNDS)
             base = best["float32"]["step_time_ms"]
             rows += [{"case": case, "scheme": scheme, "variant": v, "particles": m["particles"],

@@ -137,11 +137,12 @@ def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None,
 
 def print_large(rows: list[dict]) -> None:
     print("\nlarge: the 3D elastic sphere (EMPM, fixed corotated, quadratic MLS), no logging, no detection")
-    print(f"{'size':<5} {'energy':<6} {'particles':>11} {'device':<7} {'k':>3} {'setup s':>8} {'ms/step':>9} {'steps/s':>8} "
-          f"{'Gpart-steps/s':>13} {'reads/step':>10} {'arrays MB':>10} {'device MB':>10}")
+    print(f"{'size':<5} {'energy':<6} {'particles':>11} {'device':<7} {'k':>3} {'setup s':>8} {'ms/step':>9} "
+          f"{'steps/s':>8} {'Gpart-steps/s':>13} {'reads/step':>10} {'arrays MB':>10} {'device MB':>10}")
     for r in rows:
         used = f"{r['device_mb']:>10,.0f}" if r["device_mb"] is not None else f"{'-':>10}"
-        print(f"{r['size']:<5} {'sums' if r['energy'] else 'none':<6} {r['particles']:>11,} {r['device']:<7} {r['sync_every']:>3} {r['setup_s']:>8.1f} "
+        print(f"{r['size']:<5} {'sums' if r['energy'] else 'none':<6} {r['particles']:>11,} {r['device']:<7} "
+              f"{r['sync_every']:>3} {r['setup_s']:>8.1f} "
               f"{r['step_ms']:>9.3f} {r['steps_per_s']:>8.1f} {r['particle_steps_per_s'] / 1e9:>13.3f} "
               f"{r['reads']:>10.2f} {r['arrays_mb']:>10,.0f} {used}")
 

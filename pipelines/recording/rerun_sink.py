@@ -246,7 +246,8 @@ class RerunSink(Sink):
             if all(self._ranges[n] is not None for n in self._channels):  # else sent at the end
                 self.rec.send_property("channels", rr.AnyValues(
                     names=self._channels, low=[self._ranges[n][0][0] for n in self._channels],
-                    high=[self._ranges[n][0][1] for n in self._channels], unit=[UNITS.get(n, "") for n in self._channels],
+                    high=[self._ranges[n][0][1] for n in self._channels],
+                    unit=[UNITS.get(n, "") for n in self._channels],
                     source=[self._ranges[n][1] for n in self._channels]))
         self.rec.log("legend", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
         known = {} if self._ranges.get(self._color) is None else dict(

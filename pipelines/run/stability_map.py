@@ -104,7 +104,8 @@ def run_map(spec, points: MapSpec, out_dir: Path, identity: dict | None = None) 
             rows.append({"E": E, "k": k, "dt": ps.run.dt, "status": m["status"], "steps": m.get("steps"),
                          "unstable_step": m.get("unstable_step"), "criterion": m.get("unstable_criterion"),
                          "body": m.get("unstable_body"), "reason": m.get("reason"),
-                         "wall_time_s": m.get("wall_time_s"), "newton_mean": (m.get("implicit") or {}).get("newton_mean")})
+                         "wall_time_s": m.get("wall_time_s"),
+                         "newton_mean": (m.get("implicit") or {}).get("newton_mean")})
             if m["status"] == "interrupted":
                 status = "interrupted"
                 break

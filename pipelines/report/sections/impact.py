@@ -101,8 +101,8 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
     have = [j for j in jobs if j.scene == SCENE and j.data_file("recording.rrd") is not None]
     if not have:
         return absent(title, f"no {SCENE} job with a recording (+experiment=impact)")
-    headers = ["scheme", "contact", "kernel", "transfer", "resolution", "status", "steps", "contact from [s]", "contact to [s]",
-               "separated", "energy kept", "closest approach", "momentum drift"]
+    headers = ["scheme", "contact", "kernel", "transfer", "resolution", "status", "steps", "contact from [s]",
+               "contact to [s]", "separated", "energy kept", "closest approach", "momentum drift"]
     rows, curves = [], []
     for j in sorted(have, key=lambda j: (j.scheme, contact_of(j), j.kernel, transfer_of(j), j.resolution or 0)):
         rec = read(j.data_file("recording.rrd"))  # (two small disks: their frames are small)
@@ -115,16 +115,18 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
         closest = closest_approach(rec.positions, rec.body)
         curves.append(Curves(f"{j.scheme} {contact} {j.kernel} {transfer} {j.resolution}", j.transfer, contact,
                              f["energy_kept"] if j.completed else None, energy_curves(rec.scalars, rec.clock)))
-        rows.append([j.scheme, contact, j.kernel, transfer, j.resolution, j.status, j.metrics.get("steps"), fmt(f["contact_start"], 3),
-                     fmt(f["contact_end"], 3), {None: "", True: "yes", False: "no"}[f["separated"]],
-                     fmt(f["energy_kept"], 3), fmt(closest, 3), fmt(j.metrics.get("momentum_drift"), 2)])
+        rows.append([j.scheme, contact, j.kernel, transfer, j.resolution, j.status, j.metrics.get("steps"),
+                     fmt(f["contact_start"], 3), fmt(f["contact_end"], 3),
+                     {None: "", True: "yes", False: "no"}[f["separated"]], fmt(f["energy_kept"], 3),
+                     fmt(closest, 3), fmt(j.metrics.get("momentum_drift"), 2)])
     write_csv(out / "impact.csv", headers, rows)
     lines = [f"## {title}", "",
             "Sulsky, Chen and Schreyer (1994): two elastic disks meet and separate; the elastic "
             "continuum keeps all its energy, and its disks (0.5 sqrt(2) m apart, radius 0.2 m, closing "
             "at 0.2 sqrt(2) m/s) touch at t = 1.086 s. Per scheme, contact, kernel and transfer: the first and "
             "last time a body node is in contact (mpm.contact; on one shared grid, the first and last logged "
-            "frame where the disks' particles are within the kernel's support of each other), whether the disks separated by the end, the total "
+            "frame where the disks' particles are within the kernel's support of each other), whether the "
+            "disks separated by the end, the total "
             "energy after the last contact over the initial one, the closest approach of two particles "
             "of the two disks over the logged frames in particle spacings (below 1: the disks overlap), "
             "and the momentum drift "
