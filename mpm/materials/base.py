@@ -50,7 +50,21 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 @dataclass
 class Material:
-    """Base class; ``model`` names the constitutive model (the registry key)."""
+    """Base class; ``model`` names the constitutive model (the registry key).
+
+    A subclass is a dataclass of its parameters (``param`` fields, SI units)
+    with a ``name``, ``packed()`` (the per-body parameter vector, at most
+    N_MATERIAL_PARAMS numbers), ``wave_speed()`` [m/s] and factories
+    ``types -> Warp function`` (@functools.cache, specialised per dimension
+    and precision, mpm.types.Types):
+
+    * ``stress_energy(t)`` -> ``stress_energy(F, L, params) -> (P [Pa], psi [J/m^3])``
+    * ``principal(t)`` -> ``principal(sigma, params, history) -> (P_hat, psi, H)``
+    * ``project(t)`` (optional) -> ``project(F, params) -> F``
+
+    (plastic models: mpm.materials.plastic.Plastic's ``flow``,
+    ``elasticity``, ``elasticity_hessian``). See this module's docstring and
+    docs/extending.md; mpm.materials.register_material checks a class."""
 
     model: str = ""
     """the constitutive model's name, the key of mpm.MATERIALS (set by the class)"""

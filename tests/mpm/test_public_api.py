@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import importlib
+import importlib.util
 import inspect
 import pkgutil
 import re
@@ -93,6 +94,23 @@ def test_the_api_names_what_a_researcher_reaches_for():
         assert name in mpm.__all__ and hasattr(mpm, name)
     assert sorted(mpm.__all__) == sorted(set(mpm.__all__))
     assert all(hasattr(mpm, n) for n in mpm.__all__)
+
+
+def test_every_name_the_library_page_shows_is_public():
+    """docs/library.md says every ``mpm.<name>`` it shows is in mpm.__all__
+    (mpm.precision.resolution was not) or a module of mpm, and a dotted one
+    is its module's."""
+    text = (ROOT / "docs" / "library.md").read_text()
+    names = set(re.findall(r"`mpm\.([A-Za-z_][A-Za-z0-9_.]*)", text))
+    assert names
+    for name in sorted(n for n in names if not n.startswith("__")):
+        if "." not in name and importlib.util.find_spec(f"mpm.{name}") is None:  # (a module of mpm: its own)
+            assert name in mpm.__all__, f"mpm.{name} is shown in docs/library.md but is not in mpm.__all__"
+            continue
+        obj, path = mpm, "mpm"
+        for part in name.split("."):  # an attribute, else a submodule
+            path += "." + part
+            obj = getattr(obj, part) if hasattr(obj, part) else importlib.import_module(path)
 
 
 def test_the_check_finds_an_undocumented_field():
