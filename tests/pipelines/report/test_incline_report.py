@@ -49,8 +49,8 @@ def test_a_block_on_an_incline_against_coulomb(tmp_path):
 def test_the_rolling_section_reads_the_disk(tmp_path):
     """A disk on the plane at 30 deg, mu = 0.5 >= tan 30 deg / 3 (64 cells,
     0.1 s): the section's closed form is rolling, (2/3) g sin 30 deg; the
-    acceleration is positive and below g sin 30 deg (friction acts; at this
-    grid it rolls with a resistance, RESULTS)."""
+    measured acceleration within 5 % of it (it only had to lie between 0 and
+    g sin 30 deg)."""
     sweep = tmp_path / "sweep"
     p = run_cli(["scene=incline_disk_2d", "scene.resolution=64", "scene.duration=0.1", "log.fps=100",
                  "log.progress=false", f"hydra.run.dir={sweep / 'disk'}"], cwd=ROOT)
@@ -59,4 +59,5 @@ def test_the_rolling_section_reads_the_disk(tmp_path):
     assert "## Friction between bodies: a disk rolling down an incline" in report.read_text()
     row, = _rows(report.parent / "rolling.csv").values()
     assert float(row["closed form"]) == pytest.approx(2.0 / 3.0 * G * 0.5, rel=1e-3)
-    assert 0.0 < float(row["acceleration [m/s^2]"]) < G * 0.5
+    a = float(row["acceleration [m/s^2]"])
+    assert a == pytest.approx(2.0 / 3.0 * G * 0.5, rel=0.05), a  # measured 3.379 against 3.270 (+3.3 %)

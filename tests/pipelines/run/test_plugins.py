@@ -170,6 +170,18 @@ def test_registered_names_from_mpm_plugins():
     p = run_cli(["material=my_neo_hookean", "kernel=my_quadratic", "run.plan=true"], cwd=ROOT, timeout=300, env=env)
     assert p.returncode == 0, p.stderr
     assert "my_quadratic kernel" in p.stdout.splitlines()[0] and "note:" not in p.stderr
+    # in this process: the names compose into the plugin's own class and kernel, recorded as the user's
+    from helpers import spec_for
+    from pipelines.config import schema
+
+    assert plugins.load_env({"MPM_PLUGINS": "examples.my_models"}) == ["examples.my_models"]
+    schema.register()
+    spec = spec_for(["material=my_neo_hookean", "kernel=my_quadratic"])
+    example = sys.modules["examples.my_models"]
+    assert type(spec.scene.bodies[0].material) is example.MyNeoHookean and spec.kernel is example.MY_QUADRATIC
+    assert plugins.origins(spec.scene, spec.kernel) == {
+        "material my_neo_hookean": "examples.my_models.MyNeoHookean",
+        "kernel my_quadratic": "examples.my_models.MY_QUADRATIC"}
 
 
 @pytest.mark.slow
