@@ -8,7 +8,11 @@ had ``--wait`` seconds to load (its wasm takes about a minute on two cores).
 Needs Chromium (``apt-get install chromium``) and ``aiohttp`` (``pip install
 -e ".[screenshot]"``), both checked before anything starts. The server and
 the browser run in process groups of their own, ended on every way out
-(success, failure, Ctrl-C, SIGTERM); on Linux this process also adopts what
+(success, failure, Ctrl-C, SIGTERM; a second signal during that cleanup
+waits for it), and on Linux die with this process even when it is killed
+(a parent-death signal). Each DevTools call gets CALL_TIMEOUT seconds and
+the capture DEADLINE beyond ``--wait``; an error reply, a dropped
+connection or a missed deadline is one line. On Linux this process also adopts what
 the browser detaches from its group (its crash handlers) and ends and reaps
 it, so that not even a zombie is left when it returns (a child another
 thread starts meanwhile would be taken for one of the browser's).
@@ -71,9 +75,18 @@ def requirements(chromium: str | None = None) -> tuple[str, list[str]]:
     return chromium, missing
 
 
+def _parent_death_signal() -> None:
+    """In the child before it runs (Linux): SIGKILL when this process dies,
+    even by SIGKILL, which leaves no cleanup to run (prctl PR_SET_PDEATHSIG)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1
+
+
 def _start(cmd: list[str]) -> subprocess.Popen:
-    """``cmd`` in a process group of its own (the group's id is its pid)."""
-    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    """``cmd`` in a process group of its own (the group's id is its pid),
+    killed if this process dies (:func:`_parent_death_signal`)."""
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            preexec_fn=_parent_death_signal if sys.platform.startswith("linux") else None)
 
 
 def _escalate(send, alive) -> None:
@@ -183,6 +196,10 @@ def group_members(pgid: int) -> list[int]:
     return [pid for pid, _, group, state in _proc_stats() if group == pgid and state != "Z"]
 
 
+CALL_TIMEOUT = 30.0  # [s] a DevTools call's answer at most
+DEADLINE = 60.0  # [s] the whole capture at most, beyond --wait
+
+
 async def _capture(port: int, url: str, out: Path, wait: float, size: tuple[int, int]) -> None:
     import aiohttp
 
@@ -192,13 +209,25 @@ async def _capture(port: int, url: str, out: Path, wait: float, size: tuple[int,
         async with session.ws_connect(page["webSocketDebuggerUrl"], max_msg_size=0) as ws:
             ids = iter(range(1, 1000))
 
+            async def answer(n: int, method: str):
+                async for msg in ws:
+                    if msg.type != aiohttp.WSMsgType.TEXT:
+                        break
+                    data = json.loads(msg.data)
+                    if data.get("id") == n:
+                        if "error" in data:
+                            raise RuntimeError(f"the browser refused {method}: "
+                                               f"{data['error'].get('message', data['error'])}")
+                        return data.get("result", {})
+                raise RuntimeError(f"the browser closed the DevTools connection during {method}")
+
             async def call(method: str, **params):
                 n = next(ids)
                 await ws.send_json({"id": n, "method": method, "params": params})
-                async for msg in ws:
-                    data = json.loads(msg.data)
-                    if data.get("id") == n:
-                        return data.get("result", {})
+                try:
+                    return await asyncio.wait_for(answer(n, method), CALL_TIMEOUT)
+                except asyncio.TimeoutError:
+                    raise RuntimeError(f"the browser did not answer {method} within {CALL_TIMEOUT:g} s") from None
 
             await call("Page.enable")
             # the page's size is the picture's (the window's would lose the browser's own frame)
@@ -207,7 +236,17 @@ async def _capture(port: int, url: str, out: Path, wait: float, size: tuple[int,
             await call("Page.navigate", url=url)
             await asyncio.sleep(wait)
             shot = await call("Page.captureScreenshot", format="png")
+            if "data" not in shot:
+                raise RuntimeError("the browser's Page.captureScreenshot returned no picture")
             out.write_bytes(base64.b64decode(shot["data"]))
+
+
+async def _within(coroutine, seconds: float):
+    """``coroutine`` with an overall deadline (RuntimeError, one line, past it)."""
+    try:
+        return await asyncio.wait_for(coroutine, seconds)
+    except asyncio.TimeoutError:
+        raise RuntimeError(f"the capture took longer than {seconds:g} s") from None
 
 
 def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900), chromium: str | None = None,
@@ -237,10 +276,12 @@ def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900),
                                "about:blank"]))
         _wait_for(f"http://127.0.0.1:{devtools}/json/version", start_timeout)
         try:
-            asyncio.run(_capture(devtools, url, Path(out), wait, size))
-        except (OSError, StopIteration) as e:  # aiohttp's connection errors are OSErrors
-            raise RuntimeError(f"the browser's DevTools connection failed: {e or type(e).__name__}") from e
+            asyncio.run(_within(_capture(devtools, url, Path(out), wait, size), wait + DEADLINE))
+        except (OSError, StopIteration, ValueError, KeyError) as e:  # aiohttp's connection errors are OSErrors
+            raise RuntimeError(f"the browser's DevTools connection failed: "
+                               f"{str(e).splitlines()[0] if str(e) else type(e).__name__}") from e
     finally:
+        held = _hold_signals() if main_thread else {}  # a second SIGTERM or Ctrl-C waits for the cleanup
         for p in reversed(started):
             _end(p)
         _end_adopted(_children() - children - {p.pid for p in started})
@@ -249,8 +290,28 @@ def screenshot(recording: Path, out: Path, wait: float = 90.0, size=(1600, 900),
         _remove_singleton_dir(profile)
         shutil.rmtree(profile, ignore_errors=True)
         if main_thread:
+            _release_signals(held)
             signal.signal(signal.SIGTERM, previous)
     return Path(out)
+
+
+def _hold_signals() -> dict:
+    """Ignore SIGTERM and SIGINT while the started processes are ended (a
+    second one would skip the rest of the cleanup); the handlers before, and
+    whether one came meanwhile, for :func:`_release_signals`."""
+    came: list[int] = []
+    held = {sig: signal.signal(sig, lambda signum, frame: came.append(signum)) for sig in (signal.SIGTERM,
+                                                                                           signal.SIGINT)}
+    return {"handlers": held, "came": came}
+
+
+def _release_signals(held: dict) -> None:
+    """The handlers :func:`_hold_signals` replaced; a signal that came
+    meanwhile is acted on now (the cleanup is done)."""
+    for sig, handler in held["handlers"].items():
+        signal.signal(sig, handler)
+    if held["came"]:
+        signal.raise_signal(held["came"][0])
 
 
 def _terminated(signum, frame):

@@ -7,10 +7,13 @@ process group ends, and, as Chromium's crash handler, a second one detached
 in a session of its own (its pid written to ``FAKE_CHROMIUM_DETACHED``); it
 links ``SingletonSocket`` in its profile to a directory
 ``org.chromium.Chromium.*`` in the temporary directory, as Chromium does.
-``FAKE_CHROMIUM=silent``: it never answers."""
+``FAKE_CHROMIUM=silent``: it never answers; ``hang``, ``close``, ``error``:
+at ``Page.captureScreenshot`` it never answers, drops the connection, or
+replies with an error."""
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import io
 import json
@@ -68,6 +71,16 @@ def main() -> None:
             if call["method"] == "Emulation.setDeviceMetricsOverride":
                 size[:] = [call["params"]["width"], call["params"]["height"]]
             if call["method"] == "Page.captureScreenshot":
+                fault = os.environ.get("FAKE_CHROMIUM")
+                if fault == "hang":  # a renderer that never answers
+                    await asyncio.sleep(300)
+                if fault == "close":  # the connection drops
+                    await ws.close()
+                    break
+                if fault == "error":  # an error reply
+                    await ws.send_str(json.dumps({"id": call["id"], "error": {
+                        "code": -32000, "message": "Unable to capture screenshot"}}))
+                    continue
                 result = {"data": base64.b64encode(png(*size)).decode()}
             await ws.send_str(json.dumps({"id": call["id"], "result": result}))
         return ws

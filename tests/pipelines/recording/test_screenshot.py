@@ -116,3 +116,73 @@ def test_bad_arguments_are_one_line(recording, args, key, monkeypatch, capsys):
     assert shot.main([str(recording), "out.png", *args]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {key}: ") and "accepted: " in err
+
+
+@pytest.mark.parametrize("fault,said", [
+    ("hang", "the browser did not answer Page.captureScreenshot within 2 s"),
+    ("close", "the browser closed the DevTools connection during Page.captureScreenshot"),
+    ("error", "the browser refused Page.captureScreenshot: Unable to capture screenshot"),
+])
+def test_a_browser_that_hangs_drops_or_refuses_is_one_line_and_leaves_nothing(
+        recording, chromium, groups, detached, tmp_path, monkeypatch, fault, said):
+    """At the screenshot call the stand-in browser never answers (each call
+    has CALL_TIMEOUT: here 2 s; it blocked forever with both processes
+    running), drops the connection or replies with an error (a TypeError or
+    KeyError traceback): one line saying which, and nothing left running."""
+    monkeypatch.setenv("FAKE_CHROMIUM", fault)
+    monkeypatch.setattr(shot, "CALL_TIMEOUT", 2.0)
+    with pytest.raises(RuntimeError) as caught:
+        shot.screenshot(recording, tmp_path / "out.png", wait=0.0, chromium=str(chromium))
+    assert str(caught.value) == said
+    assert len(groups) == 2 and all(shot.group_members(p.pid) == [] for p in groups)
+    assert gone(int(detached.read_text())) and not (tmp_path / "out.png").exists()
+
+
+def dead(pid: int) -> bool:
+    """``pid`` is not running: absent, or a zombie its new parent has not reaped."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
+def test_what_it_starts_dies_with_it_even_when_it_is_killed():
+    """A process that started a child through screenshot._start (its own
+    session, as the server and the browser) is SIGKILLed, leaving no cleanup
+    to run: the child dies too (it outlived it)."""
+    code = ("import sys, time; from pipelines.recording.screenshot import _start; "
+            "p = _start(['sleep', '300']); print(p.pid, flush=True); time.sleep(300)")
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    assert not dead(child)
+    parent.kill()
+    parent.wait()
+    for _ in range(100):
+        if dead(child):
+            break
+        import time
+        time.sleep(0.05)
+    assert dead(child)
+
+
+def test_a_second_signal_waits_for_the_cleanup():
+    """While the cleanup ends the processes, SIGTERM and SIGINT are held
+    (a second one skipped the rest of it) and acted on once it is done."""
+    import signal
+
+    class Stopped(Exception):
+        pass
+
+    def stop(signum, frame):
+        raise Stopped(signum)
+
+    before = signal.signal(signal.SIGTERM, stop)
+    try:
+        held = shot._hold_signals()
+        os.kill(os.getpid(), signal.SIGTERM)  # during the cleanup: held
+        with pytest.raises(Stopped):
+            shot._release_signals(held)  # then acted on
+        assert signal.getsignal(signal.SIGTERM) is stop
+    finally:
+        signal.signal(signal.SIGTERM, before)
