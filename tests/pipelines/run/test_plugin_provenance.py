@@ -109,6 +109,9 @@ def plugin(tmp_path, monkeypatch):
     yield write, module, names
     for name in (module, names["helper"]):
         sys.modules.pop(name, None)
+    for registry in (mpm.MATERIALS, KERNELS):  # the registries are the process's: leave them as found
+        for name in [n for n in registry if tag in n]:
+            del registry[name]
     for group in plugins.GROUPS:
         for path in [p for p in plugins.ALIASES[group] if p.startswith(module + ".")]:
             del plugins.ALIASES[group][path]

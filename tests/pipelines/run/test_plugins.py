@@ -170,18 +170,23 @@ def test_registered_names_from_mpm_plugins():
     p = run_cli(["material=my_neo_hookean", "kernel=my_quadratic", "run.plan=true"], cwd=ROOT, timeout=300, env=env)
     assert p.returncode == 0, p.stderr
     assert "my_quadratic kernel" in p.stdout.splitlines()[0] and "note:" not in p.stderr
-    # in this process: the names compose into the plugin's own class and kernel, recorded as the user's
-    from helpers import spec_for
-    from pipelines.config import schema
-
-    assert plugins.load_env({"MPM_PLUGINS": "examples.my_models"}) == ["examples.my_models"]
-    schema.register()
-    spec = spec_for(["material=my_neo_hookean", "kernel=my_quadratic"])
-    example = sys.modules["examples.my_models"]
-    assert type(spec.scene.bodies[0].material) is example.MyNeoHookean and spec.kernel is example.MY_QUADRATIC
-    assert plugins.origins(spec.scene, spec.kernel) == {
+    # in a process of its own (the registries are per process): the names compose into the plugin's own
+    # class and kernel, recorded as the user's
+    code = ("import sys; sys.path[:0] = ['tests', '.']\n"
+            "from helpers import spec_for\n"
+            "from pipelines.config import plugins, schema\n"
+            "assert plugins.load_env() == ['examples.my_models']\n"
+            "schema.register()\n"
+            "spec = spec_for(['material=my_neo_hookean', 'kernel=my_quadratic'])\n"
+            "example = sys.modules['examples.my_models']\n"
+            "assert type(spec.scene.bodies[0].material) is example.MyNeoHookean\n"
+            "assert spec.kernel is example.MY_QUADRATIC\n"
+            "print(sorted(plugins.origins(spec.scene, spec.kernel).items()))\n")
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip().splitlines()[-1] == str(sorted({
         "material my_neo_hookean": "examples.my_models.MyNeoHookean",
-        "kernel my_quadratic": "examples.my_models.MY_QUADRATIC"}
+        "kernel my_quadratic": "examples.my_models.MY_QUADRATIC"}.items()))
 
 
 @pytest.mark.slow
