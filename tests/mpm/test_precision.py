@@ -60,11 +60,25 @@ def test_a_body_nothing_moves_is_resolved():
 
 
 def test_a_given_step_and_the_precisions():
+    """At a given step of 1e-4 s the stiff cantilever's figures worked by
+    hand: its tip traction (1630 Pa over the P-wave modulus rho c^2, reached
+    over the 0.6 s ramp) strains it by 1630 / (rho c^2) x 1e-4 / 0.6 a step,
+    r_F = that over 2^-24; the load point moves eps h / T a second (h =
+    4.5 m, the body's length with its clamped end), r_x = its step over
+    2^-23 x 8 m (the domain's largest coordinate); float64's spacings are
+    2^-53 and 2^-52."""
     s = scene("scene=cantilever_stiff_2d")
     r = resolution(s, dt=1e-4)
+    b = s.bodies[0].material
+    c = b.wave_speed()
+    eps = 1630.0 / (b.rho * c * c)
     assert r.dt == 1e-4
-    assert r.position_spacing == pytest.approx(2.0**-23 * 8.0)
+    assert r.r_F == pytest.approx(eps * 1e-4 / 0.6 / 2.0**-24, rel=1e-9)
+    lo, hi = s.bodies[0].shape.bounds()
+    assert max(h - l for l, h in zip(lo, hi)) == pytest.approx(4.5)
+    assert r.r_x == pytest.approx(eps * 4.5 / 0.6 * 1e-4 / (2.0**-23 * 8.0), rel=1e-9)
     r64 = resolution(s, dt=1e-4, precision="float64")
+    assert r64.r_F == pytest.approx(eps * 1e-4 / 0.6 / 2.0**-53, rel=1e-9)
     assert r64.r_F == pytest.approx(r.r_F * SPACING["float32"][0] / SPACING["float64"][0])
     with pytest.raises(ValueError, match="precision"):
         resolution(s, precision="float16")
