@@ -70,26 +70,44 @@ def test_drop_ball_does_not_call_a_falling_disc_at_the_floor(device, capsys):
     assert "at the floor: t =" not in out and "at the floor: not reached in 0.2 s" in out, out
 
 
+@pytest.fixture
 def my_models():
     """examples/my_models.py under the name the command line and tests/mpm/test_extending.py import it
-    by (its classes register once per process: under another module name they would clash)."""
+    by (its classes register once per process: under another module name they would clash), the
+    registries restored and the module forgotten after the test (as test_extending does: the config
+    groups of later tests in this process are the built-in ones)."""
+    from mpm.kernels import KERNELS
+    from mpm.materials import MATERIALS
+
+    saved = dict(MATERIALS), dict(KERNELS)
     if str(EXAMPLES) not in sys.path:
         sys.path.insert(0, str(EXAMPLES))  # (its main imports _args from there)
-    return importlib.import_module("examples.my_models")
+    yield importlib.import_module("examples.my_models")
+    for registry, before in zip((MATERIALS, KERNELS), saved):
+        registry.clear()
+        registry.update(before)
+    sys.modules.pop("examples.my_models", None)
 
 
-@pytest.mark.parametrize("name", SCRIPTS + ("my_models",))
+@pytest.mark.parametrize("name", SCRIPTS)
 def test_an_examples_help_shows_its_defaults(name, capsys):
     with pytest.raises(SystemExit) as done:
-        (my_models() if name == "my_models" else load(name)).main(["--help"])
+        load(name).main(["--help"])
     out = capsys.readouterr().out
     assert done.value.code == 0 and "--device" in out and "(default: cpu)" in out, out
 
 
-def test_my_models_takes_its_arguments(device, capsys):
+def test_my_models_help_shows_its_defaults(my_models, capsys):
+    with pytest.raises(SystemExit) as done:
+        my_models.main(["--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0 and "--device" in out and "(default: cpu)" in out, out
+
+
+def test_my_models_takes_its_arguments(my_models, device, capsys):
     """examples/my_models.py runs the steps and size it is given (it ignored
     every argument, --help included) and refuses a bad one in one line."""
-    example = my_models()
+    example = my_models
     assert example.main(["--steps", "3", "--device", device]) == 0
     out = capsys.readouterr().out
     assert "my_neo_hookean: the same bits as the built-in after 3 steps" in out, out
