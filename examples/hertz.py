@@ -31,7 +31,6 @@ accepted: ...``) and exit code 2.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 

@@ -110,6 +110,18 @@ class SolverOptions:
             raise ValueError(f"options.flip: {self.flip!r}; accepted: 0 <= flip <= 1")
 
 
+def _check_part(key: str, value, classes: tuple, what: str, example: str) -> None:
+    """TypeError unless ``value`` is an instance of ``classes``; ValueError for
+    a field out of its range (mpm.params) or one of its ``problems()``."""
+    problem = instance_problem(value, classes, what, example)
+    if problem:
+        raise TypeError(f"{key}: {problem}")
+    for name, given, accepted in violations(value):
+        raise ValueError(f"{key}.{name}: {given!r}; accepted: {accepted}")
+    for name, message in value.problems():
+        raise ValueError(f"{key}.{name}: {message}")
+
+
 def check_solver_inputs(model, scheme, options) -> None:
     """TypeError or ValueError, one line naming the argument, for a model
     that is not mpm.build's, a scheme or options that are not instances
@@ -118,27 +130,14 @@ def check_solver_inputs(model, scheme, options) -> None:
     if problem:
         raise TypeError(f"model: {problem}")
     if scheme is not None:
-        problem = instance_problem(scheme, (EMPM, TLMPM, AULMPM), "a scheme instance", "mpm.EMPM(), mpm.TLMPM(), "
-                                   "mpm.AULMPM()")
-        if problem:
-            raise TypeError(f"scheme: {problem}")
-        for name, value, accepted in violations(scheme):
-            raise ValueError(f"scheme.{name}: {value!r}; accepted: {accepted}")
-        for name, message in scheme.problems():
-            raise ValueError(f"scheme.{name}: {message}")
+        _check_part("scheme", scheme, (EMPM, TLMPM, AULMPM), "a scheme instance",
+                    "mpm.EMPM(), mpm.TLMPM(), mpm.AULMPM()")
     if options is not None:
         problem = instance_problem(options, SolverOptions, "SolverOptions", "mpm.SolverOptions(transfer='apic')")
         if problem:
             raise TypeError(f"options: {problem}")
-        integrator = options.integrator
-        problem = instance_problem(integrator, (Explicit, Implicit), "an integrator instance",
-                                   "mpm.Explicit(), mpm.Implicit()")
-        if problem:
-            raise TypeError(f"options.integrator: {problem}")
-        for name, value, accepted in violations(integrator):
-            raise ValueError(f"options.integrator.{name}: {value!r}; accepted: {accepted}")
-        for name, message in integrator.problems():
-            raise ValueError(f"options.integrator.{name}: {message}")
+        _check_part("options.integrator", options.integrator, (Explicit, Implicit), "an integrator instance",
+                    "mpm.Explicit(), mpm.Implicit()")
         options.check()
     scene = model.scene
     if scene.contact == "shared" and scheme is not None and not isinstance(scheme, EMPM):

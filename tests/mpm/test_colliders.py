@@ -125,7 +125,6 @@ def _incline(mu: float, scheme: str = "empm", boundary: str = "separate", res: i
     n1 = np.array([-np.sin(THETA), np.cos(THETA)])
     down = np.array([-np.cos(THETA), -np.sin(THETA)])
     apex = np.array([0.8, 0.6])
-    dx = 1.0 / res
     half = np.array([0.08, 0.03])  # wide and flat: well away from tipping (tan 30 deg < 0.08/0.03)
     c = apex + 0.16 * down + n1 * half[1]  # on the face: dropped onto it, an elastic block bounces
     body = mpm.Body(Rotated(mpm.Box(tuple(c), tuple(half)), rotation_matrix(np.degrees(THETA), 2)),
@@ -185,7 +184,6 @@ def test_moving_collider_drags_a_block_by_friction():
     along itself) accelerates a block at rest by friction at mu g until it
     moves with the belt: the collider hands it the momentum m u."""
     u, mu, res = 0.5, 0.4, 64
-    dx = 1.0 / res
     body = mpm.Body(mpm.Box((0.3, 0.3 + 0.03), (0.08, 0.03)),  # resting on the belt
                     FixedCorotated(E=1e6, nu=0.3, rho=1000.0))
     belt = Collider("half_space", boundary="separate", friction=mu, point=(0.5, 0.3), normal=(0.0, 1.0),
