@@ -22,6 +22,8 @@ class _CosineMode:
     the extent's and the coordinate's fields."""
 
     _layer: tuple[str, str]
+    mode: int  # fields of the subclasses
+    lo: float
     has_body_force = False
 
     @property

@@ -243,6 +243,7 @@ def build_meshes(colliders: list[Collider], device) -> dict:
     out = {}
     for i, c in enumerate(colliders):
         if c.type == "mesh":
+            assert c.mesh is not None, "checked by Collider.problems()"
             pts, tris = c.mesh.geometry
             out[i] = wp.Mesh(points=wp.array(pts.astype(np.float32), dtype=wp.vec3, device=device),
                              indices=wp.array(tris.reshape(-1).astype(np.int32), dtype=wp.int32,

@@ -205,16 +205,16 @@ def make_vessels(t: Types):
     @wp.func
     def mesh(c: Data, d: vec, q: vec):
         qf = wp.vec3(wp.float32(q[0]), wp.float32(q[1]), wp.float32(q[2]))
-        hit = wp.mesh_query_point_sign_winding_number(c.mesh, qf, wp.float32(1.0e6))
+        hit = wp.mesh_query_point_sign_winding_number(c.mesh, qf, wp.float32(1.0e6))  # pyright: ignore[reportArgumentType]
         phi = S(1.0e30)
         n = c.n0
-        if hit.result:
-            cp = wp.mesh_eval_position(c.mesh, hit.face, hit.u, hit.v)
-            dv = vec(S(qf[0] - cp[0]), S(qf[1] - cp[1]), S(qf[2] - cp[2]))
+        if hit.result:  # pyright: ignore[reportAttributeAccessIssue]
+            cp = wp.mesh_eval_position(c.mesh, hit.face, hit.u, hit.v)  # pyright: ignore[reportAttributeAccessIssue]
+            dv = vec(S(qf[0] - cp[0]), S(qf[1] - cp[1]), S(qf[2] - cp[2]))  # pyright: ignore[reportIndexIssue]
             L = wp.length(dv)
-            phi = S(hit.sign) * L
-            nf = wp.mesh_eval_face_normal(c.mesh, hit.face)
-            n = unit(S(hit.sign) * dv, vec(S(nf[0]), S(nf[1]), S(nf[2])))
+            phi = S(hit.sign) * L  # pyright: ignore[reportAttributeAccessIssue]
+            nf = wp.mesh_eval_face_normal(c.mesh, hit.face)  # pyright: ignore[reportAttributeAccessIssue]
+            n = unit(S(hit.sign) * dv, vec(S(nf[0]), S(nf[1]), S(nf[2])))  # pyright: ignore[reportAttributeAccessIssue, reportIndexIssue]
         return phi, n
 
     return {"cup": cup, "bowl": bowl, "mesh": mesh}
@@ -231,7 +231,7 @@ def make_shape(t: Types, kinds: tuple[str, ...]):
     kinds = tuple(k for k in kinds if k in shapes)
     if not kinds:
         @wp.func
-        def shape(c: Data, d: vec, q: vec):
+        def shape(c: Data, d: vec, q: vec):  # pyright: ignore[reportRedeclaration]
             return S(0.0), c.n0
 
         return shape

@@ -46,9 +46,12 @@ outside it). The kernels compile only the shapes a scene has
 """
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .meshes import MeshShape
 
 KINDS = ("half_space", "wedge", "box", "sphere", "cylinder", "cup", "bowl", "mesh")
 """the collider shapes (Collider.type); the module docstring says what each takes"""
@@ -123,7 +126,7 @@ class Collider:
     """the bowl's rim plane, its height above the centre along the axis [m]"""
     axis: int | Sequence[float] = 1
     """the axis of a cylinder, cup or bowl (the opening): 0, 1, 2 or a direction; default +y"""
-    mesh: object | None = None
+    mesh: "MeshShape | None" = None
     """a closed triangle mesh placed in the scene (mpm.meshes.MeshShape, 3D)"""
     velocity: Sequence[float] | None = None
     """constant velocity [m/s] while start <= t < end (None: at rest)"""
@@ -200,8 +203,8 @@ class Collider:
     def speed(self) -> float:
         return float(np.linalg.norm(self.velocity)) if self.velocity is not None else 0.0
 
-    def offset(self, t: float) -> np.ndarray:
-        """Displacement of the shape at time ``t`` [s]."""
+    def offset(self, t: float) -> np.ndarray | float:
+        """Displacement of the shape at time ``t`` [s] (0.0 for a collider at rest)."""
         if self.velocity is None:
             return 0.0
         return np.asarray(self.velocity, float) * (min(max(t, self.start), self.end) - self.start)
@@ -214,14 +217,17 @@ class Collider:
                  r=self.radius, a=0.0, w=self.thickness, u=tuple(self.velocity or z),
                  window=(self.start, min(self.end, 1e30)))
         if self.type in ("half_space", "wedge"):
+            assert self.point is not None, "checked by problems()"
             r["p"] = tuple(self.point)
             if self.type == "half_space":
                 r["n0"] = _unit(self.normal)
             else:
+                assert self.normals is not None, "checked by problems()"
                 r["n0"], r["n1"] = _unit(self.normals[0]), _unit(self.normals[1])
         else:
             r["p"] = tuple(self.center) if self.center is not None else z
         if self.type == "box":
+            assert self.half_size is not None, "checked by problems()"
             r["h"] = tuple(self.half_size)
         if self.type in ("cylinder", "cup", "bowl"):
             r["n0"] = axis_vector(self.axis, dim)

@@ -176,7 +176,7 @@ def _cell_search(q: np.ndarray, points: np.ndarray, lo: np.ndarray, r: float, ro
     dim = points.shape[1]
     cell = np.floor((points - lo) / r).astype(np.int64)
     shape = cell.max(0) + 3  # one empty cell around every side
-    key = np.ravel_multi_index((cell + 1).T, shape)
+    key = np.asarray(np.ravel_multi_index((cell + 1).T, shape))
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
     qcell = np.floor((q - lo) / r).astype(np.int64) + 1

@@ -29,7 +29,7 @@ def returned(f) -> set[int]:
     tree = getattr(getattr(f, "adj", None), "tree", None)
     body = next((n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)), None) if tree else None
     counts: set[int] = set()
-    stack = list(body.body) if body is not None else []
+    stack: list[ast.AST] = list(body.body) if body is not None else []
     while stack:
         node = stack.pop()
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):

@@ -161,31 +161,31 @@ def make_g2p(t: Types, kernel: Kernel, transfer: str, record_dJ: bool, count_mar
         p = wp.tid()
         b = body[p]
         if wp.static(removal):
-            if parked(p, b, x, mass, status, body_params, F0s, Fsn, cache, dx):
+            if parked(p, b, x, mass, status, body_params, F0s, Fsn, cache, dx):  # pyright: ignore[reportArgumentType]
                 return
-        vp, v_transferred, B, grad_v = sums(p, b, shape, cache, grid_v, grid_m, grid_p0, dx)
+        vp, v_transferred, B, grad_v = sums(p, b, shape, cache, grid_v, grid_m, grid_p0, dx)  # pyright: ignore[reportArgumentType]
         vp = S(inv_G) * vp
         v_new = vp  # the particle's new velocity (the positions move with PIC's, vp)
         if wp.static(flip):
             v_new = vp + flip_share * (v[p] - S(inv_G) * v_transferred)
-        Cp, grad_v = affine_C(p, B, grad_v, K, cache)
-        xp, xc_new, Fsn_old, Fs, Fc_new = advance(p, dt, vp, grad_v, x, xc, Fsn, Fc)
+        Cp, grad_v = affine_C(p, B, grad_v, K, cache)  # pyright: ignore[reportArgumentType]
+        xp, xc_new, Fsn_old, Fs, Fc_new = advance(p, dt, vp, grad_v, x, xc, Fsn, Fc)  # pyright: ignore[reportArgumentType]
         if wp.static(put_out is not None):
-            xp, v_new = put_out(xp, v_new, mass[p], S(control.t[0]) + dt, boundary, inside_lo, inside_hi, status)
+            xp, v_new = put_out(xp, v_new, mass[p], S(control.t[0]) + dt, boundary, inside_lo, inside_hi, status)  # pyright: ignore[reportOptionalCall]
         if wp.static(removal):
-            if remove(p, b, xp, Fsn_old, inside_lo, inside_hi, open_lo, open_hi, x, v, C, mass, volume,
+            if remove(p, b, xp, Fsn_old, inside_lo, inside_hi, open_lo, open_hi, x, v, C, mass, volume,  # pyright: ignore[reportArgumentType]
                       status, body_params, F0s, Fsn, cache, dx):
                 return
         if wp.static(loads):
             work = S(0.5) * dt * mass[p] * wp.dot(body_force[p], v[p] + v_new)
             wp.atomic_add(status.load_work, 0, f64(work))
-        store(p, xp, xc_new, v_new, Cp, Fs, Fc_new, x, xc, v, C, Fsn, Fc)
-        deformation(p, b, Fs, Fsn_old, grad_v, epsilon, F0s, dJ, status)
-        motion(p, b, mass, xp, v_new, Fs, gravity, inside_lo, inside_hi, status)
+        store(p, xp, xc_new, v_new, Cp, Fs, Fc_new, x, xc, v, C, Fsn, Fc)  # pyright: ignore[reportArgumentType]
+        deformation(p, b, Fs, Fsn_old, grad_v, epsilon, F0s, dJ, status)  # pyright: ignore[reportArgumentType]
+        motion(p, b, mass, xp, v_new, Fs, gravity, inside_lo, inside_hi, status)  # pyright: ignore[reportArgumentType]
         if wp.static(commit):
             if wp.static(comp_F0):
-                commit_compensated(p, xp, dt * grad_v, F0s[p], F0s, Fsn, Fc, cache, dx)
+                commit_compensated(p, xp, dt * grad_v, F0s[p], F0s, Fsn, Fc, cache, dx)  # pyright: ignore[reportArgumentType]
             else:
-                commit_reference(p, xp, Fs, F0s[p], body_params[b], F0s, Fsn, cache, dx)
+                commit_reference(p, xp, Fs, F0s[p], body_params[b], F0s, Fsn, cache, dx)  # pyright: ignore[reportArgumentType]
 
     return g2p

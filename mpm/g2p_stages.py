@@ -46,7 +46,7 @@ def make_min_stretch2(t: Types):
         d = wp.determinant(F)
         if wp.static(t.dim == 2):
             f2 = wp.ddot(F, F)
-            return S(2.0) * d * d / wp.max(f2 + wp.sqrt(wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))),
+            return S(2.0) * d * d / wp.max(f2 + wp.sqrt(wp.max(f2 * f2 - S(4.0) * d * d, S(0.0))),  # pyright: ignore[reportArgumentType]
                                            S(1.0e-30))
         else:
             G = wp.transpose(wp.inverse(F)) * d  # cofactor matrix
@@ -360,19 +360,19 @@ def make_figures(t: Types, record_dJ: bool, count_marked: bool, lagrangian: bool
         if wp.static(count_marked):
             if dj >= epsilon:
                 wp.atomic_add(status.marked, b, f64(1.0))
-            wp.atomic_max(status.max_dJ, b, f64(dj))
+            wp.atomic_max(status.max_dJ, b, f64(dj))  # pyright: ignore[reportArgumentType]
         if wp.static(track_compression or track_inversion):
             wp.atomic_min(status.min_J, b, f64(wp.determinant(Fs) * wp.determinant(F0s[p])))
         if wp.static(track_inversion):
-            wp.atomic_min(status.min_F_stretch2, b, f64(min_stretch2(Fs * F0s[p])))
+            wp.atomic_min(status.min_F_stretch2, b, f64(min_stretch2(Fs * F0s[p])))  # pyright: ignore[reportArgumentType]
         # |L|^2 of the velocity gradient in current coordinates, L = grad_v (F^sn)^-1
         # (for EMPM F^sn was I: L = grad_v); a singular F^sn makes it non-finite
         rate2 = wp.ddot(grad_v, grad_v)
         if wp.static(lagrangian):
             s2 = min_stretch2(Fs)
-            wp.atomic_min(status.min_stretch2, b, f64(s2))
+            wp.atomic_min(status.min_stretch2, b, f64(s2))  # pyright: ignore[reportArgumentType]
             if wp.static(bound_reach):
-                wp.atomic_max(status.max_F_norm, b, f64(row_sum_norm(Fs)))
+                wp.atomic_max(status.max_F_norm, b, f64(row_sum_norm(Fs)))  # pyright: ignore[reportArgumentType]
             L = grad_v * wp.inverse(Fsn_old)
             rate2 = wp.ddot(L, L)
         wp.atomic_max(status.max_rate2, b, f64(rate2))

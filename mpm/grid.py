@@ -212,7 +212,7 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
             return
         v = lat.v[i]
         q = lat.q[i]
-        V, G = node_state(lat, i, m, data)
+        V, G = node_state(lat, i, m, data)  # pyright: ignore[reportArgumentType]
         Pi = wp.identity(n=dim, dtype=S)
         v, Pi = walls(v, Pi, q, V, data.domain, data.band, data.wall_lo, data.wall_hi, data.face_lo, data.face_hi,
                       data.profile)
@@ -315,7 +315,7 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         status: StepStatus,  # boundary_work += the energy the conditions gave
     ):
         i = wp.tid()
-        m = node_mass(lat, control, i)
+        m = node_mass(lat, control, i)  # pyright: ignore[reportArgumentType]
         if m <= S(0.0):
             return
         dt = S(control.dt[0])
@@ -324,11 +324,11 @@ def make_grid_update(t: Types, with_boundary: bool, with_regions: bool,
         vi = lat.v[i] / m + dt * gravity
         if positioned != 0:
             if wp.static(lattice):
-                qi = node_position(i, lat.lo, lat.shape, lat.offset, lat.n_boxes, grid_offsets, lat.dx)
+                qi = node_position(i, lat.lo, lat.shape, lat.offset, lat.n_boxes, grid_offsets, lat.dx)  # pyright: ignore[reportArgumentType]
             else:
                 qi = lat.q[i] / m
             if wp.static(with_boundary):
-                vi = apply_conditions(lat, i, m, vi, qi, time, data, status)
+                vi = apply_conditions(lat, i, m, vi, qi, time, data, status)  # pyright: ignore[reportArgumentType]
             lat.q[i] = qi
         lat.v[i] = vi
 
@@ -349,9 +349,9 @@ def make_boundary(t: Types, with_regions: bool, colliders: tuple[str, ...] = (),
     @warp_kernel
     def boundary(lat: Lattice, control: StepControl, data: Data, status: StepStatus):
         i = wp.tid()
-        m = node_mass(lat, control, i)
+        m = node_mass(lat, control, i)  # pyright: ignore[reportArgumentType]
         if m <= S(0.0):
             return
-        lat.v[i] = apply_conditions(lat, i, m, lat.v[i], lat.q[i], S(control.t[0]), data, status)
+        lat.v[i] = apply_conditions(lat, i, m, lat.v[i], lat.q[i], S(control.t[0]), data, status)  # pyright: ignore[reportArgumentType]
 
     return boundary

@@ -71,6 +71,7 @@ class Launches:
         entry = self._recorded.get(kernel)
         if entry is None:
             cmd = wp.launch(kernel, dim, inputs=inputs, device=self.device, record_cmd=True)
+            assert cmd is not None  # record_cmd=True returns the Launch
             self._recorded[kernel] = [cmd, list(inputs), dim]
             cmd.launch()
             return
@@ -112,7 +113,10 @@ class Counter:
             self.reads += 1
             return numpy(array, *args, **kwargs)
 
-        wp.launch, wp.Launch.launch, wp.array.numpy = counted_launch, counted_recorded, counted_numpy
+        wp.launch = counted_launch
+        # methods patched while counting (their stubs declare methods, not attributes)
+        wp.array.numpy = counted_numpy  # pyright: ignore[reportAttributeAccessIssue]
+        wp.Launch.launch = counted_recorded  # pyright: ignore[reportAttributeAccessIssue]
         return self
 
     def __exit__(self, *exc):

@@ -37,7 +37,7 @@ particle, none under a load held still), goes to the step's ``load_work``
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 import warp as wp
@@ -54,6 +54,12 @@ FACE_TOLERANCE = 1e-6  # of the sampling spacing: the face layer's lower edge, o
 POINT_REACH = 2.0
 """a point load's ``at`` must lie within this many cells of a particle of its
 body(ies): farther, it would silently load whatever particles are nearest"""
+
+
+class Region(Protocol):
+    """A scene shape as a selection: which of the points x (n, d) [m] lie inside."""
+
+    def contains(self, x: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass
@@ -76,7 +82,7 @@ class Load:
     kind: str
     """point, traction or body (LOAD_KINDS)"""
     force: Sequence[float]
-    select: object | None = None
+    select: Region | None = None
     body: int | None = None
     at: Sequence[float] | None = None
     count: int = 1
@@ -346,7 +352,7 @@ def make_apply_loads(t: Types):
         time = control.t[0]
         xp = x[p]
         f = t.vec()
-        for e in range(loads.offsets[j], loads.offsets[j + 1]):
+        for e in range(loads.offsets[j], loads.offsets[j + 1]):  # pyright: ignore[reportOperatorIssue]
             n = loads.entry_load[e]
             f = f + S(factor(loads, n, time)) * loads.entry_force[e]
             for k in range(wp.static(t.dim)):

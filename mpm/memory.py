@@ -6,6 +6,8 @@ modules; an array and views of it are counted once (a view counts as the
 array it was taken from).
 """
 
+from typing import Any
+
 import warp as wp
 
 from .types import StructInstance
@@ -32,11 +34,12 @@ def array_bytes(*roots) -> int:
             continue
         seen.add(id(obj))
         if isinstance(obj, wp.array):
-            while isinstance(getattr(obj, "_ref", None), wp.array):  # a view: the array it views
-                obj = obj._ref
-            if obj.ptr and obj.ptr not in pointers:
-                pointers.add(obj.ptr)
-                total += obj.capacity
+            array: Any = obj  # Warp's private _ref: the array a view views
+            while isinstance(getattr(array, "_ref", None), wp.array):
+                array = array._ref
+            if array.ptr and array.ptr not in pointers:
+                pointers.add(array.ptr)
+                total += array.capacity
             continue
         stack.extend(_children(obj))
     return total

@@ -11,6 +11,7 @@ import functools
 import hashlib
 import os
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import warp as wp
@@ -57,13 +58,13 @@ def _read(path: str) -> tuple[np.ndarray, np.ndarray]:
     if not path.lower().endswith((".usd", ".usda", ".usdc")):
         import trimesh
 
-        mesh = trimesh.load(path, force="mesh", process=False)
+        mesh = cast(trimesh.Trimesh, trimesh.load(path, force="mesh", process=False))  # force="mesh": a Trimesh
         return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     from pxr import Usd, UsdGeom  # usd-core
 
     stage = Usd.Stage.Open(path)
     for prim in stage.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
+        if prim.IsA(UsdGeom.Mesh):  # pyright: ignore[reportArgumentType, reportCallIssue]  (types-usd 24.5: no IsA(type))
             mesh = UsdGeom.Mesh(prim)
             xf = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
             pts = np.asarray(mesh.GetPointsAttr().Get(), float)
@@ -119,7 +120,7 @@ def load_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
 def _inside(mesh: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.int32)):
     i = wp.tid()
     q = wp.mesh_query_point_sign_winding_number(mesh, pts[i], 1.0e6)
-    if q.result and q.sign < 0.0:
+    if q.result and q.sign < 0.0:  # pyright: ignore[reportAttributeAccessIssue]
         out[i] = 1
 
 

@@ -8,6 +8,7 @@ contiguous range too.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -16,7 +17,7 @@ from .kernels import KERNELS, Kernel
 from .kernels.registry import kernel_problem
 from .loads import LoadError, LoadTable, resolve
 from .materials import Material
-from .params import instance_problem, violations
+from .params import instance_problem, refusal, violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
 from .stencil import stencil_cache
 from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
@@ -147,8 +148,8 @@ class State:
     """reference positions [m]"""
     dJ: wp.array
     """|det Fsn - 1| after the last step (written when recorded)"""
-    stencils: object
-    """the stencil cache, a Warp struct (mpm.stencil.make_stencil_cache)"""
+    stencils: Any
+    """the stencil cache, a Warp struct instance (mpm.stencil.make_stencil_cache)"""
     history: wp.array
     """history variables of plastic models (one unused entry without them)"""
     xc: wp.array | None = None
@@ -233,9 +234,7 @@ def check_body(i: int, b, d: int) -> None:
     if problem:
         raise SceneError(f"{key}.material", problem)
     if isinstance(b.shape, type) or not callable(getattr(b.shape, "bounds", None)):
-        raise SceneError(f"{key}.shape", instance_problem(b.shape, type(None), "a shape instance",
-                                                          "mpm.Box(center, half_extents)").replace(
-            "NoneType", "shape"))
+        raise SceneError(f"{key}.shape", refusal(b.shape, "a shape instance", "mpm.Box(center, half_extents)"))
     if b.velocity is not None and _numbers(b.velocity, d) is None:
         raise SceneError(f"{key}.velocity", f"{_one_line(b.velocity)}; accepted: {d} finite numbers [m/s]")
     if b.angular_velocity is not None:
@@ -381,7 +380,7 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
             F = np.asarray(b.deformation, float)
             c = 0.5 * (np.asarray(b.shape.bounds()[0], float) + np.asarray(b.shape.bounds()[1], float))
             x = c + (x - c) @ F.T
-        out.append(BodySample(x, V / n if used == "shape" and n else cell, F,
+        out.append(BodySample(x, V / n if V is not None and used == "shape" and n else cell, F,
                               {"volume": V if used == "shape" else n * cell, "shape": V, "cells": n * cell,
                                "used": used}))
     return out
@@ -410,8 +409,8 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
             raise SceneError(f"bodies[{i}].shape", "holds no particle; accepted: a shape larger than a cell")
 
     xs, vs, Cs, ms, Vs, ids, hs, Fs = [], [], [], [], [], [], [], []
-    body_ranges = [None] * len(scene.bodies)
-    volumes: list[dict | None] = [s.volumes for s in samples]
+    body_ranges: list = [None] * len(scene.bodies)  # (start, count) of each body, set below
+    volumes: list[dict] = [s.volumes for s in samples]
     groups: list[MaterialGroup] = []
     start = 0
     for i in order:
@@ -421,8 +420,11 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
         v, C = _rigid_velocity(b, x, d)
         if scene.solution is not None:
             v, C = scene.solution.velocity(x, 0.0), scene.solution.velocity_gradient(x, 0.0)
-        xs.append(x), vs.append(v), Cs.append(C)
-        Vs.append(np.full(n, vol)), ms.append(np.full(n, vol * b.material.rho))
+        xs.append(x)
+        vs.append(v)
+        Cs.append(C)
+        Vs.append(np.full(n, vol))
+        ms.append(np.full(n, vol * b.material.rho))
         ids.append(np.full(n, i, np.int32))
         hs.append(np.tile(b.material.initial_history() if b.material.plastic else (0.0, 0.0), (n, 1)))
         body_ranges[i] = (start, n)

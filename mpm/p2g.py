@@ -120,7 +120,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         if write != 0:
             dt = S(control.dt[0])
         sum_positions = int(control.positions[0])
-        p = wp.tid() + start
+        p = wp.tid() + start  # pyright: ignore[reportOperatorIssue]
         b = body[p]
         m = mass[p]
         xp = x[p]
@@ -128,7 +128,7 @@ def _make_p2g(t: Types, kernel: Kernel, transfer: str, material, with_regions: b
         Fs = Fsn[p]
         P, psi, F0 = stress_of(p, b, dt, write, Fs, F0s[p], Cp, body_params, history, F0s, status)
         if wp.static(exact_energy is not None):
-            wp.atomic_add(status.elastic, 0, f64(volume[p]) * exact_energy(Fs, F0s[p], Fc[p], Cp, body_params[b]))
+            wp.atomic_add(status.elastic, 0, f64(volume[p]) * exact_energy(Fs, F0s[p], Fc[p], Cp, body_params[b]))  # pyright: ignore[reportOptionalCall]
         else:
             wp.atomic_add(status.elastic, 0, f64(volume[p] * psi))
         stress = (dt * volume[p]) * P * wp.transpose(F0)  # dt V^0 P F^{0s,T}
@@ -175,7 +175,7 @@ def make_stress(t: Types, material, lagrangian: bool):
         P = t.mat()
         psi = t.scalar(0.0)
         if wp.static(plastic):
-            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)
+            FE, P, psi, h = plastic_update(Fs * F0, body_params[b], history[p], dt)  # pyright: ignore[reportOptionalCall]
             if wp.static(lagrangian):
                 F0 = wp.inverse(Fs) * FE
             else:
@@ -184,12 +184,12 @@ def make_stress(t: Types, material, lagrangian: bool):
                 F0s[p] = F0
                 history[p] = h
             if wp.static(stiffening is not None):
-                wp.atomic_max(status.stiffening, b, f64(stiffening(body_params[b], h)))
+                wp.atomic_max(status.stiffening, b, f64(stiffening(body_params[b], h)))  # pyright: ignore[reportOptionalCall]
         else:
             L = Cp  # velocity gradient in current coordinates: C (F^sn)^-1
             if wp.static(needs_L):
                 L = Cp * wp.inverse(Fs)
-            P, psi = stress_energy(Fs * F0, L, body_params[b])
+            P, psi = stress_energy(Fs * F0, L, body_params[b])  # pyright: ignore[reportOptionalCall]
         return P, psi, F0
 
     return stress

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 
 def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, inf=False, choices=None):
@@ -23,7 +23,7 @@ def param(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, inf=Fal
     )
 
 
-def accepted_range(name: str, meta: dict) -> str:
+def accepted_range(name: str, meta: Mapping) -> str:
     """Human-readable range, e.g. ``-1 < nu < 0.5``."""
     lo = f"{meta['gt']} < " if meta.get("gt") is not None else (
         f"{meta['ge']} <= " if meta.get("ge") is not None else "")
@@ -33,7 +33,7 @@ def accepted_range(name: str, meta: dict) -> str:
     return text + (" (inf allowed)" if meta.get("inf") else "")
 
 
-def in_range(value: float, meta: dict) -> bool:
+def in_range(value: float, meta: Mapping) -> bool:
     if value is None or math.isnan(value):
         return False
     if math.isinf(value) and not (meta.get("inf") and value > 0):
@@ -91,8 +91,14 @@ class Names(dict):
 def instance_problem(value, cls, what: str, example: str) -> str | None:
     """Why ``value`` is not an instance of ``cls`` (None: it is): a class
     given for its instance, or another type."""
-    if isinstance(value, cls):
-        return None
+    return None if isinstance(value, cls) else refusal(value, what, example)
+
+
+def refusal(value, what: str, example: str) -> str:
+    """Why ``value`` is refused where ``what`` is accepted: a class given for
+    its instance, nothing (None), or another type."""
     if isinstance(value, type):
-        return (f"the class {value.__name__}, not an instance; accepted: {what}, e.g. {example}")
+        return f"the class {value.__name__}, not an instance; accepted: {what}, e.g. {example}"
+    if value is None:
+        return f"None; accepted: {what}, e.g. {example}"
     return f"{type(value).__name__} {value!r:.60}; accepted: {what}, e.g. {example}"

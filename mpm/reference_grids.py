@@ -12,6 +12,8 @@ through contact.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import warp as wp
 
@@ -52,7 +54,7 @@ class GridLayout:
         self._last = self.cells - (kernel.support - 1)  # the highest first node of a stencil
         # (lo, shape) views per body [grid, axis]; shared: all bodies at once [body, grid, axis]
         by_body = (self.lo.reshape(n_bodies, G, t.dim), self.shape.reshape(n_bodies, G, t.dim))
-        self._grids = by_body if shared else [(by_body[0][b], by_body[1][b]) for b in range(n_bodies)]
+        self._grids: Any = by_body if shared else [(by_body[0][b], by_body[1][b]) for b in range(n_bodies)]
         self._fitted: dict = {}  # shared: each body's last bounds
         with wp.ScopedDevice(device):
             self.lo_d = wp.zeros(n_boxes, dtype=t.ivec)
@@ -147,7 +149,7 @@ class GridArrays:
         node count and the arrays stay: slicing a Warp array every step costs
         more host time than zeroing the 2D ball's grid)."""
         if self._views is None or self._views[0] != n or self._views[1] is not self.m:
-            arrays = (self.m, self.v, self.q, self.kin, self.kin_id, self.p0)
+            arrays: tuple = (self.m, self.v, self.q, self.kin, self.kin_id, self.p0)  # (reserved)
             self._views = (n, self.m, tuple(a[:n] if len(a) >= n else a for a in arrays))
         return self._views[2]
 
@@ -159,6 +161,7 @@ class GridArrays:
         if self.flip:
             p0.zero_()
         if self.gradients:
+            assert self.G is not None, "reserve() first"
             self.G[:n].zero_()
         if positions:
             q.zero_()

@@ -103,7 +103,7 @@ def make_committed(t: Types, project):
     def committed(Fsn: t.mat, F0s: t.mat, params: t.params):
         F = Fsn * F0s
         if wp.static(proj is not None):
-            F = proj(F, params)
+            F = proj(F, params)  # pyright: ignore[reportOptionalCall]
         return F
 
     return committed
@@ -160,7 +160,7 @@ def make_update(t: Types, kernel: Kernel, project, affine: str, gradients: bool,
         # with compensate: the running error of G2P's sum of F^sn (mpm.g2p)
         Fc: wp.array(dtype=t.mat),
     ):
-        p = wp.tid() + start
+        p = wp.tid() + start  # pyright: ignore[reportOperatorIssue]
         b = body[p]
         if wp.static(gated):  # (a body whose grid must be refitted first: the host moves it)
             if (control.update[b] == wp.float64(0.0) or control.regrid[b] != wp.float64(0.0)

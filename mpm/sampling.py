@@ -88,5 +88,6 @@ def shape_volume(shape, dim: int) -> float | None:
                 if np.all(lo < hi2) and np.all(lo2 < hi):
                     return None
         volumes = [shape_volume(p, dim) for p in shape.parts]
-        return None if any(v is None for v in volumes) else float(sum(volumes))
+        known = [v for v in volumes if v is not None]
+        return float(sum(known)) if len(known) == len(volumes) else None
     return None

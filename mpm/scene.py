@@ -7,7 +7,7 @@ covered by a regular grid of spacing ``dx = domain[0] / resolution``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence, Union
+from typing import Protocol, Sequence, Union
 
 import numpy as np
 
@@ -172,12 +172,23 @@ def rotation_matrix(angles, dim: int) -> np.ndarray:
     return Rz @ Ry @ Rx
 
 
+class _Shape(Protocol):
+    """What a turned shape offers: its centre, its bounds and an inside test."""
+
+    @property
+    def center(self) -> Sequence[float]: ...
+
+    def bounds(self) -> tuple: ...
+
+    def contains(self, x: np.ndarray) -> np.ndarray: ...
+
+
 @dataclass(frozen=True, eq=False)
 class Rotated:
     """``shape`` turned by the rotation matrix ``R`` about its centre
     (``Rotated(shape, rotation_matrix(angles, dim))``)."""
 
-    shape: object
+    shape: _Shape
     """the shape turned (any shape of a body)"""
     R: np.ndarray
     """d x d rotation matrix (:func:`rotation_matrix`)"""
@@ -193,8 +204,9 @@ class Rotated:
             return lo, hi
         c = np.asarray(self.center, float)
         d = len(lo)
-        if hasattr(self.shape, "geometry"):  # mpm.meshes.MeshShape
-            pts = self.shape.geometry[0]
+        geometry = getattr(self.shape, "geometry", None)  # mpm.meshes.MeshShape's (points, triangles)
+        if geometry is not None:
+            pts = geometry[0]
         else:
             pts = np.array([[hi[k] if (i >> k) & 1 else lo[k] for k in range(d)] for i in range(2**d)])
         turned = c + (pts - c) @ self.R.T
@@ -292,6 +304,15 @@ class ContactPair:
     """Coulomb mu of their contact"""
 
 
+class Solution(Protocol):
+    """A closed-form solution as a scene reads it (mpm.analytic): the velocity
+    v(X, t) [m/s] (n, d) and its gradient (n, d, d) [1/s] at points X (n, d) [m]."""
+
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray: ...
+
+    def velocity_gradient(self, X: np.ndarray, t: float) -> np.ndarray: ...
+
+
 @dataclass
 class Scene:
     """Domain, grid, walls, gravity and bodies of a run. The domain is the
@@ -357,7 +378,7 @@ class Scene:
     particle_resolution: int | None = None
     """particles are sampled as if the grid had this many cells along x
     (default: ``resolution``): a fixed particle set for grid-refinement studies"""
-    solution: object | None = None
+    solution: Solution | None = None
     """a closed-form solution (``mpm.analytic``): it sets the initial velocity
     and, for a manufactured solution, the body force"""
 

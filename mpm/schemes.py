@@ -48,6 +48,7 @@ default of fluids and plastic bodies.
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import warp as wp
 
@@ -158,7 +159,8 @@ class AULMPM:
         if (self.criterion or defaults["criterion"]) == "paper":
             defaults.update(PAPER_BOUNDS)
         given = {k: getattr(self, k) for k in defaults}
-        return AULMPM(name=self.name, **{k: defaults[k] if v is None else v for k, v in given.items()})
+        values: dict[str, Any] = {k: defaults[k] if v is None else v for k, v in given.items()}
+        return AULMPM(name=self.name, **values)
 
     def problems(self) -> list[tuple[str, str]]:
         """(key, message) for inconsistent settings."""
@@ -169,14 +171,17 @@ class AULMPM:
         return []
 
     def updates(self, marked: int, count: int, max_dJ: float, min_stretch: float) -> bool:
-        if math.isinf(self.epsilon):
+        epsilon, eta, dJ_max, stretch_min = self.epsilon, self.eta, self.dJ_max, self.stretch_min
+        assert epsilon is not None and eta is not None and dJ_max is not None and stretch_min is not None, \
+            "resolved() fills every bound"
+        if math.isinf(epsilon):
             return False
-        if marked >= self.eta * count:
+        if marked >= eta * count:
             return True
-        return self.criterion == "distortion" and (max_dJ >= max(self.dJ_max, self.epsilon)
-                                                   or min_stretch < self.stretch_min)
+        return self.criterion == "distortion" and (max_dJ >= max(dJ_max, epsilon) or min_stretch < stretch_min)
 
     def tracks_marks(self) -> bool:
+        assert self.epsilon is not None, "resolved() fills epsilon"
         return not math.isinf(self.epsilon)
 
 
@@ -195,7 +200,7 @@ class RuleParams:
     stretch_min: wp.float64
 
 
-def rule_params(scheme) -> RuleParams:
+def rule_params(scheme) -> RuleParams:  # pyright: ignore[reportGeneralTypeIssues]  (a wp.struct)
     p = RuleParams()
     p.epsilon, p.eta = float(getattr(scheme, "epsilon", 0.0) or 0.0), float(getattr(scheme, "eta", 0.0) or 0.0)
     p.dJ_max, p.stretch_min = (float(getattr(scheme, "dJ_max", 0.0) or 0.0),
@@ -221,7 +226,7 @@ def make_update_rule(kind: str):
     f64 = wp.float64
 
     @wp.func
-    def updates(marked: f64, count: f64, max_dJ: f64, min_stretch: f64, params: RuleParams):
+    def updates(marked: f64, count: f64, max_dJ: f64, min_stretch: f64, params: RuleParams):  # pyright: ignore[reportGeneralTypeIssues]
         fire = bool(False)
         if wp.static(kind == "always"):
             fire = True

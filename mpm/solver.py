@@ -24,6 +24,7 @@ integrator's kernels only when the scene needs them.
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -198,6 +199,7 @@ class Solver:
         self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene, model.types.precision,
                                                      policy)
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
+        assert None not in (opt.compensate, opt.track_energy, opt.track_J, scheme.affine), "resolved() decides"
         implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched
         forcing = scene.solution if getattr(scene.solution, "has_body_force", False) else None
         nb = self.n_bodies = len(scene.bodies)
@@ -218,21 +220,21 @@ class Solver:
         self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact or implicit)
         projections = {b.material.project for b in scene.bodies}
         fused = opt.fuse if opt.fuse is not None else (k.moment is not None or opt.compensate) and len(projections) == 1
-        self.fused = fused and eulerian and not implicit
+        self.fused = bool(fused and eulerian and not implicit)
         # fused EMPM: G2P does the configuration update too when the bodies share one projection
         self.g2p_commits = self.fused and len(projections) == 1 and scheme.affine == "keep"
         self.transfers = Transfers(
             model, self.launch, self.buffer, opt.transfer, lagrangian=not eulerian, fused=self.fused,
             commit=self.g2p_commits, with_stress=not implicit, regions=self.conditions.regions, forcing=forcing,
             record_dJ=opt.record_dJ, marks=scheme.tracks_marks(), epsilon=getattr(scheme, "epsilon", None) or 0.0,
-            track_energy=opt.track_energy, track_J=opt.track_J, removal=self.conditions.open,
+            track_energy=bool(opt.track_energy), track_J=bool(opt.track_J), removal=self.conditions.open,
             bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
-            batched=batched, flip=opt.flip, compensate=opt.compensate, gradients=self.grid.gradients,
+            batched=batched, flip=opt.flip, compensate=bool(opt.compensate), gradients=self.grid.gradients,
             boundary=self.conditions.data, keep_out=self.conditions.keep_out)
         per_particle_K = k.moment is None and opt.transfer not in AFFINE_FREE  # K_p cached per particle
         self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
-                                     affine=scheme.affine, gradients=opt.transfer != "mls" or k.gradient_affine,
-                                     fused=self.fused, moment=per_particle_K, compensate=opt.compensate)
+                                     affine=str(scheme.affine), gradients=opt.transfer != "mls" or k.gradient_affine,
+                                     fused=self.fused, moment=per_particle_K, compensate=bool(opt.compensate))
         self.criterion = Criterion(model, self.launch, self.buffer, self.layout, scheme, self.conditions,
                                    free_flight=self.free_flight, commits=self.g2p_commits, batched=batched)
         self.diagnostics = Diagnostics(model, self.launch, self.buffer, per_particle_K, batched)
@@ -272,7 +274,7 @@ class Solver:
         self.diagnostics.prepare(self.X0)
         self.fracture.prepare(x)
         state.stencils.offset = self.layout.offset_d  # (the cached stencils are relative to their boxes)
-        state.compensated(self.options.compensate)  # (the sums' running errors, where it compensates)
+        state.compensated(bool(self.options.compensate))  # (the sums' running errors, where it compensates)
         if self.fused:
             fuse(state.stencils, m.types, m.kernel, state.X, self.layout.lo_d, self.layout.offset_d, m.dx)
         lo = [x[s:s + c].min(axis=0) for s, c in m.body_ranges]
@@ -319,7 +321,7 @@ class Solver:
     def _apply_forcing(self, state: State) -> None:
         """The external loads' body force (mpm.loads), or a manufactured solution's, at the step's start."""
         if self.transfers.forcing is not None or self.transfers.loads is not None:
-            self.transfers.apply_forcing(state, self.X0, self.time)
+            self.transfers.apply_forcing(state, cast(np.ndarray, self.X0), self.time)  # (set by prepare)
 
     def _rasterize(self, state: State, write: bool = True) -> None:
         """P2G (mpm.p2g); the plastic return mapping stored when ``write``."""
@@ -381,12 +383,12 @@ class Solver:
         for attempt in range(halvings + 1):
             self.dt = dt
             newton = self.attempt(state)
-            if newton is None or newton.outcome == "converged" or attempt == halvings:
+            if newton is None or newton.outcome == "converged" or attempt == halvings or self.implicit is None:
                 break
             self.implicit.restore(state)
             dt *= 0.5
             self.buffer.set(dt=dt)
-        if newton is not None and not newton.converged:
+        if newton is not None and not newton.converged and self.implicit is not None:
             self.implicit.restore(state)  # the state the failed step started from
         return newton, dt, attempt
 
@@ -411,7 +413,7 @@ class Solver:
     def report(self, values: dict | None = None) -> StepReport:
         """The step's report: the buffer read back, or a history row's ``values``."""
         v = values if values is not None else self.buffer.read()
-        return StepReport.of(v, self.model.dim, energy=self.options.track_energy, reach=self.free_flight)
+        return StepReport.of(v, self.model.dim, energy=bool(self.options.track_energy), reach=self.free_flight)
 
     def step_energy(self) -> float:
         """Elastic energy [J] of the state the last step started from (its P2G)."""

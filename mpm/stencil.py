@@ -63,7 +63,7 @@ def make_origin(t: Types, kernel: Kernel, with_gradients: bool):
         for d in range(wp.static(t.dim)):
             u0[d] = u0[d] - grid_offsets[0]
             if wp.static(phase is not None):
-                ph = phase(u0[d] - wp.floor(u0[d]))  # periodic: the fraction keeps the argument small
+                ph = phase(u0[d] - wp.floor(u0[d]))  # periodic: the fraction keeps the argument small  # pyright: ignore[reportOptionalCall]
                 for k in range(3):
                     P[d, k] = ph[k]
         return u0, P
@@ -108,8 +108,10 @@ def make_weigh(t: Types, kernel: Kernel, with_gradients: bool, clamped: bool):
     Pm = wp.types.matrix((t.dim, 3), S)
     shared = kernel.phase is not None
     if shared:
+        assert kernel.weights_at is not None and kernel.gradients_at is not None, "kernel_problem() checks"
         weights, gradients = kernel.weights_at(t), kernel.gradients_at(t)
     else:
+        assert kernel.weights is not None and kernel.gradients is not None, "kernel_problem() checks"
         weights, gradients = kernel.weights(t), kernel.gradients(t)
     fill_weights = make_fill_row(t, kernel, weights, shared)
     fill_gradients = make_fill_row(t, kernel, gradients, shared)

@@ -76,6 +76,7 @@ def reach(kernel: Kernel) -> float:
 def _profile_kernel(kernel: Kernel):
     t = make_types(2, "float64")
     S = t.scalar
+    assert kernel.weights is not None, "kernel_problem() checks"
     weights = kernel.weights(t)
     support = kernel.support
 
@@ -159,7 +160,7 @@ def make_surface(t: Types):
         u = (x + profile.reach) / (S(2.0) * profile.reach) * S(steps)
         kf = wp.min(wp.floor(u), S(last))
         f = u - kf
-        k = wp.int32(kf)
+        k = wp.int32(kf)  # pyright: ignore[reportArgumentType]
         return (S(1.0) - f) * profile.table[k] + f * profile.table[k + 1]
 
     @wp.func

@@ -128,7 +128,7 @@ def bound(kernel: str, mls: bool = True, dim: int = 2, per_axis: int = 2, nu: fl
 
 
 def body_bound(x: np.ndarray, volume: np.ndarray, kernel: str, dx: float, nu: float = 0.3,
-               walls: tuple = (), lo: float = 0.0, hi=1.0) -> tuple[float, float]:
+               walls: tuple = (), lo: float = 0.0, hi: float | np.ndarray = 1.0) -> tuple[float, float]:
     """The step bound of a 2D body's own particles ``x`` (n, 2) [m] with
     volumes ``volume`` [m^2] under the explicit MLS step (B-spline
     ``kernel``, grid spacing ``dx`` [m], nodes at integer multiples of dx):
@@ -216,7 +216,7 @@ def scene_bounds(overrides: list[str]) -> list[tuple[str, float, float]]:
 def main(argv: list[str] | None = None) -> int:
     from .config.arguments import Parser
 
-    parser = Parser(prog="python -m pipelines.cfl_bound", description=__doc__.split("\n")[0])
+    parser = Parser(prog="python -m pipelines.cfl_bound", description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--dim", type=int, default=2, choices=(2, 3))
     parser.add_argument("--per-axis", type=int, default=2, help="particles per cell and axis")
     parser.add_argument("--nu", type=float, default=0.3)

@@ -71,7 +71,7 @@ def make_couple(t: Types, normal: str = "difference", touching: bool = False):
         cbin[i] = -1
         if lat.m[i] <= S(0.0):
             return
-        b = node_body(lat, i)
+        b = node_body(lat, i)  # pyright: ignore[reportArgumentType]
         g = nearest(lat, lat.q[i])
         present, _m, _p, volume, a, c = occupancy(lat, bins, g)  # a, c: the first and second body present
         n_global = lat.n_global
@@ -185,6 +185,6 @@ def make_projection(t: Types):
         if mode == 0:
             x[i] = x[i] - ct * (lam / m[i])
             return
-        remove(mode, i, ct * lam, Pi, inv_diag, x, z, acc, r2, rz)
+        remove(mode, i, ct * lam, Pi, inv_diag, x, z, acc, r2, rz)  # pyright: ignore[reportArgumentType]
 
     return sums, project

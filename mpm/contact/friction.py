@@ -182,7 +182,7 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
         if mode == 0:
             x[i] = x[i] - ct / m[i]
             return
-        remove(mode, i, ct, Pi, inv_diag, x, z, acc, r2, rz)
+        remove(mode, i, ct, Pi, inv_diag, x, z, acc, r2, rz)  # pyright: ignore[reportArgumentType]
 
     @warp_kernel
     def classify(bnormal: wp.array(dtype=vec), state: wp.array(dtype=wp.int32), mu: wp.array(dtype=S),

@@ -195,10 +195,10 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
     @warp_kernel
     def splat(lat: Lattice, bins: Bins, control: StepControl):
         i = wp.tid()
-        m = node_mass(lat, control, i)
+        m = node_mass(lat, control, i)  # pyright: ignore[reportArgumentType]
         if m <= S(0.0):
             return
-        b = node_body(lat, i)
+        b = node_body(lat, i)  # pyright: ignore[reportArgumentType]
         m = m / S(lat.n_grids)  # every kernel grid carries the body's full mass
         for k in range(wp.static(n_points)):
             w, g = lattice_point(lat, lat.q[i], k)
@@ -215,10 +215,10 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
         control: StepControl,
     ):
         i = wp.tid()
-        m = node_mass(lat, control, i)
+        m = node_mass(lat, control, i)  # pyright: ignore[reportArgumentType]
         if m <= S(0.0):
             return
-        b = node_body(lat, i)
+        b = node_body(lat, i)  # pyright: ignore[reportArgumentType]
         dv = vec()
         touching = False
         for k in range(wp.static(n_points)):  # the corrections, with the weights the node was spread with
@@ -239,9 +239,9 @@ def make_contact(t: Types, batched: bool = False, gather: bool = False, friction
     @warp_kernel
     def clear(lat: Lattice, bins: Bins, control: StepControl):
         i = wp.tid()
-        if node_mass(lat, control, i) <= S(0.0):
+        if node_mass(lat, control, i) <= S(0.0):  # pyright: ignore[reportArgumentType]
             return
-        b = node_body(lat, i)
+        b = node_body(lat, i)  # pyright: ignore[reportArgumentType]
         for k in range(wp.static(n_points)):
             _w, g = lattice_point(lat, lat.q[i], k)
             bins.M[b * lat.n_global + g] = S(0.0)
@@ -279,9 +279,9 @@ class Contact:
         self.passes = GATHER_PASSES if lagrangian else 1
         # the implicit solve's constraints bin every node to one lattice node (disjoint rows)
         self.bin, _, self.unbin = make_contact(t, batched) if implicit else (None, None, None)
-        self.constraint = make_contact_constraint(t, normal, touching=self.friction) if implicit else ()
+        self.constraint: tuple = make_contact_constraint(t, normal, touching=self.friction) if implicit else ()
         # with friction the solve's projection has a stuck bin's d rows (mpm.contact.friction)
-        self.sliding = make_friction_constraint(t, normal) if implicit and self.friction else ()
+        self.sliding: tuple = make_friction_constraint(t, normal) if implicit and self.friction else ()
         n_bodies, n_global = len(model.scene.bodies), model.n_nodes
         self.inv_dx = t.scalar(1.0 / model.dx)
         self.fill = t.scalar(model.scene.contact_fill)

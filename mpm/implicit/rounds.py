@@ -37,7 +37,7 @@ class Rounds:
         with wp.ScopedDevice(m.device):
             self.bstate_kept = wp.full(m.n_nodes if solve.sliding else 1, -1, dtype=wp.int32)
             self.side_changes = wp.zeros(1, dtype=wp.int32)
-        self.kept = ()
+        self.kept: tuple = ()
 
     def grow(self, n: int) -> None:
         """Room for the last solve's classification of ``n`` nodes."""
@@ -97,6 +97,7 @@ class Rounds:
         s = self.solve
         solver, m = s.solver, s.solver.model
         n = solver.layout.n_nodes
+        assert self.sides is not None, "called under the surface rule only (changes)"
         unconstrained, changed = self.sides
         arrays = (solver.grid.v, s.free, s.friction, s.friction_u, s.friction_n, s.friction_shift, s.contact_id)
         for kept, a in zip(self.kept, arrays):

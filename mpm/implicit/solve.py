@@ -64,8 +64,6 @@ A plastic model's return mapping has run in P2G: F^0s is the returned
 elastic state, so the energy is the elastic predictor's for the step.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 import warp as wp
 
@@ -73,33 +71,12 @@ from .system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, mak
                               make_boundary_work, make_evaluate, make_friction, make_node_kernels)
 from ..materials.differential import make_tangent_type
 from .rounds import Rounds
+from ..stepping.status import NewtonReport
 
 ARMIJO = 1.0e-4  # sufficient decrease of E along the Newton direction
 BACKTRACKS = 12  # halvings of the Newton step before the line search gives up
 ROUNDOFF = 10.0  # the residual's floor in units of its round-off (ImplicitSolve.solve)
 ROUNDS = 8  # solves per step at most (friction's stick / slip changes, the one-sided constraints)
-
-
-@dataclass
-class NewtonReport:
-    """What one implicit solve did."""
-
-    newton: int = 0  # Newton iterations
-    cg: int = 0  # conjugate-gradient iterations, all Newton iterations together
-    residual: float = 0.0  # final |R| / initial |R| (0 when no iteration was needed)
-    residual0: float = 0.0  # initial |R| [kg m/s]
-    backtracks: int = 0  # line-search halvings, all iterations together
-    rounds: int = 1  # solves (more than one where friction or a one-sided constraint changed a node's state)
-    unsettled: int = 0  # bins and nodes the last solve leaves unsatisfied after ROUNDS solves (0: settled)
-    reason: str = ""  # why it failed, or what the near miss was
-    # converged | near_miss (out of iterations, or the line search stalled, within newton_accept of the
-    # tolerance) | missed | diverged | stalled (see ImplicitSolve.solve)
-    outcome: str = "converged"
-
-    @property
-    def converged(self) -> bool:
-        """Whether the step may use the solution: converged, or a near miss."""
-        return self.outcome in ("converged", "near_miss")
 
 
 class ImplicitSolve:
@@ -123,7 +100,7 @@ class ImplicitSolve:
         self._work = make_boundary_work(t)
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact  # mpm.contact.Contact, or None
-        self._contact = self.contact.constraint if self.contact is not None else ()
+        self._contact: tuple = self.contact.constraint if self.contact is not None else ()
         self.sliding = self.contact.sliding if self.contact is not None else ()  # mpm.contact.friction
         with wp.ScopedDevice(m.device):
             if self.sliding:  # per bin: sums of vectors and d x d blocks, the state and load

@@ -163,7 +163,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
         diag: wp.array(dtype=t.vec),
         acc: wp.array(dtype=f64),
     ):
-        p = wp.tid() + start
+        p = wp.tid() + start  # pyright: ignore[reportOperatorIssue]
         b = body[p]
         Fs = Fsn[p]
         F0 = F0s[p]
@@ -194,7 +194,7 @@ def make_evaluate(t: Types, kernel: Kernel, transfer: str, material, psd: bool):
         args.dt = dt
         args.M = stress
         args.T = T
-        args.VF0T = wp.transpose(T.V) * wp.transpose(F0)
+        args.VF0T = wp.transpose(T.V) * wp.transpose(F0)  # pyright: ignore[reportOperatorIssue]
         args.FinvT = FinvT
         args.V0 = V0
         args.k_visc = k_visc
@@ -234,9 +234,9 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
         p = wp.tid()
         b = body[p]
         F0 = F0s[p]
-        args = args_at(p, cache, K, dx)
+        args = args_at(p, cache, K, dx)  # pyright: ignore[reportArgumentType]
         args.field = dv
-        D = S(inv_G) * gather(p, b, shape, cache, dx, mat(), args)
+        D = S(inv_G) * gather(p, b, shape, cache, dx, mat(), args)  # pyright: ignore[reportArgumentType]
         dS = volume[p] * action(tangent[p], dt * D * F0) * wp.transpose(F0)
         if wp.static(viscous):
             Finv = wp.inverse(Fsn[p])
@@ -244,7 +244,7 @@ def make_apply(t: Types, kernel: Kernel, transfer: str, viscous: bool):
             dS += visc[p] * S(0.5) * (L + wp.transpose(L)) * wp.transpose(Finv)
         args.field = out
         args.M = dt * dS
-        scatter(p, b, shape, cache, dx, mat(), args)
+        scatter(p, b, shape, cache, dx, mat(), args)  # pyright: ignore[reportArgumentType]
 
     return apply
 

@@ -61,19 +61,19 @@ class Kernel:
     offset: float
     moment: float | None
     margin: float
-    weights: Callable = None
+    weights: Callable | None = None
     """types -> Warp function t -> (w_0 .. w_{support-1})"""
-    gradients: Callable = None
+    gradients: Callable | None = None
     """types -> Warp function t -> dw/dt (divide by dx for the spatial gradient)"""
     grids: tuple[float, ...] = (0.0,)
     """each grid's shift [cells]: (0,) for the B-splines, (-1/4, 1/4) for the compact kernel"""
     gradient_affine: bool = False
     """C and the force from the kernel gradient (a moment matrix singular somewhere)"""
-    phase: Callable = None
+    phase: Callable | None = None
     """optional: types, with_gradients -> per-axis work the grids share"""
-    weights_at: Callable = None
+    weights_at: Callable | None = None
     """optional, with phase: types -> (t, P, g) -> weights on grid g"""
-    gradients_at: Callable = None
+    gradients_at: Callable | None = None
     """optional, with phase: types -> (t, P, g) -> gradients on grid g"""
 
     @property

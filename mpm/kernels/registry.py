@@ -39,12 +39,12 @@ def origin(kernel: Kernel) -> str:
     holding it, else where its weights factory is defined."""
     module = sys.modules.get(getattr(kernel.weights, "__module__", None) or "")
     names = [k for k, v in vars(module).items() if v is kernel] if module is not None else []
-    return f"{module.__name__}.{names[0]}" if names else defined_at(kernel)
+    return f"{module.__name__}.{names[0]}" if module is not None and names else defined_at(kernel)
 
 
 def _number(v, low: float, strict: bool) -> bool:
     return (isinstance(v, Real) and not isinstance(v, bool) and math.isfinite(v)
-            and (v > low if strict else v >= low))
+            and (float(v) > low if strict else float(v) >= low))
 
 
 def kernel_problem(kernel, factories: bool = True) -> str | None:
@@ -116,4 +116,4 @@ def _add(kernel: Kernel, factories: bool) -> Kernel:
 def built_in(kernel) -> bool:
     """Whether ``kernel`` is one of mpm's own (the object, not a copy:
     ``dataclasses.replace(mpm.QUADRATIC, ...)`` is the user's)."""
-    return BUILT_IN.get(getattr(kernel, "name", None)) is kernel
+    return BUILT_IN.get(getattr(kernel, "name", "")) is kernel

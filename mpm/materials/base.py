@@ -94,6 +94,11 @@ class Material:
         """Per-body parameter vector read by the Warp functions."""
         raise NotImplementedError
 
+    def initial_history(self) -> tuple[float, float]:
+        """The two history variables at rest (plastic models: mpm.materials.plastic;
+        an elastic model has none, read as zeros)."""
+        return (0.0, 0.0)
+
     def packed_padded(self) -> tuple[float, ...]:
         p = tuple(float(v) for v in self.packed())
         assert len(p) <= N_MATERIAL_PARAMS

@@ -25,7 +25,7 @@ def make_rotation(t: Types):
     if t.dim == 2:
 
         @wp.func
-        def rotation(F: t.mat):
+        def rotation(F: t.mat):  # pyright: ignore[reportRedeclaration]
             # closed form: R = [[c, -s], [s, c]] maximises tr(R^T F)
             a = F[0, 0] + F[1, 1]
             b = F[1, 0] - F[0, 1]
@@ -114,7 +114,7 @@ def make_svd(t: Types):
         rotation = make_rotation(t)
 
         @wp.func
-        def svd(F: t.mat):
+        def svd(F: t.mat):  # pyright: ignore[reportRedeclaration]
             # closed form (wp.svd2 is wrong for equal singular values): the
             # polar rotation R, then the eigenvectors of the symmetric S = R^T F
             R = rotation(F)
@@ -130,7 +130,7 @@ def make_svd(t: Types):
             V = mat(co, -si, si, co)
             return R * V, vec(mean + r, mean - r), V
 
-        return svd
+        return svd  # pyright: ignore[reportGeneralTypeIssues]
 
     @wp.func
     def svd(F: t.mat):

@@ -87,7 +87,7 @@ def make_psd(t: Types):
                 return A
             phi = S(0.5) * wp.atan2(S(2.0) * b, a - c)
             e = vec(wp.cos(phi), wp.sin(phi))  # eigenvector of mean + r
-            return wp.max(mean + r, S(0.0)) * wp.outer(e, e)
+            return wp.max(mean + r, S(0.0)) * wp.outer(e, e)  # pyright: ignore[reportOperatorIssue]
         else:
             Q = mat()
             d = vec()

@@ -75,7 +75,7 @@ def _flow(t: Types):
         p = -S(0.5) * kappa * (J * J - S(1.0))
         if p > p0 or p < p_min:  # beyond a tip: isotropic (no deviator), on the tip
             p = wp.clamp(p, p_min, p0)
-            JE = wp.sqrt(wp.max(S(1.0) - S(2.0) * p / kappa, S(JE2_FLOOR)))
+            JE = wp.sqrt(wp.max(S(1.0) - S(2.0) * p / kappa, S(JE2_FLOOR)))  # pyright: ignore[reportArgumentType]
             if hardening:
                 h[0] = h[0] + wp.log(J / JE)
             return stretches_of_b(mean, vec(), JE), h
@@ -99,7 +99,7 @@ def _flow(t: Types):
             A = M2 * d0 * d0 + (S(1.0) + S(2.0) * beta) * d1 * d1
             B = M2 * d0 * (S(2.0) * pc - p0 - p_min)
             C = M2 * (pc - p_min) * (pc - p0)
-            root = wp.sqrt(wp.max(B * B - S(4.0) * A * C, S(0.0)))
+            root = wp.sqrt(wp.max(B * B - S(4.0) * A * C, S(0.0)))  # pyright: ignore[reportArgumentType]
             p1 = pc + d0 * (-B + root) / (S(2.0) * A)
             p2 = pc + d0 * (-B - root) / (S(2.0) * A)
             px = p2
@@ -107,7 +107,7 @@ def _flow(t: Types):
                 px = p1
             Jx2 = wp.abs(S(1.0) - S(2.0) * px / kappa)
             if Jx2 > S(JE2_FLOOR):
-                h[0] = h[0] + wp.log(J / wp.sqrt(Jx2))
+                h[0] = h[0] + wp.log(J / wp.sqrt(Jx2))  # pyright: ignore[reportArgumentType]
         return out, h
 
     return flow
@@ -136,7 +136,10 @@ class NACC(SplitPlastic):
                                   "changes)")
 
     def slope(self) -> float:
-        return self.M if self.friction_angle is None else friction_to_M(self.friction_angle)
+        if self.friction_angle is not None:
+            return friction_to_M(self.friction_angle)
+        assert self.M is not None, "checked by problems(): M or friction_angle"
+        return self.M
 
     def problems(self):
         if self.M is not None and self.friction_angle is not None:

@@ -155,8 +155,8 @@ def make_plastic_update(t: Types, cls: type[Plastic]):
         sig_E, h = flow(sig, params, history, dt)
         de = vec()
         for i in range(wp.static(t.dim)):
-            de[i] = (wp.log(wp.max(wp.abs(sig[i]), S(STRETCH_FLOOR)))
-                     - wp.log(wp.max(sig_E[i], S(STRETCH_FLOOR))))
+            de[i] = (wp.log(wp.max(wp.abs(sig[i]), S(STRETCH_FLOOR)))  # pyright: ignore[reportArgumentType]
+                     - wp.log(wp.max(sig_E[i], S(STRETCH_FLOOR))))  # pyright: ignore[reportArgumentType]
         h[1] = h[1] + S(SQRT_2_3) * wp.length(de)
         P_hat, psi = elasticity(sig_E, params, h)
         Vt = wp.transpose(V)

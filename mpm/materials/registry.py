@@ -149,4 +149,4 @@ def _add(cls, factories: bool):
 def built_in(cls) -> bool:
     """Whether material class ``cls`` is one of mpm's own (the class itself:
     a subclass defined elsewhere is the user's)."""
-    return BUILT_IN.get(getattr(cls, "name", None)) is cls
+    return BUILT_IN.get(getattr(cls, "name", "")) is cls

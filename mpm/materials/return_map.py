@@ -30,7 +30,7 @@ def make_hencky_strain(t: Types):
         eps = vec()
         tr = S(0.0)
         for i in range(wp.static(t.dim)):
-            eps[i] = wp.log(wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR)))
+            eps[i] = wp.log(wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR)))  # pyright: ignore[reportArgumentType]
             tr += eps[i]
         return eps, tr
 
@@ -129,7 +129,7 @@ def make_stretches_of_b(t: Types):
         out = vec()
         prod = S(1.0)
         for i in range(wp.static(t.dim)):
-            out[i] = wp.sqrt(wp.max(mean + dev[i], S(0.0)))
+            out[i] = wp.sqrt(wp.max(mean + dev[i], S(0.0)))  # pyright: ignore[reportArgumentType]
             prod *= out[i]
         return out * wp.pow(J / wp.max(prod, S(1.0e-30)), S(one_over_d))
 

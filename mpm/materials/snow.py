@@ -39,7 +39,7 @@ def _flow(t: Types):
         dlogJ = S(0.0)
         for i in range(wp.static(t.dim)):
             sig_E[i] = wp.clamp(sigma[i], lo, hi)
-            dlogJ += wp.log(wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))) - wp.log(sig_E[i])
+            dlogJ += wp.log(wp.max(wp.abs(sigma[i]), S(STRETCH_FLOOR))) - wp.log(sig_E[i])  # pyright: ignore[reportArgumentType]
         h = history
         h[0] = h[0] + dlogJ
         return sig_E, h

@@ -116,7 +116,7 @@ def make_criterion(t: Types, kernel: Kernel, n_bodies: int, kind: str, free_flig
     def criterion(
         status: StepStatus,
         control: StepControl,
-        rule: RuleParams,
+        rule: RuleParams,  # pyright: ignore[reportGeneralTypeIssues]
         lo: wp.array(dtype=t.ivec),  # the layout's boxes
         shape: wp.array(dtype=t.ivec),
         inv_dx: f64,

@@ -249,7 +249,7 @@ class DetectParams:
     check_J: wp.array(dtype=wp.float64)  # per body: 1 where the model cannot invert
 
 
-def detect_params(detector: Detector, device) -> DetectParams:
+def detect_params(detector: Detector, device) -> DetectParams:  # pyright: ignore[reportGeneralTypeIssues]  (a wp.struct)
     p = DetectParams()
     o = detector.options
     p.energy_growth, p.speed_factor, p.min_J, p.min_stretch = (o.energy_growth, o.speed_factor, o.min_J,
@@ -296,7 +296,7 @@ def make_energy_check(energy_on: bool):
     record = make_record()
 
     @wp.func
-    def energy(control: StepControl, status: StepStatus, params: DetectParams):
+    def energy(control: StepControl, status: StepStatus, params: DetectParams):  # pyright: ignore[reportGeneralTypeIssues]
         """The energy criterion for the state the step started from (its kinetic
         and potential energy from the last G2P, its elastic energy from this
         step's P2G); the new state's energies are kept for the next step."""
@@ -331,7 +331,7 @@ def make_step_check():
     record = make_record()
 
     @wp.func
-    def step(control: StepControl, status: StepStatus, laws: BodyLaws, params: DetectParams, n_bodies: int):
+    def step(control: StepControl, status: StepStatus, laws: BodyLaws, params: DetectParams, n_bodies: int):  # pyright: ignore[reportGeneralTypeIssues]
         """Speed and inversion after the step; its boundaries' work is added."""
         control.work[0] = control.work[0] + status.boundary_work[0] / params.n_grids + status.load_work[0]
         tripped = bool(False)

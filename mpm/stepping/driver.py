@@ -216,7 +216,10 @@ class Driver:
     def done(self) -> bool:
         """The policy's end is reached."""
         p = self.policy
-        return self.step >= p.steps if p.steps is not None else self.time >= p.duration * (1 - 1e-12)
+        if p.steps is not None:
+            return self.step >= p.steps
+        assert p.duration is not None, "StepPolicy.problems(): steps or duration"
+        return self.time >= p.duration * (1 - 1e-12)
 
     def kernels(self) -> list:
         """Every kernel the run compiles: the solver's and the policy's."""
@@ -242,9 +245,9 @@ class Driver:
         if self.k > 1:  # room for k steps of at most cfl cells each (a fixed step: one; the device checks)
             s.pad = math.ceil(self.k * (p.cfl if p.dt is None else 1.0)) * s.model.dx
         s.prepare(state)
-        self.initial = s.measure(state, elastic=False)
+        self.initial = initial = s.measure(state, elastic=False)
         names = s.diagnostics.names
-        kinetic, potential = (float(self.initial[names.index(k)]) for k in ("kinetic_energy", "potential_energy"))
+        kinetic, potential = (float(initial[names.index(k)]) for k in ("kinetic_energy", "potential_energy"))
         self.v0 = float(np.max(np.linalg.norm(state.v.numpy(), axis=1)))
         problem = None
         if not (np.isfinite([kinetic, potential]).all() and np.isfinite(self.v0)):
@@ -271,7 +274,7 @@ class Driver:
             o.on_start(self)
         if problem is not None:
             message, criterion, body, values = problem
-            self._stop(message, criterion, body, **values)
+            self._stop(message, criterion, body, None, **values)
         elif int(v["halt"][0]) == COLLAPSE:
             self._stop(self._collapse(v), "dt_collapse")
         elif self.done:
@@ -337,7 +340,7 @@ class Driver:
             report.dt, report.newton, report.halvings = dt, newton, attempts
             report.wall_time = time.perf_counter() - t0
             report.elastic = s.step_energy()
-            self._stop(report.reason, "newton", report=report, newton_iterations=newton.newton,
+            self._stop(report.reason or "", "newton", report=report, newton_iterations=newton.newton,
                        cg_iterations=newton.cg, newton_residual=newton.residual, halvings=attempts)
             return
         s.interpolate(self.state)
@@ -385,7 +388,7 @@ class Driver:
         else:
             s.removals.add(report)
         self.outcome.step, self.outcome.time = self.step, self.time
-        if self.detector is not None and not report.nonfinite:
+        if self.detector is not None and not report.nonfinite and report.trips is not None:
             for record in report.trips.reshape(-1, TRIP_SIZE):
                 trip = self.detector.trip(record)
                 if self.detection.action == "stop":
@@ -464,6 +467,7 @@ class Driver:
                 for _ in range(self.k):
                     self._device_step()
             self._graph, self._graph_key = capture.graph, key
+        assert self._graph is not None
         wp.capture_launch(self._graph)
 
     # ------------------------------------------------------------ reporting

@@ -73,7 +73,7 @@ def make_rule(dim: int, n_bodies: int, implicit: bool):
     limits = make_step_rule(dim)
 
     @wp.func
-    def body_limits(status: StepStatus, laws: BodyLaws, params: PolicyParams, b: int, first: bool, speed: f64):
+    def body_limits(status: StepStatus, laws: BodyLaws, params: PolicyParams, b: int, first: bool, speed: f64):  # pyright: ignore[reportGeneralTypeIssues]
         """Body b's wave, viscous and strain limits and its fresh step [s]."""
         J = f64(1.0)
         s = f64(1.0)
@@ -94,12 +94,12 @@ def make_rule(dim: int, n_bodies: int, implicit: bool):
         return wave, viscous, strain, fresh
 
     @wp.func
-    def explicit(status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool, speed: f64):
+    def explicit(status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool, speed: f64):  # pyright: ignore[reportGeneralTypeIssues]
         """The smallest body limit, its fresh step and term; the reference factor."""
-        best = f64(inf)
-        best_fresh = f64(inf)
+        best = f64(inf)  # pyright: ignore[reportArgumentType]
+        best_fresh = f64(inf)  # pyright: ignore[reportArgumentType]
         binding = int(WAVE)
-        fresh = f64(inf)
+        fresh = f64(inf)  # pyright: ignore[reportArgumentType]
         factor = f64(1.0)
         for b in range(n_bodies):
             wave, viscous, strain, fresh_b = body_limits(status, laws, params, b, first, speed)
@@ -119,18 +119,18 @@ def make_rule(dim: int, n_bodies: int, implicit: bool):
         return best, fresh, factor, binding
 
     @wp.func
-    def rule(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,
+    def rule(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,  # pyright: ignore[reportGeneralTypeIssues]
              v0: f64):
         speed = v0
         if not first:
             speed = wp.sqrt(status.max_v2[0])
         speed = pymax(speed, params.collider_speed)
-        best = f64(inf)
+        best = f64(inf)  # pyright: ignore[reportArgumentType]
         binding = int(WAVE)
-        fresh = f64(inf)
+        fresh = f64(inf)  # pyright: ignore[reportArgumentType]
         factor = f64(1.0)
         if wp.static(implicit):
-            limit = f64(inf)
+            limit = f64(inf)  # pyright: ignore[reportArgumentType]
             if speed > f64(0.0):
                 limit = params.displacement * params.dx / speed
             best = control.scale[0] * limit
@@ -154,7 +154,7 @@ def make_choose(dim: int, n_bodies: int, implicit: bool):
     rule = make_rule(dim, n_bodies, implicit)
 
     @wp.func
-    def choose(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,
+    def choose(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, first: bool,  # pyright: ignore[reportGeneralTypeIssues]
                v0: f64):
         limit, fresh, factor, binding = rule(control, status, laws, params, first, v0)
         dt = params.dt_fixed
@@ -200,7 +200,7 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
     iC = diagnostic_names(dim).index("center_of_mass_x")
 
     @wp.func
-    def failure(control: StepControl, status: StepStatus, laws: BodyLaws, detection: DetectParams):
+    def failure(control: StepControl, status: StepStatus, laws: BodyLaws, detection: DetectParams):  # pyright: ignore[reportGeneralTypeIssues]
         """Why the step failed (DETECTION, NONFINITE, OUTSIDE), or 0."""
         nonfinite = status.nonfinite[0] > f64(0.0)
         halt = int(0)
@@ -220,7 +220,7 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
         return halt
 
     @wp.func
-    def going_on(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, n: f64, t: f64):
+    def going_on(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, n: f64, t: f64):  # pyright: ignore[reportGeneralTypeIssues]
         """After a sound step: DONE at the end, else the next step is chosen
         (COLLAPSE), REGRID for the host, PAUSE for an observer, or 0."""
         halt = int(0)
@@ -242,15 +242,15 @@ def make_policy(dim: int, n_bodies: int, implicit: bool, detect: bool, energy_on
         return halt
 
     @warp_kernel
-    def initial(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, v0: f64):
+    def initial(control: StepControl, status: StepStatus, laws: BodyLaws, params: PolicyParams, v0: f64):  # pyright: ignore[reportGeneralTypeIssues]
         control.halt[0] = f64(0.0)
         if choose(control, status, laws, params, True, v0):
             control.halt[0] = f64(COLLAPSE)
         control.skip[0] = wp.where(control.halt[0] != f64(0.0), f64(1.0), f64(0.0))
 
     @warp_kernel
-    def policy(status: StepStatus, control: StepControl, laws: BodyLaws, params: PolicyParams,
-               detection: DetectParams, flat: wp.array(dtype=f64), history: wp.array2d(dtype=f64)):
+    def policy(status: StepStatus, control: StepControl, laws: BodyLaws, params: PolicyParams,  # pyright: ignore[reportGeneralTypeIssues]
+               detection: DetectParams, flat: wp.array(dtype=f64), history: wp.array2d(dtype=f64)):  # pyright: ignore[reportGeneralTypeIssues]
         if wp.static(batched):
             if control.skip[0] != f64(0.0):
                 return

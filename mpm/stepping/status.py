@@ -23,6 +23,7 @@ step's whole buffer is one row of the history the host reads every k steps
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import warp as wp
@@ -168,7 +169,7 @@ class StepBuffer:
         with wp.ScopedDevice(device):
             self.flat = wp.array(self.initial, dtype=wp.float64)
             self._reset = wp.array(self.initial[:self.status_size], dtype=wp.float64)
-        self._status_view = self.flat[:self.status_size]
+        self._status_view = cast(wp.array, self.flat[:self.status_size])
         self._views: dict[str, wp.array] = {}
         self.status, self.control = StepStatus(), StepControl()
         for f in FIELDS:
@@ -181,7 +182,7 @@ class StepBuffer:
         v = self._views.get(name)
         if v is None:
             s = self.slices[name]
-            v = self._views[name] = self.flat[s.start:s.stop]
+            v = self._views[name] = cast(wp.array, self.flat[s.start:s.stop])  # a contiguous view
         return v
 
     def reset(self) -> None:
@@ -200,6 +201,28 @@ class StepBuffer:
         """Write control values from the host (host-to-device copies)."""
         for name, v in values.items():
             self.view(name).assign(np.asarray(v, np.float64).reshape(-1))
+
+
+@dataclass
+class NewtonReport:
+    """What one implicit solve did."""
+
+    newton: int = 0  # Newton iterations
+    cg: int = 0  # conjugate-gradient iterations, all Newton iterations together
+    residual: float = 0.0  # final |R| / initial |R| (0 when no iteration was needed)
+    residual0: float = 0.0  # initial |R| [kg m/s]
+    backtracks: int = 0  # line-search halvings, all iterations together
+    rounds: int = 1  # solves (more than one where friction or a one-sided constraint changed a node's state)
+    unsettled: int = 0  # bins and nodes the last solve leaves unsatisfied after ROUNDS solves (0: settled)
+    reason: str = ""  # why it failed, or what the near miss was
+    # converged | near_miss (out of iterations, or the line search stalled, within newton_accept of the
+    # tolerance) | missed | diverged | stalled (see ImplicitSolve.solve)
+    outcome: str = "converged"
+
+    @property
+    def converged(self) -> bool:
+        """Whether the step may use the solution: converged, or a near miss."""
+        return self.outcome in ("converged", "near_miss")
 
 
 @dataclass
@@ -235,7 +258,7 @@ class StepReport:
     """[s] deciding and updating"""
     dt: float = 0.0
     """[s] the step taken (an implicit step may have been halved)"""
-    newton: object = None
+    newton: NewtonReport | None = None
     """the implicit solve's NewtonReport (None: explicit)"""
     halvings: int = 0
     """times the implicit step was halved after a failed solve"""
@@ -296,8 +319,8 @@ class StepReport:
     @classmethod
     def failed(cls, n_bodies: int, dim: int) -> "StepReport":
         """The report of a step that did not complete (its state was restored)."""
-        z = [np.zeros(n_bodies) for _ in range(6)]
-        return cls(0.0, 0, 0, *z, np.zeros((n_bodies, dim)), np.zeros((n_bodies, dim)))
+        z, box = np.zeros(n_bodies), np.zeros((n_bodies, dim))
+        return cls(0.0, 0, 0, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), box.copy(), box.copy())
 
     @classmethod
     def of(cls, v: dict[str, np.ndarray], dim: int, energy: bool, reach: bool) -> "StepReport":

@@ -139,7 +139,7 @@ class BodyLaws:
     nu: wp.array(dtype=wp.float64)  # [m^2/s] kinematic viscosity
 
 
-def body_laws(materials, device) -> BodyLaws:
+def body_laws(materials, device) -> BodyLaws:  # pyright: ignore[reportGeneralTypeIssues]  (a wp.struct)
     laws = BodyLaws()
     rows = np.array([m.wave_speed_law() for m in materials], dtype=np.float64).reshape(-1, 4)
     with wp.ScopedDevice(device):
@@ -165,7 +165,7 @@ def pymax(a: wp.float64, b: wp.float64):
 
 
 @wp.func
-def wave_speed(laws: BodyLaws, i: int, J: wp.float64):
+def wave_speed(laws: BodyLaws, i: int, J: wp.float64):  # pyright: ignore[reportGeneralTypeIssues]
     """Body i's wave speed at volume ratio J [m/s]."""
     if laws.b[i] == wp.float64(0.0):
         return laws.c0[i]

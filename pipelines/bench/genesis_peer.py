@@ -26,7 +26,7 @@ def main(args: dict) -> dict:
     os.environ.setdefault("QD_NUM_THREADS", "1")
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    import genesis as gs
+    import genesis as gs  # pyright: ignore[reportMissingImports]  # optional peer (its own Python)
     import numpy as np
 
     t0 = time.perf_counter()

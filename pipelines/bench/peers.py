@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 import mpm
+from mpm.materials.base import Isotropic
+
 from .runs import QUIET, WARM, interleaved, spec_for
 
 BALL_2D = ["scene=elastic_ball_2d", "scene.resolution=128", "material=fixed_corotated", "scheme=empm"]
@@ -46,7 +48,7 @@ def taichi_ball(device: str, steps: int = STEPS):
     """A callable timing ``steps`` Taichi steps (median ms per step over
     blocks of 20), or None when taichi is not installed."""
     try:
-        import taichi as ti
+        import taichi as ti  # pyright: ignore[reportMissingImports]  # optional peer, not in the venv
     except ImportError:
         return None
     spec = spec_for(BALL_2D)
@@ -55,6 +57,7 @@ def taichi_ball(device: str, steps: int = STEPS):
     m_p = float(model.mass.numpy()[0])
     V_p = float(model.volume.numpy()[0])
     mat = spec.scene.bodies[0].material
+    assert isinstance(mat, Isotropic)  # BALL_2D: fixed_corotated
     mu, la = mat.E / (2 * (1 + mat.nu)), mat.E * mat.nu / ((1 + mat.nu) * (1 - 2 * mat.nu))
     n_grid, dx = round(1.0 / spec.scene.dx), spec.scene.dx
     inv_dx, g, bound = 1.0 / dx, -spec.scene.gravity[1], spec.scene.wall_cells
@@ -156,6 +159,7 @@ def bench_peers(workdir: Path, device: str, rounds: int = ROUNDS) -> list[dict]:
         ours = m["step_time_ms"] if ours is None else min(ours, m["step_time_ms"])
         t = run_taichi()
         theirs = t if theirs is None else min(theirs, t)
+    assert ours is not None and theirs is not None  # rounds >= 1
     return [{"peer": "taichi", "missing": False, "particles": n, "ours_ms": ours, "taichi_ms": theirs,
              "ratio": theirs / ours, "threads": 1 if device == "cpu" else None, "rounds": rounds}]
 
@@ -187,6 +191,7 @@ def genesis_ball(python: str, steps: int = GENESIS_STEPS, timeout: float = 1800.
     spec = spec_for(BALL_3D)
     body = spec.scene.bodies[0]
     mat, shape = body.material, body.shape
+    assert isinstance(mat, Isotropic) and isinstance(shape, mpm.Sphere)  # BALL_3D: an elastic ball
     args = {"dt": DT, "gravity": list(spec.scene.gravity), "domain": list(spec.scene.domain),
             "grid_density": round(1.0 / spec.scene.dx), "particle_size": spec.scene.dx / 2,
             "E": mat.E, "nu": mat.nu, "rho": mat.rho, "center": list(shape.center), "radius": shape.radius,
@@ -214,6 +219,7 @@ def bench_genesis(workdir: Path, python: str | None, rounds: int = ROUNDS) -> li
         except (RuntimeError, subprocess.TimeoutExpired, ValueError) as e:  # ValueError: no JSON line
             return [{"peer": "genesis", "missing": False, "failed": str(e)}]
         theirs = g if theirs is None or g["ms_per_step"] < theirs["ms_per_step"] else theirs
+    assert ours is not None and theirs is not None  # rounds >= 1
     n_ours, n_theirs = ours["particles"], theirs["particles"]
     return [{"peer": "genesis", "missing": False, "version": theirs["genesis"], "threads": theirs["threads"],
              "particles": n_ours, "genesis_particles": n_theirs, "ours_ms": ours["step_time_ms"],

@@ -122,6 +122,7 @@ def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None,
             n = driver.step - first
             if best is None or dt / n < best[0]:
                 best = (dt / n, r.reads / n)
+        assert best is not None  # rounds >= 1
         per_step, reads = best
         dev = wp.get_device(device)
         in_use = (dev.total_memory - dev.free_memory) / 1e6 if dev.is_cuda else None
@@ -270,6 +271,7 @@ def profile(steps: int = 20, rounds: int = 3, cases: dict | None = None) -> list
                 total = 1e3 * (time.perf_counter() - t0) / (driver.step - first)
             if best is None or total < best[0]:
                 best = (total, {k: v / (driver.step - first) for k, v in c.ms.items()})
+        assert best is not None  # rounds >= 1
         total, ms = best
         for name, t in sorted(ms.items(), key=lambda kv: -kv[1]):
             rows.append({"case": case, "part": name, "ms": t, "share": t / total})

@@ -5,7 +5,7 @@ type's geometry, and the :class:`mpm.Collider` it builds."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, List, Optional
+from typing import Any, ClassVar, List, Optional
 
 import numpy as np
 
@@ -13,7 +13,7 @@ import mpm
 from mpm.colliders import BOUNDARIES
 from mpm.meshes import MeshShape
 
-from .fields import ConfigError, Context, Family, number, setting, vector
+from .fields import ConfigError, Context, Family, coords, given, number, setting, vector
 from .shapes import axis_in, mesh_file
 
 
@@ -57,6 +57,7 @@ class _Collider:
     ``inside: true`` (the shape is a container), ``velocity`` while
     start <= t < end."""
 
+    geometry: ClassVar[tuple[str, ...]]  # each type's keys of its shape (build)
     type: str = setting("half_space", "the kind of collider")
     name: str = setting("", "a name for the recording")
     boundary: str = setting("slip", "sticky, slip or separate (mpm.colliders)", choices=BOUNDARIES)
@@ -165,7 +166,8 @@ class BowlCollider(_Collider):
     axis: Optional[Any] = setting(None, AXIS, parse=_axis)
 
     def build(self, key: str, ctx: Context) -> mpm.Collider:
-        number(f"{key}.rim", self.rim, float, {"keyed": True, "gt": -(self.radius + self.thickness), "le": self.radius})
+        radius, thickness = given(self.radius), given(self.thickness)
+        number(f"{key}.rim", self.rim, float, {"keyed": True, "gt": -(radius + thickness), "le": radius})
         return super().build(key, ctx)
 
 
@@ -182,7 +184,7 @@ class MeshCollider(_Collider):
     axis: Optional[int] = setting(None, "the mesh's up axis, 0, 1 or 2; null: 1 (y)", ge=0, le=2)
 
     def build(self, key: str, ctx: Context) -> mpm.Collider:
-        shape = MeshShape(self.mesh, self.center, self.size, axis_in(f"{key}.axis", self.axis, 3))
+        shape = MeshShape(given(self.mesh), coords(self.center), given(self.size), axis_in(f"{key}.axis", self.axis, 3))
         return mpm.Collider(**self.common(), mesh=shape)
 
 

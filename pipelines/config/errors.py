@@ -16,7 +16,7 @@ EXIT_CONFIG = 2
 EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}  # of a run, by status
 
 
-def _first_line(text: str) -> str:
+def _first_line(text: object) -> str:
     return next((ln.strip() for ln in str(text).splitlines() if ln.strip()), str(text))
 
 

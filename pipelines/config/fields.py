@@ -45,7 +45,7 @@ import types
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence, TypeVar
 
 from omegaconf import OmegaConf
 
@@ -64,7 +64,7 @@ class ConfigError(ValueError):
 
 def setting(default: Any, doc: str, *, gt=None, ge=None, lt=None, le=None, choices=None, size=None,
             nonempty: str | None = None, required: bool = False, parse: Callable | None = None,
-            family: "Family | None" = None):
+            family: "Family | None" = None) -> Any:
     """A field of a run setting, like :func:`mpm.params.param` (doc, range,
     ``choices``) with: ``size`` the length of a list of numbers (``"dim"``:
     the scene's dimension; None: any); ``nonempty`` what an empty list is
@@ -87,6 +87,21 @@ class Context:
 
     dim: int = 3
     rng: Any = None
+
+
+T = TypeVar("T")
+N = TypeVar("N", int, float)
+
+
+def given(v: T | None) -> T:
+    """A required key's value (``setting(..., required=True)``): :func:`check` refused null for it."""
+    assert v is not None
+    return v
+
+
+def coords(v: Sequence[float] | None) -> tuple[float, ...]:
+    """A required list of numbers as the solver takes it (a tuple: what :func:`vector` made)."""
+    return tuple(given(v))
 
 
 def plain(node) -> Any:
@@ -146,7 +161,7 @@ def bounds(key: str, name: str, meta: Mapping) -> str:
     return accepted_range(name, meta)
 
 
-def number(key: str, value, kind=float, meta: Mapping | None = None, name: str = ""):
+def number(key: str, value, kind: type[N] = float, meta: Mapping | None = None, name: str = "") -> N:
     """``value`` as ``kind`` (int or float), finite (or +inf where the field
     accepts it) and within the field's range."""
     meta = meta or {}
@@ -164,7 +179,7 @@ def number(key: str, value, kind=float, meta: Mapping | None = None, name: str =
     accepted = bounds(key, name or key.rsplit(".", 1)[-1], meta)
     if not math.isfinite(v) and not (meta.get("inf") and v == math.inf):
         raise ConfigError(key, f"{v} is not finite; accepted: a finite number" + (f", {accepted}" if accepted else ""))
-    if accepted and not in_range(v, meta):
+    if accepted and not in_range(v, dict(meta)):
         raise ConfigError(key, f"{v} out of range; accepted: {accepted}")
     return v
 

@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import re
+from typing import Any
 
 from omegaconf import OmegaConf
 from omegaconf.nodes import BooleanNode
@@ -106,7 +107,7 @@ def check_kinds(cfg, overrides: list[str]) -> None:
             continue
         family, node = found
         try:
-            values = OmegaConf.to_container(OmegaConf.select(cfg, node), resolve=False)
+            values: Any = OmegaConf.to_container(OmegaConf.select(cfg, node), resolve=False)
         except Exception:  # noqa: BLE001 - not a mapping: refused by the config's checks
             continue
         kind = values.get(family.key) if isinstance(values, dict) else None

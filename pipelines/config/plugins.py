@@ -209,7 +209,8 @@ def _own(module) -> bool:
     if not path or not os.path.isfile(path):
         return False
     path = os.path.realpath(path)
-    ours = [os.path.dirname(os.path.realpath(m.__file__)) for m in (mpm, sys.modules[__name__.split(".")[0]])]
+    files = [m.__file__ for m in (mpm, sys.modules[__name__.split(".")[0]])]
+    ours = [os.path.dirname(os.path.realpath(f)) for f in files if f is not None]  # regular packages: both have one
     installed = [os.path.realpath(p) for p in (sys.prefix, sys.base_prefix, sys.exec_prefix)]
     return not any(path.startswith(p + os.sep) for p in ours + installed)
 
@@ -248,7 +249,9 @@ def sources(scene: mpm.Scene, kernel: mpm.Kernel) -> dict[str, str]:
     out = {}
     for label, _, module in _defined(scene, kernel):
         for name in imported(module):
-            with open(sys.modules[name].__file__, "rb") as f:
+            path = sys.modules[name].__file__
+            assert path is not None  # imported() keeps modules with a file (_own)
+            with open(path, "rb") as f:
                 out[f"module {name}"] = hashlib.sha256(f.read()).hexdigest()[:16]
         if label.startswith("kernel "):
             out[label] = hashlib.sha256(_fields(kernel).encode()).hexdigest()[:16]

@@ -10,7 +10,7 @@ import math
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, cast
 
 import numpy as np
 from omegaconf import MISSING, OmegaConf
@@ -23,7 +23,7 @@ from mpm.sampling import PARTICLE_VOLUMES
 from mpm.scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
 from .colliders import ColliderConfig, COLLIDERS
-from .fields import ConfigError, Context, Family, check, choice, number, plain, setting, vector
+from .fields import ConfigError, Context, Family, check, choice, given, number, plain, setting, vector
 from .physics import MATERIAL
 from .shapes import SHAPES, ShapeConfig, fixed_shape
 
@@ -204,7 +204,7 @@ class VibratingBar:
         axis = number(f"{key}.axis", self.axis, int, {"keyed": True, "ge": 0, "le": dim - 1})
         lo, hi = body.shape.bounds()
         return mpm.analytic.VibratingBar(lo=float(lo[axis]), length=float(hi[axis] - lo[axis]),
-                                         wave_speed=(mat.E / mat.rho) ** 0.5, amplitude=self.amplitude,
+                                         wave_speed=(mat.E / mat.rho) ** 0.5, amplitude=given(self.amplitude),
                                          mode=self.mode, axis=axis)
 
 
@@ -231,7 +231,8 @@ class ShearWave:
             raise ConfigError(f"{key}.normal", f"{normal} equals axis; accepted: another axis")
         lo, hi = body.shape.bounds()
         return mpm.analytic.ShearWave(lo=float(lo[normal]), thickness=float(hi[normal] - lo[normal]),
-                                      kinematic_viscosity=mat.viscosity / mat.rho, amplitude=self.amplitude,
+                                      kinematic_viscosity=mat.viscosity / mat.rho,
+                                      amplitude=given(self.amplitude),
                                       mode=self.mode, axis=axis, normal=normal)
 
 
@@ -252,9 +253,10 @@ class Vortex:
         if mat.name != "neo_hookean":
             raise ConfigError("scene.bodies[0].material.model", f"{mat.name}: the vortex's body force is "
                                                                 "derived for neo_hookean; accepted: neo_hookean")
-        return mpm.analytic.Vortex(center=tuple(shape.center), inner_radius=shape.inner_radius,
+        center = cast("tuple[float, float]", tuple(shape.center))  # 2D only (dims)
+        return mpm.analytic.Vortex(center=center, inner_radius=shape.inner_radius,
                                    outer_radius=shape.radius, shear_modulus=mat.E / (2 * (1 + mat.nu)),
-                                   density=mat.rho, amplitude=self.amplitude, omega=self.omega)
+                                   density=mat.rho, amplitude=given(self.amplitude), omega=self.omega)
 
 
 SOLUTION = Family("solution", "type", {c.__dataclass_fields__["type"].default: c
@@ -370,11 +372,13 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
             raise ConfigError(f"{rkey}.body", f"missing; accepted: a body's index (0 to {len(bodies) - 1}) or name "
                                               f"({', '.join(names)})")
         body = body_index(f"{rkey}.body", r.body)
+        assert body is not None  # r.body is not None
         regions.append(mpm.KinematicRegion(
             body=body, select=r.select.build(f"{rkey}.select", replace(ctx, rng=None)), name=r.name,
             velocity=r.velocity, angular_velocity=r.angular_velocity, velocity_gradient=r.velocity_gradient,
             center=r.center, start=r.start, end=math.inf if r.end is None else r.end))
-    scene = mpm.Scene(dim=dim, domain=sc.domain, resolution=sc.resolution, bodies=bodies, gravity=sc.gravity,
+    scene = mpm.Scene(dim=dim, domain=tuple(sc.domain), resolution=sc.resolution, bodies=bodies,
+                      gravity=tuple(sc.gravity),
                       walls=sc.walls, wall_cells=sc.wall_cells, boundary_rule=sc.boundary_rule, ppc=sc.ppc,
                       jitter=sc.jitter,
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,

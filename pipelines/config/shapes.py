@@ -15,7 +15,7 @@ import numpy as np
 import mpm
 from mpm.meshes import MESH_SUFFIXES, MeshError, MeshShape, asset_path, load_mesh, mesh_assets
 
-from .fields import ConfigError, Context, Family, number, setting, vector
+from .fields import ConfigError, Context, Family, coords, given, number, setting, vector
 
 ROTATION = "[deg] an angle (2D), three angles about x, y, z (3D), or random (drawn from the run's seed)"
 
@@ -91,7 +91,7 @@ class Box:
     rotation: Optional[Any] = _rotation()
 
     def build(self, key: str, ctx: Context):
-        return _rotated(mpm.Box(self.center, self.half_size), self.rotation)
+        return _rotated(mpm.Box(coords(self.center), coords(self.half_size)), self.rotation)
 
 
 @dataclass
@@ -105,7 +105,7 @@ class Sphere:
     rotation: Optional[Any] = _rotation()
 
     def build(self, key: str, ctx: Context):
-        return _rotated(mpm.Sphere(self.center, self.radius, _inner(key, self)), self.rotation)
+        return _rotated(mpm.Sphere(coords(self.center), given(self.radius), _inner(key, self)), self.rotation)
 
 
 def _inner(key: str, shape) -> float:
@@ -130,8 +130,8 @@ class Cylinder:
 
     def build(self, key: str, ctx: Context):
         inner = _inner(key, self)
-        return _rotated(mpm.Cylinder(self.center, self.radius, self.half_height, axis_in(f"{key}.axis", self.axis, 3),
-                                     inner), self.rotation)
+        return _rotated(mpm.Cylinder(coords(self.center), given(self.radius), given(self.half_height),
+                                     axis_in(f"{key}.axis", self.axis, 3), inner), self.rotation)
 
 
 @dataclass
@@ -150,9 +150,9 @@ class Bowl:
     rotation: Optional[Any] = _rotation()
 
     def build(self, key: str, ctx: Context):
-        rim = number(f"{key}.rim", self.rim, float,
-                     {"keyed": True, "gt": -(self.radius + self.thickness), "le": self.radius})
-        return _rotated(mpm.scene.Bowl(self.center, self.radius, self.thickness, rim,
+        radius, thickness = given(self.radius), given(self.thickness)
+        rim = number(f"{key}.rim", self.rim, float, {"keyed": True, "gt": -(radius + thickness), "le": radius})
+        return _rotated(mpm.scene.Bowl(coords(self.center), radius, thickness, rim,
                                        axis_in(f"{key}.axis", self.axis, ctx.dim)), self.rotation)
 
 
@@ -171,8 +171,8 @@ class Mesh:
     rotation: Optional[Any] = _rotation()
 
     def build(self, key: str, ctx: Context):
-        return _rotated(MeshShape(self.mesh, self.center, self.size, axis_in(f"{key}.axis", self.axis, 3)),
-                        self.rotation)
+        return _rotated(MeshShape(given(self.mesh), coords(self.center), given(self.size),
+                                  axis_in(f"{key}.axis", self.axis, 3)), self.rotation)
 
 
 def parts(key: str, value, ctx: Context) -> list:
@@ -192,8 +192,8 @@ class Compound:
     rotation: Optional[Any] = _rotation()
 
     def build(self, key: str, ctx: Context):
-        return _rotated(mpm.Compound(tuple(p.build(f"{key}.parts[{i}]", ctx) for i, p in enumerate(self.parts))),
-                        self.rotation)
+        return _rotated(mpm.Compound(tuple(p.build(f"{key}.parts[{i}]", ctx)
+                                           for i, p in enumerate(given(self.parts)))), self.rotation)
 
 
 SHAPES = Family("shape", "type", {c.__dataclass_fields__["type"].default: c

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import os
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from omegaconf import OmegaConf
@@ -255,7 +255,7 @@ def compose_spec(overrides: list[str]) -> RunSpec:
         return resolve(compose(config_name="config", overrides=list(overrides)))
 
 
-def validate(cfg, overrides: list[str] = ()) -> tuple[RunSpec, list[str]]:
+def validate(cfg, overrides: Sequence[str] = ()) -> tuple[RunSpec, list[str]]:
     """Everything ``pipelines.run`` checks before a run starts: the
     overrides' literals and kinds set by key
     (:func:`pipelines.config.overrides.check_literals`, ``check_kinds``),

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import rerun as rr
+from numpy.typing import ArrayLike
 
 from .colours import VIRIDIS_LUT, UNITS, body_colour
 
@@ -35,7 +36,7 @@ def _points(dim: int, **kw):
     return (rr.Points2D if dim == 2 else rr.Points3D)(**kw)
 
 
-def _at(dim: int, x: float, y: np.ndarray) -> np.ndarray:
+def _at(dim: int, x: float, y: ArrayLike) -> np.ndarray:
     """Points at ``x`` and heights ``y``, on the back face z = 0 in 3D."""
     y = np.asarray(y, float)
     xy = np.stack([np.full_like(y, x), y], axis=1)

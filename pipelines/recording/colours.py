@@ -45,7 +45,8 @@ FROM_ZERO = frozenset({"speed", "dJ", "plastic_strain", "hardening"})
 
 def body_colour(i: int) -> tuple[tuple[int, int, int], str]:
     """Body ``i``'s colour (RGB) and its name."""
-    return tuple(int(c) for c in PALETTE[i % len(PALETTE)]), PALETTE_NAMES[i % len(PALETTE)]
+    r, g, b = (int(c) for c in PALETTE[i % len(PALETTE)])
+    return (r, g, b), PALETTE_NAMES[i % len(PALETTE)]
 
 
 def colormap(values: np.ndarray, top: float, bottom: float = 0.0) -> np.ndarray:

@@ -14,9 +14,14 @@ the recording property ``view`` states the convention.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+
+if TYPE_CHECKING:
+    from rerun.encodings import EntityPathLike
 
 FLIP_2D = (1.0, -1.0, 1.0)  # scale of the 2D spatial entities: y up on the screen
 SPATIAL_2D = ("particles", "domain", "colliders", "regions")  # the entities that carry the flip
@@ -102,8 +107,8 @@ def y_range(members: list[str], extents: dict) -> tuple[float, float] | None:
     """The y range of a plot of ``members`` with room for its legend above
     the data, from the series' (min, max) in ``extents``; None unless every
     member has an extent."""
-    spans = [extents.get(m) for m in members]
-    if not spans or any(e is None for e in spans):
+    spans = [e for e in (extents.get(m) for m in members) if e is not None]
+    if not members or len(spans) < len(members):
         return None
     lo, hi = min(e[0] for e in spans), max(e[1] for e in spans)
     span = hi - lo if hi > lo else max(abs(hi), 1e-30)
@@ -158,7 +163,8 @@ def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents:
     hidden = [f"/channels/{c}" for c in channels]
     contents = ["/particles", "/particles/key/**", "/domain", "/colliders/**", "/regions/**"] + [
         p for c in hidden for p in (c, f"{c}/key/**")]
-    overrides = {path: rrb.EntityBehavior(visible=False) for path in hidden} or None
+    overrides: dict[EntityPathLike, rrb.EntityBehavior] | None = {
+        path: rrb.EntityBehavior(visible=False) for path in hidden} or None
     if dim == 2:
         m = 0.05 * float(L.max())
         view = rrb.Spatial2DView(name=title, origin="/", contents=contents, overrides=overrides,
@@ -200,7 +206,7 @@ def declared(path) -> dict:
     data = reader.stream().collect()
     static = data.reader(index=None, contents="/**").to_arrow_table()
 
-    def first(table, col):
+    def first(table, col) -> Any:  # the column's last value (None: none)
         values = [v for v in table.column(col).to_pylist() if v is not None] if col in table.column_names else []
         return values[-1] if values else None
 

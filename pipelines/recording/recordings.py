@@ -15,6 +15,7 @@ import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Iterable, cast
 
 import numpy as np
 
@@ -33,8 +34,8 @@ class Recording:
     scalars: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (steps, values)
     properties: dict[str, list]  # "config:overrides" -> [values], "provenance:git_commit" -> [value]
     update_steps: np.ndarray  # steps with a configuration-update event
-    colliders: dict = None  # name -> (vertices, triangles) in 3D, or a list of (n, 2) polylines in 2D
-    collider_shift: dict = None  # name -> (steps, translations) of a moving collider
+    colliders: dict | None = None  # name -> (vertices, triangles) in 3D, or a list of (n, 2) polylines in 2D
+    collider_shift: dict | None = None  # name -> (steps, translations) of a moving collider
     timings: dict = field(default_factory=dict)  # name -> (steps, values) [ms], from the timings file
     run: dict = field(default_factory=dict)  # "started", "host", "command" -> [value], from the timings file
     index: list = field(default_factory=list)  # per logged step: the particles' numbers (None: all of them)
@@ -117,6 +118,7 @@ def read(path: str | Path, particles: bool = True) -> Recording:
              and c.split(":", 1)[1] not in ("dJ", "positions", "colors", "radii", "body_index")
              and ":" not in c.split(":", 1)[1]]
     if pos_col is not None:
+        row: Any  # a pandas row: its cells' types vary by column
         for _, row in parts.iterrows():
             if row[pos_col] is None:
                 continue
@@ -157,8 +159,8 @@ def read(path: str | Path, particles: bool = True) -> Recording:
             v = props_df[c].iloc[0]
             props[c[len("property:"):]] = [] if v is None else list(v)
     events = data.reader(index="step", contents="/events").to_pandas()
-    update_steps = [int(s) for s, u in zip(events.get("step", []), events.get("/events:update_step", []))
-                    if u is not None]
+    update_steps = [int(s) for s, u in zip(cast(Iterable, events.get("step", [])),  # (pandas: get's type has None)
+                                           cast(Iterable, events.get("/events:update_step", []))) if u is not None]
     colliders, shifts = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,

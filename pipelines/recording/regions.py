@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -135,7 +136,7 @@ def _config(text: str) -> dict:
     try:
         from omegaconf import OmegaConf
 
-        return OmegaConf.to_container(OmegaConf.create(text), resolve=True)
+        return cast(dict, OmegaConf.to_container(OmegaConf.create(text), resolve=True))  # a mapping's document
     except Exception:  # an interpolation that cannot be resolved here: the plain document
         import yaml
 

@@ -63,6 +63,7 @@ import threading
 import uuid
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -88,6 +89,11 @@ CHANNEL_DRAW_ORDER = 31.0  # 2D: the channels over the particles (Rerun's points
 
 
 class RerunSink(Sink):
+    _points: type[rr.Points2D] | type[rr.Points3D]  # these: set by start()
+    _body: np.ndarray  # body per particle
+    _names: list[str]
+    _domain: tuple
+
     def __init__(self, path: Path, flush_every: int = 500, threaded: bool = True):
         self.path = Path(path)
         self.flush_every = flush_every
@@ -98,7 +104,6 @@ class RerunSink(Sink):
         self._rows = 0
         self._buffer: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._timings: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
-        self._points = None
         self._moving = []
         self._regions = []  # pipelines.recording.regions.Region, drawn with each particle frame
         self._color = "body"
@@ -106,7 +111,6 @@ class RerunSink(Sink):
         self._values: FrameValues | None = None  # the frames' values of the fields coloured at close
         self._labelled: set[tuple] = set()  # scalar series named (with their unit) so far
         self._dim = 2
-        self._body = None
         self._channels: list[str] = []  # log.channels: a /channels/<field> entity each
         self._layout: tuple | None = None  # the blueprint's arguments (start), re-sent with the extents at close
         self._extents: dict[str, tuple[float, float]] = {}  # scalar name -> (min, max) over the run
@@ -142,10 +146,9 @@ class RerunSink(Sink):
         rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
                 rr.AnyValues(body_index=self._body.astype(np.int32)), static=True)
+        over: dict[str, Any] = {"draw_order": CHANNEL_DRAW_ORDER} if meta.dim == 2 else {}
         for name in self._channels:  # drawn over /particles in 2D when shown
-            rec.log(f"channels/{name}", self._points.from_fields(
-                radii=meta.particle_radius, **({"draw_order": CHANNEL_DRAW_ORDER} if meta.dim == 2 else {})),
-                static=True)
+            rec.log(f"channels/{name}", self._points.from_fields(radii=meta.particle_radius, **over), static=True)
         self._domain = tuple(meta.domain)
         self._regions = regions.of_yaml(((meta.properties or {}).get("config") or {}).get("yaml") or "", meta.dim)
         self._legend()
@@ -261,19 +264,21 @@ class RerunSink(Sink):
         once the ranges are known."""
         if self._color == "body":
             colour_key.log_bodies(self.rec, "particles/key", list(self._names), self._dim, self._domain)
-        elif self._ranges.get(self._color) is not None:
-            colour_key.log_bar(self.rec, "particles/key", self._color, *self._ranges[self._color][0], self._dim,
-                               self._domain)
+        elif (r := self._ranges.get(self._color)) is not None:
+            (lo, hi), _ = r
+            colour_key.log_bar(self.rec, "particles/key", self._color, lo, hi, self._dim, self._domain)
         for k, name in enumerate(self._channels):
-            if self._ranges.get(name) is not None:
-                colour_key.log_bar(self.rec, f"channels/{name}/key", name, *self._ranges[name][0], self._dim,
-                                   self._domain, column=k + 1)
+            if (r := self._ranges.get(name)) is not None:
+                (lo, hi), _ = r
+                colour_key.log_bar(self.rec, f"channels/{name}/key", name, lo, hi, self._dim, self._domain,
+                                   column=k + 1)
 
     def _colour_frames(self) -> None:
         """At the end: the fields coloured on the run's range, a colour row
         per logged frame at its step and time (beside its positions), the
         ranges stated in the legend, properties, key and view title."""
         values = self._values
+        assert values is not None  # close() calls this only then
         for field in values.fields:
             self._ranges[field] = (values.range(field), "the run's range")
         paths = [("particles", self._color)] * (self._color in values.fields) + [
@@ -300,6 +305,7 @@ class RerunSink(Sink):
 
     def _write_frames(self) -> None:
         """The writer thread: frames in order until None."""
+        assert self._frames is not None  # threaded: the writer's queue
         while (frame := self._frames.get()) is not None:
             if self._failure is None:
                 try:
@@ -315,6 +321,7 @@ class RerunSink(Sink):
     def _drain(self) -> None:
         """Wait until every frame handed over is written; stop the writer."""
         if self._writer is not None and self._writer.is_alive():
+            assert self._frames is not None  # made with the writer
             self._frames.put(None)
             self._writer.join()
         self._writer = None
@@ -343,7 +350,7 @@ class RerunSink(Sink):
         colors = self._colors(self._color, values.get(self._color), index)
         if index is not None:
             values["index"] = index.astype(np.int32)
-        parts = [self._points.from_fields(positions=x, colors=colors)]
+        parts: list[rr.AsComponents] = [self._points.from_fields(positions=x, colors=colors)]
         if values:
             parts.append(rr.AnyValues(**values))
         self.rec.log("particles", *parts)
@@ -365,7 +372,7 @@ class RerunSink(Sink):
     def event(self, step, t, text, level="INFO", **values):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
-        parts = [rr.TextLog(text, level=level)]
+        parts: list[rr.AsComponents] = [rr.TextLog(text, level=level)]
         if values:
             parts.append(rr.AnyValues(**values))
         self.rec.log("events", *parts)

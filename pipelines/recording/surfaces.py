@@ -98,14 +98,21 @@ def _revolve(profile: np.ndarray, center: np.ndarray, axis: np.ndarray) -> np.nd
     return center + h * axis[None, None, :] + r * ring[None, :, :]  # (rows, N, 3)
 
 
+def _unit_normals(c: Collider) -> list[np.ndarray]:
+    """A half-space's or a wedge's outward normals, of unit length."""
+    given = [c.normal] if c.type == "half_space" else c.normals
+    assert given is not None and all(n is not None for n in given)  # Collider.problems: its type's keys
+    normals = [np.asarray(n, float) for n in given]
+    return [n / np.linalg.norm(n) for n in normals]
+
+
 def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3), triangles (m, 3)) of a 3D collider at its initial place."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     m = _Mesh()
     if c.type in ("half_space", "wedge"):
         p = np.asarray(c.point, float)
-        normals = [c.normal] if c.type == "half_space" else list(c.normals)
-        normals = [np.asarray(n, float) / np.linalg.norm(n) for n in normals]
+        normals = _unit_normals(c)
         for i, n in enumerate(normals):
             poly = _box_edges_polygon(p, n, lo, hi)
             for j, other in enumerate(normals):
@@ -114,6 +121,7 @@ def surface_3d(c: Collider, lo, hi) -> tuple[np.ndarray, np.ndarray]:
             m.polygon(poly)
         return m.result()
     if c.type == "mesh":
+        assert c.mesh is not None  # Collider.problems: a mesh collider's mesh
         pts, tris = c.mesh.geometry
         return np.asarray(pts, float), np.asarray(tris, np.int32)
     center = np.asarray(c.center, float)
@@ -155,8 +163,7 @@ def outline_2d(c: Collider, lo, hi) -> list[np.ndarray]:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     if c.type in ("half_space", "wedge"):
         p = np.asarray(c.point, float)
-        normals = [c.normal] if c.type == "half_space" else list(c.normals)
-        normals = [np.asarray(n, float) / np.linalg.norm(n) for n in normals]
+        normals = _unit_normals(c)
         box = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])
         solid = box
         for n in normals:

@@ -88,7 +88,7 @@ def write_report(sweep_dir: Path, out: Path | None = None) -> Path:
 def main(argv: list[str] | None = None) -> int:
     from ..config.arguments import Parser, output_dir
 
-    parser = Parser(prog="python -m pipelines.report", description=__doc__.split("\n")[0])
+    parser = Parser(prog="python -m pipelines.report", description=(__doc__ or "").split("\n")[0])
     parser.add_argument("sweep_dir", type=Path, help="multirun sweep directory")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default: the sweep dir)")
     args = parser.parse_args(argv)

@@ -12,6 +12,7 @@ import json
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -26,19 +27,19 @@ COVERED_KEYS = {"scheme", "scheme.name", "kernel", "kernel.name", "kernel.transf
 RESOLUTION_KEYS = {"scene.resolution", "scene.particle_resolution"}
 
 
-def _load_yaml(path: Path):
+def _load_yaml(path: Path) -> Any:
     """A YAML file as plain containers, each top-level entry with its
     interpolations resolved where they resolve (a scene's value picked by
     its size), else left as written; None if unreadable."""
     if not path.is_file():
         return None
     try:
-        from omegaconf import OmegaConf
+        from omegaconf import DictConfig, OmegaConf
 
         loaded = OmegaConf.load(path)
-        if not OmegaConf.is_dict(loaded):
+        if not isinstance(loaded, DictConfig):  # (OmegaConf.is_dict)
             return OmegaConf.to_container(loaded, resolve=False)
-        out = OmegaConf.to_container(loaded, resolve=False)
+        out: Any = OmegaConf.to_container(loaded, resolve=False)  # a dict (a mapping's document)
         for key in loaded:
             try:
                 out[key] = OmegaConf.to_container(loaded[key], resolve=True) if OmegaConf.is_config(
@@ -67,7 +68,7 @@ def parse_overrides(items) -> dict[str, str]:
     return out
 
 
-def config_value(config, *path):
+def config_value(config, *path) -> Any:
     """A value of the composed config, None if missing or an unresolved interpolation."""
     node = config
     for key in path:
@@ -273,7 +274,7 @@ def assign_errors(jobs: list[Job]) -> None:
     for members in groups.values():
         # the reference is the finest grid of the method; if that run did not
         # complete (or left no final state), the method has no self error
-        ref = max(members, key=lambda j: j.resolution)
+        ref = max(members, key=lambda j: cast(int, j.resolution))  # (grouped: a resolution)
         rs = ref.final_state() if ref.completed else None
         if rs is None:
             continue

@@ -18,6 +18,7 @@ import os
 import shutil
 import sys
 from pathlib import Path
+from typing import Any, cast
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -74,8 +75,8 @@ def run(cfg: DictConfig) -> dict:
         print(f"note: {note}", file=sys.stderr)
     choices = effective_choices(cfg, {k: v for k, v in hc.runtime.choices.items() if not k.startswith("hydra")})
     origins = plugins.origins(spec.scene, spec.kernel)
-    identity = {"config_hash": provenance.config_hash(
-        OmegaConf.to_container(cfg, resolve=True), provenance.code_hash(),
+    identity: dict[str, Any] = {"config_hash": provenance.config_hash(
+        cast(dict, OmegaConf.to_container(cfg, resolve=True)), provenance.code_hash(),
         files={**spec.meshes, **plugins.sources(spec.scene, spec.kernel)})}
     if spec.meshes:
         identity["meshes"] = spec.meshes

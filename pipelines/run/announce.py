@@ -1,7 +1,29 @@
 """The events that open a run's recording: what the scheme and the integrator
-do, in words, with their parameters."""
+do, in words, with their parameters; and the views of its scalars."""
 
 from __future__ import annotations
+
+IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
+
+
+def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
+    """Time-series views of the recording's blueprint: scalar names, or entity
+    paths (the wall-clock timings, in the timings file)."""
+    momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
+                ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
+                 "angular_momentum_y", "angular_momentum_z"])
+    groups = {
+        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
+        "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
+        "step": ["dt", "dt_fresh", "max_speed"],
+        "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
+        "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
+    }
+    if error:
+        groups["error"] = ["error/displacement", "error/velocity"]
+    if implicit:
+        groups["implicit solve"] = IMPLICIT_SCALARS
+    return groups
 
 
 def opening_events(scheme, integrator=None, dt: float | None = None) -> list[tuple[str, dict]]:

@@ -29,7 +29,11 @@ class Progress:
         if now - self.start < self.delay or now - self._last < self.every:
             return
         self._last = now
-        frac = step / self.steps if self.steps else t / self.duration
+        if self.steps:
+            frac = step / self.steps
+        else:
+            assert self.duration is not None  # exactly one of steps and duration is set (RunSpec.end)
+            frac = t / self.duration
         frac = min(max(frac, 0.0), 1.0)
         elapsed = now - self.start
         eta = elapsed * (1 - frac) / frac if frac > 0 else float("nan")

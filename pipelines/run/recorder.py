@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -24,30 +25,9 @@ from . import announce, run_metrics
 from .progress import Progress
 from .collider_track import ColliderForces
 from .load_track import LoadTrack
-from .run_metrics import Drift, median, particle_fields, peak_rss_mb
+from .run_metrics import ClosedForm, Drift, median, particle_fields, peak_rss_mb
+from ..config.validate import RunSpec
 from ..recording.sinks import RunMeta, Sink
-
-IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
-
-
-def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
-    """Time-series views of the recording's blueprint: scalar names, or entity
-    paths (the wall-clock timings, in the timings file)."""
-    momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
-                ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
-                 "angular_momentum_y", "angular_momentum_z"])
-    groups = {
-        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
-        "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
-        "step": ["dt", "dt_fresh", "max_speed"],
-        "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
-        "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
-    }
-    if error:
-        groups["error"] = ["error/displacement", "error/velocity"]
-    if implicit:
-        groups["implicit solve"] = IMPLICIT_SCALARS
-    return groups
 
 
 class Recorder(mpm.Observer):
@@ -55,11 +35,16 @@ class Recorder(mpm.Observer):
     ``spec`` (:meth:`build`), observes the driver, and writes the summary
     into ``metrics`` (:meth:`finish`)."""
 
-    def __init__(self, spec, out_dir: Path, properties: dict, sink: Sink):
+    solver: mpm.Solver  # these three: made by build(), read once it has run
+    state: mpm.State
+    drift: Drift
+    solution: ClosedForm | None  # closed-form solution of the scene, if any (mpm.analytic)
+    X0: np.ndarray  # made by on_start
+
+    def __init__(self, spec: RunSpec, out_dir: Path, properties: dict, sink: Sink):
         self.spec, self.out_dir, self.properties, self.sink = spec, out_dir, properties, sink
         self.metrics: dict = {"status": "failed", "reason": "did not start", "steps": 0, "sim_time": 0.0}
         self.driver: mpm.Driver | None = None
-        self.solver = self.state = self.drift = None
         self.built = False  # build() completed: finish() may summarise the run
         self.step_ms: list[float] = []
         self.log_ms: list[float] = []
@@ -71,7 +56,7 @@ class Recorder(mpm.Observer):
         self.inside_max = None  # per collider: the most particles seen inside it
         self.loads: LoadTrack | None = None  # the external loads' track
         self.forces: ColliderForces | None = None  # the colliders' forces
-        self.solution = None  # closed-form solution of the scene, if any (mpm.analytic)
+        self.solution = None
         self.error_last: dict | None = None
         self._error_step = -1
         self._pending: list = []  # the last state's scalar row, waiting for its elastic energy
@@ -114,7 +99,7 @@ class Recorder(mpm.Observer):
         finally:
             notice.cancel()
         self.mass0 = self.model.mass.numpy().astype(np.float64)  # [kg] (removed particles' mass becomes 0)
-        self.solution = spec.scene.solution
+        self.solution = cast("ClosedForm | None", spec.scene.solution)  # one of mpm.analytic's (config.scene)
         self.error_max = {"displacement": 0.0, "velocity": 0.0}
         self.names = self.solver.diagnostics.names
         self.drift = Drift(self.names)
@@ -146,20 +131,22 @@ class Recorder(mpm.Observer):
             field_notes=run_metrics.field_notes(self.scheme.name),
             properties={k: v for k, v in self.properties.items() if k != "run"},
             run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
-            scalar_groups=scalar_groups(scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
-                                        + (self.stretch_names if self.scheme.name != "empm" else []),
-                                        self.solution is not None or self.spec.run.reference is not None,
-                                        self.implicit))
+            scalar_groups=announce.scalar_groups(
+                scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
+                + (self.stretch_names if self.scheme.name != "empm" else []),
+                self.solution is not None or self.spec.run.reference is not None, self.implicit))
 
     # ------------------------------------------------------------ the driver's reports
     def on_start(self, driver: mpm.Driver) -> None:
         """The initial state: its scalars, particles, fracture measure, and the scheme's announcement."""
         log = self.spec.log
         self.started = True
+        assert self.solver.X0 is not None  # the driver prepared the solver
         self.X0 = self.solver.X0  # initial positions [m], float64
         self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
         self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
                        if self.spec.scene.colliders else None)
+        assert driver.initial is not None  # measured by driver.start() before it reports
         self._pending[:] = [0, 0.0, driver.initial.copy(), {
             "config_updates": 0.0, **(self.errors() if self.solution is not None else {})}]
         if log.particles:
@@ -211,6 +198,7 @@ class Recorder(mpm.Observer):
             self.log_ms.append(1e3 * (time.perf_counter() - t1 + report.measure_time))
         if self.step % log.fracture_every == 0:
             self.log_fracture()
+        assert self.progress is not None  # made by on_start
         self.progress.update(self.step, self.t, self.step_ms[-1])
 
     def wants(self, driver: mpm.Driver) -> tuple[float, float]:
@@ -298,6 +286,7 @@ class Recorder(mpm.Observer):
         x = self.state.x.numpy().astype(np.float64)
         v = self.state.v.numpy().astype(np.float64)
         sol = self.solution
+        assert sol is not None  # called only for a scene with a solution
         e = {"displacement": analytic.rms(x - self.X0, sol.displacement(self.X0, self.t)),
              "velocity": analytic.rms(v, sol.velocity(self.X0, self.t))}
         for k, val in e.items():
@@ -346,6 +335,7 @@ class Recorder(mpm.Observer):
     # ------------------------------------------------------------ events
     def record_removed(self, report: mpm.StepReport) -> None:
         """Particles that left through open walls: an event per body, counted."""
+        assert report.removed is not None  # on_step calls this only then
         for b, n in enumerate(report.removed):
             if n:
                 name = self.spec.scene.bodies[b].name
@@ -359,7 +349,7 @@ class Recorder(mpm.Observer):
         if report.updated:
             self.update_steps += 1
             self.updates[report.updated] += 1
-        if self.scheme.name != "aulmpm":
+        if not isinstance(self.scheme, mpm.AULMPM):
             return  # EMPM: every step, logged as the count; TLMPM: never
         for b in report.updated:
             name = self.spec.scene.bodies[b].name
@@ -425,6 +415,7 @@ class Recorder(mpm.Observer):
             m["particle_steps_per_s"] = m["particles"] / (m["step_time_ms"] / 1e3)
         if not self.built:
             return
+        assert self.driver is not None  # made by build()
         names = [b.name for b in self.spec.scene.bodies]
         m.update(
             scheme=self.scheme.name, kernel=self.spec.kernel.name, transfer=self.spec.transfer,
@@ -433,7 +424,7 @@ class Recorder(mpm.Observer):
             updates_per_1e4_steps=1e4 * self.update_steps / steps if steps else None,
             update_time_ms=float(np.mean(self.update_ms)) if self.update_ms else None,
             memory_mb=self.solver.memory_bytes(self.state) / 1e6, peak_rss_mb=peak_rss_mb())
-        if self.scheme.name == "aulmpm":
+        if isinstance(self.scheme, mpm.AULMPM):
             m.update(epsilon=self.scheme.epsilon, eta=self.scheme.eta, affine=self.scheme.affine)
         m["integrator"] = self.spec.integrator.name
         if self.solver.contact is not None:  # [J] the kinetic energy the contact between bodies took (<= 0)
@@ -448,7 +439,7 @@ class Recorder(mpm.Observer):
             lost = float(self.mass0.sum() - self.mass0[kept].sum())
             m["removed"] = {"total": int(self.solver.removals.removed.sum()),
                             **{b: int(c) for b, c in zip(names, self.solver.removals.removed)}, "mass": lost}
-            if self.drift.first is not None and self.drift.first[0]:
+            if self.drift.first is not None and self.drift.last is not None and self.drift.first[0]:
                 m["mass_drift"] = abs(self.drift.last[0] + lost - self.drift.first[0]) / self.drift.first[0]
         if self.driver.detector is not None:
             d = m["detect"] = self.driver.detector.summary()
@@ -467,6 +458,7 @@ class Recorder(mpm.Observer):
             self.particles()
         if self.fracture is None or self.fracture_step != self.step:
             self.log_fracture()
+        assert self.fracture is not None  # set by log_fracture()
         overall, per_body = self.fracture
         names = [b.name for b in self.spec.scene.bodies]
         m["fracture"] = {"total": overall, **{n: float(f) for n, f in zip(names, per_body)}}
@@ -493,6 +485,7 @@ class Recorder(mpm.Observer):
         elif self.solution is not None:
             if self.error_last is None or self._error_step != self.step:
                 self.errors()
+            assert self.error_last is not None  # set by errors()
             u, v = self.solution.scales()
             m["error"] = {"displacement": self.error_last["displacement"], "velocity": self.error_last["velocity"],
                           "displacement_max": self.error_max["displacement"],

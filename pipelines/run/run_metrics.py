@@ -9,12 +9,25 @@ import math
 import statistics
 import sys
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 import mpm
 from mpm import analytic
 from mpm.diagnostics import relative_drift, spilled_fraction
+
+
+class ClosedForm(Protocol):
+    """What the run reads of a scene's closed-form solution (mpm.analytic: VibratingBar, ShearWave, Vortex)."""
+
+    name: str
+
+    def displacement(self, X: np.ndarray, t: float) -> np.ndarray: ...
+
+    def velocity(self, X: np.ndarray, t: float) -> np.ndarray: ...
+
+    def scales(self) -> tuple[float, float]: ...
 
 
 class Drift:
@@ -40,6 +53,7 @@ class Drift:
         self.L_scale = max(self.L_scale, d[self.names.index("angular_momentum_scale")])
 
     def _rel(self, idx: list[int], scale: float) -> float:
+        assert self.first is not None and self.last is not None  # add() sets both
         return relative_drift(self.first[idx], self.last[idx], scale)
 
     def energy(self, d: np.ndarray) -> float:
@@ -47,7 +61,7 @@ class Drift:
                                                           "potential_energy")))
 
     def summary(self) -> dict:
-        if self.first is None:
+        if self.first is None or self.last is None:  # (add() sets both)
             return {}
         m0, m1 = self.first[0], self.last[0]
         return {

@@ -16,11 +16,13 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 import mpm
 from mpm.precision import compensates, for_policy
+from mpm.stepping.driver import SYNC_EVERY_CUDA
 from mpm.stepping.plan import plan as step_plan
 
 from . import provenance
@@ -63,7 +65,7 @@ def sync_every(spec: RunSpec) -> int:
     host_steps = spec.integrator.name == "implicit" or spec.scene.solution is not None
     k = spec.run.sync_every
     if k is None:
-        k = mpm.stepping.driver.SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
+        k = SYNC_EVERY_CUDA if spec.run.device == "cuda" else 1
     return 1 if host_steps else int(k)
 
 
@@ -160,7 +162,7 @@ class Interrupts:
             raise exc()
 
 
-def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list[str] = (),
+def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequence[str] = (),
             choices: dict | None = None, sink: Sink | None = None, identity: dict | None = None) -> dict:
     """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
 
@@ -194,6 +196,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         run.build(step_policy(spec), solver_options(spec), sync_every(spec), spec.run.graph)
         sink.start(run.meta())
         driver = run.driver
+        assert driver is not None  # made by run.build()
         driver.start()
         interrupts.deferred = True  # Ctrl-C and SIGTERM end the run at a step boundary
         try:

@@ -96,7 +96,7 @@ def run_map(spec, points: MapSpec, out_dir: Path, identity: dict | None = None) 
             ps = point_spec(spec, E, k, points.steps)
             pdir = out_dir / "points" / point_name(E, k)
             try:
-                m = execute(ps, pdir, sink=Sink())
+                m: dict = execute(ps, pdir, sink=Sink())
             except Exception as e:  # noqa: BLE001 - one failed point must not lose the map
                 m = {"status": "failed", "reason": f"{type(e).__name__}: {e}"}
             if (pdir / "metrics.json").is_file():

@@ -75,6 +75,8 @@ CASES = [
     ("nu 0.6", lambda: mpm.build(scene([body(material=mpm.FixedCorotated(E=1e4, nu=0.6))]), mpm.QUADRATIC),
      "bodies[0].material.nu"),
     ("a shape class", lambda: mpm.build(scene([body(shape=mpm.Box)]), mpm.QUADRATIC), "bodies[0].shape"),
+    ("no shape", lambda: mpm.build(scene([body(shape=None)]), mpm.QUADRATIC), "bodies[0].shape"),
+    ("no material", lambda: mpm.build(scene([body(material=None)]), mpm.QUADRATIC), "bodies[0].material"),
     ("a shape outside the domain", lambda: mpm.build(scene([body(shape=mpm.Box((0.95, 0.5), (0.1, 0.1)))]),
                                                      mpm.QUADRATIC), "bodies[0]"),
     ("velocity of shape (2, 1)", lambda: mpm.build(scene([body(velocity=np.zeros((2, 1)))]), mpm.QUADRATIC),

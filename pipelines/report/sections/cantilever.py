@@ -83,7 +83,9 @@ def section_cantilever(jobs: list[Job], out: Path) -> list[str]:
                 continue
             ref = cantilever_tip(g["P"], g["L"], g["H"], g["E"], g["nu"])
             err = g["deflection"] / ref["elasticity"] - 1.0
-            order = _order(previous[1], err, cells / previous[0]) if previous else None
+            # (a grid without a spacing, dx missing from its metrics and config, has no order)
+            order = (_order(previous[1], err, cells / previous[0])
+                     if previous and cells is not None and previous[0] is not None else None)
             rows.append([*key, fmt(cells, 3), j.status, fmt(1e3 * g["deflection"], 4), fmt(100 * err, 3),
                          fmt(100 * (g["deflection"] / ref["euler_bernoulli"] - 1.0), 3), fmt(order, 2)])
             previous = (cells, err)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def drift_series(scalars: dict, prefix: str) -> tuple[np.ndarray, np.ndarray] | 
     scale = float(np.nanmax(scale_series[1])) if scale_series is not None and len(scale_series[1]) else 0.0
     if not scale > 0:
         scale = float(np.nanmax(np.linalg.norm(Q, axis=1)))
-    return common, relative_drift(Q[0], Q, scale)
+    return common, cast(np.ndarray, relative_drift(Q[0], Q, scale))  # (Q an array: an array)
 
 
 def _per_axis(scalars: dict, prefix: str) -> list[str]:
@@ -202,7 +203,9 @@ def section_conservation(jobs: list[Job], out: Path, style: dict) -> list[str]:
     series, failed = [], []
     for j in with_rec[:MAX_RECORDINGS]:
         try:
-            rec = read(j.data_file("recording.rrd"), particles=False)  # scalars only: frames can be GBs
+            path = j.data_file("recording.rrd")
+            assert path is not None  # with_rec: jobs with one
+            rec = read(path, particles=False)  # scalars only: frames can be GBs
         except Exception as exc:
             failed.append(f"{j.rel} ({type(exc).__name__})")
             continue

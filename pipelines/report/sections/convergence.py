@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -67,7 +68,8 @@ def section_convergence(jobs: list[Job], out: Path, style: dict) -> list[str]:
             for (sc, label), members in sorted(groups.items()):
                 if sc != scene:
                     continue
-                js = sorted((j for j in members if positive(job_error(j, q))), key=lambda j: j.dx)
+                js = sorted((j for j in members if positive(job_error(j, q))),
+                            key=lambda j: cast(float, j.dx))  # (have: a positive dx)
                 if not js:
                     continue
                 colour, marker = style[label]

@@ -107,8 +107,10 @@ def fronts(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | 
         center, half = np.asarray(shape["center"], float), np.asarray(shape["half_size"], float)
         g = abs(float(scene["gravity"][1]))
         ppc = int(scene["ppc"])
-        dx = float(job.num("dx"))  # the run's (the saved config may hold the size's interpolation)
+        dx = job.num("dx")  # the run's (the saved config may hold the size's interpolation)
     except (KeyError, TypeError, IndexError, ValueError):
+        return None
+    if dx is None:
         return None
     path = job.path / "recording.rrd"
     if not path.is_file():

@@ -46,7 +46,8 @@ def section_extreme(jobs: list, out: Path) -> list[str]:
         if change is None:
             scale = num(det.get("energy_scale"))
             e0, e1 = num(m.get("energy_initial")), num(m.get("energy_final"))
-            change = (e1 - e0) / scale if None not in (e0, e1, scale) and scale > 0 else None
+            change = ((e1 - e0) / scale if e0 is not None and e1 is not None and scale is not None and scale > 0
+                      else None)
         frac = m.get("fracture")
         frac = frac.get("total") if isinstance(frac, dict) else frac
         rows.append([case, j.scheme, status, m.get("steps"), fmt(m.get("sim_time")), fmt(change, 3),

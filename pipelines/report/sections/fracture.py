@@ -26,7 +26,9 @@ def section_fracture(jobs: list[Job], out: Path, style: dict) -> list[str]:
     values: dict[tuple[str, str], float] = {}
     for j in have:
         key = (group_name(j), j.label)
-        values[key] = max(values.get(key, 0.0), j.num("fracture"))
+        fracture = j.num("fracture")
+        assert fracture is not None  # have: jobs that report it
+        values[key] = max(values.get(key, 0.0), fracture)
     lines = [f"## {title}", "",
              "Fraction of initially neighbouring particle pairs torn apart at the end of the run, per "
              "method, grouped by scene and resolution, and the number of fragments "

@@ -6,7 +6,7 @@ the disks' particles came, and the momentum drift (impact.csv)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,7 +30,7 @@ def impact_figures(scalars: dict, clock: tuple) -> dict:
     steps, contact = (np.asarray(a, float) for a in scalars.get("contact_nodes", ((), ())))
     e_steps, energy = (np.asarray(a, float) for a in scalars.get("total_energy", ((), ())))
     times = dict(zip(np.asarray(clock[0], float).tolist(), np.asarray(clock[1], float).tolist()))
-    out = {"contact_start": None, "contact_end": None, "separated": None, "energy_kept": None}
+    out: dict[str, Any] = {"contact_start": None, "contact_end": None, "separated": None, "energy_kept": None}
     if not len(steps) or not len(e_steps):
         return out
     touching = steps[contact > 0]
@@ -105,7 +105,9 @@ def section_impact(jobs: list[Job], out: Path) -> list[str]:
                "contact to [s]", "separated", "energy kept", "closest approach", "momentum drift"]
     rows, curves = [], []
     for j in sorted(have, key=lambda j: (j.scheme, contact_of(j), j.kernel, transfer_of(j), j.resolution or 0)):
-        rec = read(j.data_file("recording.rrd"))  # (two small disks: their frames are small)
+        path = j.data_file("recording.rrd")
+        assert path is not None  # have: jobs with one
+        rec = read(path)  # (two small disks: their frames are small)
         scalars, contact, transfer = rec.scalars, contact_of(j), transfer_of(j)
         if contact == "shared" and j.kernel in KERNELS and j.dx:
             # one grid: the disks interact while their stencils share a node (support x dx apart per axis)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 from mpm.inclines import rolling, sliding
 
@@ -20,7 +21,7 @@ from ..registry import section
 BLOCK, DISK = "incline_2d", "incline_disk_2d"
 
 
-def resolved(job: Job, key: str):
+def resolved(job: Job, key: str) -> Any:
     """The job's composed config at ``key`` ("scene.gravity") with its
     interpolations resolved (the scenes pick theta by ``scene.size``); None
     if missing or unresolvable."""

@@ -59,10 +59,11 @@ def definitions(jobs: list[Job], names: list[str]) -> list[str]:
     out = []
     for name in names:
         r = next((scene_response(j, name) for j in jobs if scene_response(j, name)), {})
-        what = QUANTITIES.get(r.get("quantity"), r.get("quantity", "?")).split(" [")[0]
+        quantity = str(r.get("quantity", "?"))
+        what = QUANTITIES.get(quantity, quantity).split(" [")[0]
         body = "every body's particles" if r.get("body") == "all" else f"the {r.get('body')}"
         out.append(f"- *{name.replace('_', ' ')}* [{r.get('unit', '')}]: {what} of {body}, "
-                   f"{REDUCTIONS.get(r.get('reduce'), r.get('reduce'))}.")
+                   f"{REDUCTIONS.get(r.get('reduce', ''), r.get('reduce'))}.")
     return out
 
 

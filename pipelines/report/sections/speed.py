@@ -45,7 +45,9 @@ def section_speed(jobs: list[Job], out: Path, style: dict) -> list[str]:
     values: dict[tuple[str, str], float] = {}
     for j in have:  # the fastest job of a label in a group (repeats, varying extras aside)
         key = (group_name(j), j.label)
-        values[key] = min(values.get(key, math.inf), j.num("step_time_ms"))
+        ms = j.num("step_time_ms")
+        assert ms is not None  # have: jobs that report it
+        values[key] = min(values.get(key, math.inf), ms)
     bar_chart(out / "speed.png", groups, values, style, "median wall time per step [ms]")
     lines = [f"## {title}", "",
              "Median wall time per step [ms] per method, grouped by scene and resolution, and "
