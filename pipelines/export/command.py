@@ -34,7 +34,7 @@ from ..run.progress import Progress
 from . import frames
 
 FORMATS = ("vtk", "usd")
-INSTALL = 'pip install -e ".[export]"'
+PACKAGES = {"vtk": ("vtk", 'pip install -e ".[export]"'), "usd": ("usd-core", "pip install -e .")}
 
 
 def _writer(fmt: str):
@@ -75,8 +75,9 @@ def main(argv=None) -> int:
     if problem is None:
         try:
             write = _writer(args.format)
-        except ImportError as e:
-            problem = f"--format {args.format}: {e.name or 'its package'} is not installed; accepted: {INSTALL}"
+        except ImportError:
+            package, install = PACKAGES[args.format]
+            problem = f"--format {args.format}: the {package} package is not installed; accepted: {install}"
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
@@ -102,7 +103,7 @@ def main(argv=None) -> int:
         progress.close()
     n = max(len(f.positions) for f in run.frames)
     print(f"{len(run.frames)} frames of {n} particles ({', '.join(sorted(run.frames[0].channels)) or 'no channels'})"
-          f" to {args.out}: {len(written)} file{"s" * (len(written) != 1)} in {time.perf_counter() - start:.2f} s")
+          f" to {args.out}: {len(written)} file{'s' * (len(written) != 1)} in {time.perf_counter() - start:.2f} s")
     return 0
 
 

@@ -121,9 +121,10 @@ def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Su
 
 def walls(scene: dict) -> Surface | None:
     """The inner faces of the domain's walls (``wall_cells`` cells inside
-    its faces; ``walls`` per face in the order x_lo, x_hi, y_lo, ...) that are not open: a quad of two triangles per face in 3D, a
-    segment per face in 2D. None without a recorded domain or when every
-    wall is open."""
+    its faces) that are not open (``walls``: one type, or one per face in
+    the order x_lo, x_hi, y_lo, ...): a quad of two triangles per face in
+    3D, a segment per face in 2D. None without a recorded domain or when
+    every wall is open."""
     try:
         L = np.asarray(scene["domain"], float)
         dim = len(L)
