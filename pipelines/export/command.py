@@ -17,8 +17,8 @@
 
 The channels are those the run logged: dJ, the plastic fields of plastic
 bodies, speed (with log.color=speed or log.channels=[speed]), the body of
-each particle and, once particles were removed at open walls, their numbers
-(index). 2D runs are exported in the plane z = 0.
+each particle and, when the run removed particles at open walls, their
+numbers (index) in every frame. 2D runs are exported in the plane z = 0.
 """
 
 from __future__ import annotations
@@ -71,14 +71,14 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     folder = args.run_dir.parent if args.run_dir.suffix == ".rrd" else args.run_dir
     args.out = args.out if args.out is not None else folder / "export" / args.format
-    problem = _problem(args)
+    write, problem = None, _problem(args)
     if problem is None:
         try:
             write = _writer(args.format)
         except ImportError:
             package, install = PACKAGES[args.format]
             problem = f"--format {args.format}: the {package} package is not installed; accepted: {install}"
-    if problem:
+    if problem or write is None:
         print(f"error: {problem}", file=sys.stderr)
         return 2
     start = time.perf_counter()

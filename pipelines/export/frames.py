@@ -50,9 +50,6 @@ class Run:
     walls: Surface | None  # the inner faces of the walls that are not open (None: every wall open)
 
 
-UNITS = {"speed": "m/s"}  # of the channels that have one (dJ and the plastic fields are ratios; body, index: numbers)
-
-
 def pad(x: np.ndarray) -> np.ndarray:
     """Positions (n, 2 or 3) as (n, 3), z = 0 for 2D."""
     x = np.asarray(x)
@@ -70,17 +67,19 @@ def read(run_dir: Path, every: int = 1) -> Run:
     first), with its colliders and walls."""
     rec = recordings.read(recording_path(run_dir))
     picked = range(0, len(rec.positions), every)
+    removed = any(i is not None for i in rec.index)  # then every frame has its particles' numbers
     frames = [Frame(int(rec.steps[k]), float(rec.times[k]), pad(rec.positions[k]).astype(np.float32),
-                    _channels(rec, k)) for k in picked]
+                    _channels(rec, k, removed)) for k in picked]
     config = _config(rec)
     colliders = [_collider(name, geo, rec, [int(rec.steps[k]) for k in picked])
                  for name, geo in (rec.colliders or {}).items()]
     return Run(rec.dim or int(config.get("dim", 2)), frames, float(rec.radius), colliders, walls(config))
 
 
-def _channels(rec: recordings.Recording, k: int) -> dict[str, np.ndarray]:
+def _channels(rec: recordings.Recording, k: int, numbered: bool) -> dict[str, np.ndarray]:
     """Frame ``k``'s per-particle values: dJ, the logged fields, the body
-    index and (once particles were removed at open walls) their numbers."""
+    index and (``numbered``: when the run removed particles at open walls)
+    the particles' numbers, 0 to n - 1 before the first removal."""
     out = {}
     if rec.dJ[k] is not None:
         out["dJ"] = rec.dJ[k]
@@ -88,8 +87,8 @@ def _channels(rec: recordings.Recording, k: int) -> dict[str, np.ndarray]:
     index = rec.index[k] if rec.index else None
     if rec.body is not None:
         out["body"] = (rec.body if index is None else rec.body[index]).astype(np.int32)
-    if index is not None:
-        out["index"] = index
+    if numbered:
+        out["index"] = np.arange(len(rec.positions[k]), dtype=np.int64) if index is None else index
     return out
 
 
@@ -115,8 +114,14 @@ def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Su
     if moves is not None:
         at, shift = moves
         idx = np.searchsorted(at, steps, side="right") - 1
-        surface.shifts = [pad(shift[i:i + 1])[0].astype(np.float64) if i >= 0 else np.zeros(3) for i in idx]
+        surface.shifts = [_translation(shift[i]) if i >= 0 else np.zeros(3) for i in idx]
     return surface
+
+
+def _translation(row) -> np.ndarray:
+    """A recorded translation (3,) [m] (the reader may hand it nested in an object array)."""
+    flat = np.concatenate([np.asarray(v, np.float64).reshape(-1) for v in np.ravel(np.asarray(row, object))])
+    return np.concatenate([flat, np.zeros(3)])[:3]
 
 
 def walls(scene: dict) -> Surface | None:

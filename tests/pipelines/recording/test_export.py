@@ -39,6 +39,19 @@ def run_3d(tmp_path_factory):
     return run
 
 
+@pytest.fixture(scope="module")
+def run_moving(tmp_path_factory):
+    """The 2D ball thrown through an open wall under a lid that moves down: 5
+    frames, particles removed in the last two."""
+    run = tmp_path_factory.mktemp("export") / "lid"
+    p = run_cli(["scene.walls=[slip,open,slip,slip]", "scene.gravity=[0,0]", "scene.bodies.0.velocity=[8,0]",
+                 "run.duration=0.05", "scene.resolution=32", "log.every=20", "log.progress=false",
+                 "+scene.colliders=[{type: half_space, name: lid, point: [0.5, 0.9], normal: [0, -1], "
+                 "velocity: [0, -1]}]", f"hydra.run.dir={run}"], cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr
+    return run
+
+
 def export(run, fmt, *more, out=None):
     out = out if out is not None else run / "export" / fmt
     assert command.main([str(run), "--format", fmt, "--out", str(out), *more]) == 0
@@ -140,6 +153,36 @@ def test_3d_run_with_its_collider_and_walls(run_3d):
     points = UsdGeom.Points(stage.GetPrimAtPath("/World/particles")).GetPointsAttr()
     last = points.GetTimeSamples()[-1]
     assert np.array_equal(np.asarray(points.Get(last), np.float64), rec.positions[-1])
+
+
+@pytest.mark.slow
+def test_a_moving_collider_and_removed_particles(run_moving):
+    """A moving collider is a series of its own at the particles' times;
+    once particles are removed every frame carries their numbers and the
+    body of each."""
+    rec = recordings.read(run_moving / "recording.rrd")
+    assert rec.index[0] is None and rec.index[-1] is not None and len(rec.positions[-1]) < len(rec.positions[0])
+    out = export(run_moving, "vtk")
+    steps, shifts = rec.collider_shift["lid"]
+    assert np.array_equal(steps, rec.steps)
+    moved = [np.asarray(np.ravel(s)[0], np.float64) for s in shifts]  # (the reader nests each translation)
+    base = padded(np.concatenate(rec.colliders["lid"]))
+    series = pvd(out / "collider_lid.pvd")
+    assert [t for t, _ in series] == list(rec.times) and not (out / "collider_lid.vtp").exists()
+    for k, (_, name) in enumerate(series):
+        assert np.allclose(read_vtp(out / name)[1], base + moved[k], rtol=0, atol=1e-6)
+    for k, (_, name) in enumerate(pvd(out / "particles.pvd")):
+        index = rec.index[k] if rec.index[k] is not None else np.arange(len(rec.positions[k]))
+        _, x, channels = read_vtp(out / name)
+        assert np.array_equal(channels["index"], index) and np.array_equal(channels["body"], rec.body[index])
+        assert np.array_equal(x[:, :2], rec.positions[k])
+    stage = Usd.Stage.Open(str(export(run_moving, "usd") / "stage.usdc"))
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/colliders/lid")).GetOrderedXformOps()[0]
+    codes = op.GetTimeSamples()
+    assert np.allclose([op.Get(c) for c in codes], moved, rtol=0, atol=1e-7)
+    primvars = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/particles"))
+    assert [len(primvars.GetPrimvar("index").Get(c)) for c in codes] == [len(x) for x in rec.positions]
+    assert [len(primvars.GetPrimvar("body").Get(c)) for c in codes] == [len(x) for x in rec.positions]
 
 
 @pytest.mark.slow
