@@ -114,14 +114,8 @@ def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Su
     if moves is not None:
         at, shift = moves
         idx = np.searchsorted(at, steps, side="right") - 1
-        surface.shifts = [_translation(shift[i]) if i >= 0 else np.zeros(3) for i in idx]
+        surface.shifts = [pad(shift[i:i + 1])[0] if i >= 0 else np.zeros(3) for i in idx]
     return surface
-
-
-def _translation(row) -> np.ndarray:
-    """A recorded translation (3,) [m] (the reader may hand it nested in an object array)."""
-    flat = np.concatenate([np.asarray(v, np.float64).reshape(-1) for v in np.ravel(np.asarray(row, object))])
-    return np.concatenate([flat, np.zeros(3)])[:3]
 
 
 def walls(scene: dict) -> Surface | None:

@@ -164,8 +164,8 @@ def test_a_moving_collider_and_removed_particles(run_moving):
     assert rec.index[0] is None and rec.index[-1] is not None and len(rec.positions[-1]) < len(rec.positions[0])
     out = export(run_moving, "vtk")
     steps, shifts = rec.collider_shift["lid"]
-    assert np.array_equal(steps, rec.steps)
-    moved = [np.asarray(np.ravel(s)[0], np.float64) for s in shifts]  # (the reader nests each translation)
+    assert np.array_equal(steps, rec.steps) and shifts.shape == (5, 3) and shifts.dtype == np.float64
+    moved = padded(shifts)
     base = padded(np.concatenate(rec.colliders["lid"]))
     series = pvd(out / "collider_lid.pvd")
     assert [t for t, _ in series] == list(rec.times) and not (out / "collider_lid.vtp").exists()
