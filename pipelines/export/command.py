@@ -54,8 +54,12 @@ def _problem(args) -> str | None:
         return f"--every: {args.every}; accepted: an integer >= 1 (every N-th logged frame)"
     if not args.run_dir.exists():
         return f"run dir: {args.run_dir}: no such directory; accepted: a run directory of python -m pipelines.run"
-    rec = frames.recording_path(args.run_dir)
-    if not rec.is_file():
+    if args.run_dir.name.endswith(".timings.rrd"):
+        return (f"run dir: {args.run_dir} holds a run's wall-clock timings, not its particles; accepted: "
+                f"the run directory ({args.run_dir.parent})")
+    if not args.run_dir.is_dir() and args.run_dir.suffix != ".rrd":
+        return f"run dir: {args.run_dir} is a file; accepted: a run directory of python -m pipelines.run"
+    if not frames.recording_path(args.run_dir).is_file():
         return (f"run dir: {args.run_dir}: no recording.rrd in it; accepted: a run directory of "
                 f"python -m pipelines.run that logged particles")
     return output_dir("--out", args.out)

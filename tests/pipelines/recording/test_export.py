@@ -197,6 +197,9 @@ def test_the_command_line_writes_into_the_run_directory(run_2d):
 @pytest.mark.parametrize("args, message", [
     (["{missing}", "--format", "vtk"], "error: run dir: {missing}: no such directory; accepted: "),
     (["{empty}", "--format", "vtk"], "error: run dir: {empty}: no recording.rrd in it; accepted: "),
+    (["{file}", "--format", "vtk"], "error: run dir: {file} is a file; accepted: "),
+    (["{recorded}/recording.timings.rrd", "--format", "usd"],
+     "error: run dir: {recorded}/recording.timings.rrd holds a run's wall-clock timings, not its particles"),
     (["{empty}", "--format", "ply"], "error: argument --format: invalid choice: 'ply'"),
     (["{empty}", "--format", "usd", "--every", "0"], "error: --every: 0; accepted: an integer >= 1"),
     (["{recorded}", "--format", "vtk", "--out", "{file}"], "error: --out: {file} is a file; accepted: "),
@@ -207,6 +210,7 @@ def test_bad_inputs_give_one_line_and_exit_code_2(args, message, tmp_path, capsy
     paths["empty"].mkdir()
     paths["recorded"].mkdir()
     (paths["recorded"] / "recording.rrd").write_bytes(b"")
+    (paths["recorded"] / "recording.timings.rrd").write_bytes(b"")
     paths["file"].write_text("x")
     code = exit_code([a.format(**paths) for a in args])
     err = capsys.readouterr().err.strip().splitlines()
