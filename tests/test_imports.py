@@ -33,7 +33,7 @@ PIPELINES_FLOORS = [
     ("pipelines.run",),  # one job: the run (or stability map) of one config, and the Hydra entry
     ("pipelines.report",),  # the report of a sweep's jobs
     ("pipelines.sweeps",),  # the end of a multirun: its report and outcomes
-    ("pipelines.bench", "pipelines.replay", "pipelines.material_point", "pipelines.granular",
+    ("pipelines.bench", "pipelines.replay", "pipelines.export", "pipelines.material_point", "pipelines.granular",
      "pipelines.cfl_bound"),  # the other commands
 ]
 

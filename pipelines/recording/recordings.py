@@ -229,8 +229,14 @@ def _colliders(data) -> tuple[dict, dict]:
         if c.startswith("/colliders/") and c.endswith(":translation"):
             rows = moving[["step", c]].dropna()
             shifts[c[len("/colliders/"):].split(":")[0]] = (
-                rows["step"].to_numpy(), np.stack([np.asarray(v).reshape(-1) for v in rows[c]]))
+                rows["step"].to_numpy(), np.stack([_flat(v) for v in rows[c]]))
     return geo, shifts
+
+
+def _flat(value) -> np.ndarray:
+    """A logged vector as a flat float array (the reader hands a translation
+    as an object array holding one vector)."""
+    return np.concatenate([np.asarray(x, np.float64).reshape(-1) for x in np.ravel(value)])
 
 
 def compare(a: Recording, b: Recording) -> dict:

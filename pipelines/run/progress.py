@@ -1,5 +1,5 @@
-"""A one-line progress bar on a terminal (stderr), shown once a run has taken
-more than a couple of seconds."""
+"""A one-line progress bar on a terminal (stderr), shown once a run (or an
+export: ``unit="frame"``) has taken more than a couple of seconds."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import time
 
 class Progress:
     def __init__(self, steps: int | None, duration: float | None, enabled: bool | None = None,
-                 delay: float = 2.0, every: float = 0.25):
-        self.steps, self.duration = steps, duration
+                 delay: float = 2.0, every: float = 0.25, unit: str = "step"):
+        self.steps, self.duration, self.unit = steps, duration, unit
         self.enabled = self.shown(enabled)
         self.start = time.perf_counter()
         self.delay, self.every = delay, every
@@ -23,6 +23,7 @@ class Progress:
         return sys.stderr.isatty() if enabled is None else bool(enabled)
 
     def update(self, step: int, t: float, ms_per_step: float) -> None:
+        """``step`` of ``steps`` (or ``t`` [s] of ``duration``) done, at ``ms_per_step`` [ms] per unit."""
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -38,8 +39,8 @@ class Progress:
         elapsed = now - self.start
         eta = elapsed * (1 - frac) / frac if frac > 0 else float("nan")
         bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}% step {step} t={t:.4g}s "
-                         f"{ms_per_step:.2f} ms/step eta {eta:.0f}s ")
+        sys.stderr.write(f"\r[{bar:<30}] {100 * frac:5.1f}% {self.unit} {step} t={t:.4g}s "
+                         f"{ms_per_step:.2f} ms/{self.unit} eta {eta:.0f}s ")
         sys.stderr.flush()
         self._shown = True
 

@@ -177,7 +177,8 @@ def test_every_config_key_refuses_bad_values_in_one_line(base):
 
 
 # ------------------------------------------------------------------ the other entry points' options
-MAINS = {"pipelines.replay": "pipelines.replay", "pipelines.report": "pipelines.report",
+MAINS = {"pipelines.replay": "pipelines.replay", "pipelines.export": "pipelines.export.command",
+         "pipelines.report": "pipelines.report",
          "pipelines.material_point": "pipelines.material_point", "pipelines.bench": "pipelines.bench.__main__",
          "pipelines.granular": "pipelines.report.sections.granular", "pipelines.cfl_bound": "pipelines.cfl_bound"}
 
@@ -232,6 +233,10 @@ TOOLS = {
         "--view": ["--view abc", "--view 2d"], "--color": ["--color no_such_field --frames {dir}/f"],
         "--elev": ["--elev nan", "--elev inf", "--elev abc"], "--azim": ["--azim nan", "--azim -inf", "--azim x"],
     }),
+    "pipelines.export": (["{run}", "--format", "usd"], {
+        "--format": ["--format abc", "--format ply", "--format"], "--every": ["--every 0", "--every -3", "--every abc"],
+        "--out": ["--out {file}", "--out"],
+    }),
     "pipelines.report": (["{dir}"], {"--out": ["--out {file}", "--out"]}),
     "pipelines.material_point": ([], {
         "--path": ["--path abc"], "--strain": ["--strain nan", "--strain inf", "--strain abc"],
@@ -257,6 +262,7 @@ TOOLS = {
 }
 POSITIONAL = {  # bad positional arguments
     "pipelines.replay": ["{file}", "{missing}", "{dir}", "{run}/recording.timings.rrd"],
+    "pipelines.export": ["{file}", "{missing}", "{dir}", "{run}/recording.timings.rrd"],  # (each without --format)
     "pipelines.report": ["{file}", "{missing}"],
     "pipelines.material_point": ["scene.resolution=8", "material.E=nan", "material=steel", "material.nope=1"],
     "pipelines.bench": ["no_such_case"],

@@ -61,8 +61,8 @@ def validates(args: list[str]) -> None:
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
-    """A finished run of the default scene, a few steps (the replay and
-    granular examples' input)."""
+    """A finished run of the default scene, a few steps (the replay, export
+    and granular examples' input)."""
     run = tmp_path_factory.mktemp("readme") / "run"
     p = run_cli(["scene.resolution=24", "run.steps=6", "log.every=3", "log.progress=false",
                  f"hydra.run.dir={run}"], cwd=ROOT, timeout=300)
@@ -88,6 +88,13 @@ def check(cmd: str, tiny_run, tmp_path) -> None:
         argv = [str(tiny_run) if a == "RUN_DIR" else str(tmp_path / a) if a == "frames/" else a for a in argv]
         p = tool(argv, ROOT)
         assert p.returncode == 0 and list((tmp_path / "frames").glob("frame_*.png")), p.stderr
+        return
+    if argv[:2] == ["-m", "pipelines.export"]:
+        fmt = argv[argv.index("--format") + 1]
+        argv = [str(tiny_run) if a == "RUN_DIR" else a for a in argv]
+        p = tool([*argv, "--out", str(tmp_path / fmt)], ROOT)
+        written = {"vtk": "particles.pvd", "usd": "stage.usdc"}[fmt]
+        assert p.returncode == 0 and (tmp_path / fmt / written).is_file(), p.stderr
         return
     if argv[:2] == ["-m", "pipelines.report"]:  # a sweep of two tiny jobs; the report is written at its end
         sweep = tmp_path / "sweep"
@@ -124,7 +131,7 @@ def check(cmd: str, tiny_run, tmp_path) -> None:
 
 def test_the_readme_has_examples_of_every_command():
     cmds = readme_commands()
-    for entry in ("pipelines.run", "pipelines.replay", "pipelines.report", "pipelines.bench",
+    for entry in ("pipelines.run", "pipelines.replay", "pipelines.export", "pipelines.report", "pipelines.bench",
                   "pipelines.material_point", "pipelines.granular", "pipelines.cfl_bound", "examples/"):
         assert any(entry in c for c in cmds), entry
 
