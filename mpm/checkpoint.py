@@ -51,6 +51,10 @@ CAPACITY = (("solver.implicit", "_capacity", "_grow"),)
 """(owner's path, its size attribute, the method that grows it): parts sized lazily to the largest grid
 seen so far (mpm.implicit.solve.ImplicitSolve's per-node arrays), grown to the checkpoint's size before
 the values are restored, so that every array is there with the checkpoint's shape"""
+LAZY = (("solver.fracture", "_pairs"),)
+"""(owner's path, the method that builds it): parts built at their first use (the fracture measure's
+neighbour pairs, from the positions prepared at the start), built before the restore when the
+checkpoint holds arrays of theirs that a fresh driver lacks"""
 PLAIN = (bool, int, float, str, bytes, type(None), np.generic)
 
 
@@ -278,11 +282,17 @@ def _at(root, path: str):
 
 
 def reserve(driver, data: Checkpoint) -> None:
-    """Grow the lazily sized parts (:data:`CAPACITY`) to the sizes they had in ``data``."""
+    """Grow the lazily sized parts (:data:`CAPACITY`) to the sizes they had in ``data``, and build the
+    parts built at first use (:data:`LAZY`) that ``data`` has built."""
     for owner, size, grow in CAPACITY:
         part, n = _at(driver, owner), data.header["values"].get(f"{owner}.{size}")
         if part is not None and n is not None and n > getattr(part, size):
             getattr(part, grow)(n)
+    mine, theirs = signature(driver), data.header["signature"]
+    for owner, build in LAZY:
+        part = _at(driver, owner)
+        if part is not None and any(p.startswith(f"{owner}.") and p not in mine for p in theirs):
+            getattr(part, build)()
 
 
 def restore(driver, data: Checkpoint) -> None:

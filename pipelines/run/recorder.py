@@ -24,31 +24,8 @@ from . import announce, run_metrics
 from .progress import Progress
 from .collider_track import ColliderForces
 from .load_track import LoadTrack
-from .run_metrics import Drift, median, particle_fields, peak_rss_mb
+from .run_metrics import Drift, median, particle_fields, peak_rss_mb, scalar_groups
 from ..recording.sinks import RunMeta, Sink
-
-IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
-
-
-def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
-    """Time-series views of the recording's blueprint: scalar names, or entity
-    paths (the wall-clock timings, in the timings file)."""
-    momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
-                ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
-                 "angular_momentum_y", "angular_momentum_z"])
-    groups = {
-        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
-        "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
-        "step": ["dt", "dt_fresh", "max_speed"],
-        "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
-        "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
-    }
-    if error:
-        groups["error"] = ["error/displacement", "error/velocity"]
-    if implicit:
-        groups["implicit solve"] = IMPLICIT_SCALARS
-    return groups
-
 
 class Recorder(mpm.Observer):
     """One run's recording and metrics: builds the model and solver of
@@ -155,11 +132,7 @@ class Recorder(mpm.Observer):
     def on_start(self, driver: mpm.Driver) -> None:
         """The initial state: its scalars, particles, fracture measure, and the scheme's announcement."""
         log = self.spec.log
-        self.started = True
-        self.X0 = self.solver.X0  # initial positions [m], float64
-        self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
-        self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
-                       if self.spec.scene.colliders else None)
+        self.on_resume(driver)
         self._pending[:] = [0, 0.0, driver.initial.copy(), {
             "config_updates": 0.0, **(self.errors() if self.solution is not None else {})}]
         if log.particles:
@@ -169,10 +142,19 @@ class Recorder(mpm.Observer):
         if self.responses is not None:
             self.responses.update(self.state.x.numpy(), self.t, self.solver.removals.kept)
         self.announce_scheme()
-        self.progress = Progress(*self.spec.end, log.progress)
-        self.metrics["status"], self.metrics["reason"] = "running", ""
         if driver.running and 0.0 < driver.dt < math.inf:
             self.warn_size(driver.dt)
+
+    def on_resume(self, driver: mpm.Driver) -> None:
+        """The parts a run's tracks need, nothing logged (after a checkpoint's restore, the tracks' own
+        state comes back from it: pipelines.run.checkpoints)."""
+        self.started = True
+        self.X0 = self.solver.X0  # initial positions [m], float64
+        self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
+        self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
+                       if self.spec.scene.colliders else None)
+        self.progress = Progress(*self.spec.end, self.spec.log.progress)
+        self.metrics["status"], self.metrics["reason"] = "running", ""
 
     def on_step(self, driver: mpm.Driver, report: mpm.StepReport) -> None:
         """A completed step: the last state's scalar row, events, this state's
@@ -412,8 +394,8 @@ class Recorder(mpm.Observer):
             self.progress.close()
         if self.started and m["status"] != "failed":
             self._final_state()
-        if m["status"] == "interrupted":
-            self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
+        if m["status"] in ("interrupted", "preempted"):
+            self.sink.event(self.step, self.t, f"{m['status']}: {m['reason']}", level="WARN")
         steps = self.step
         m.update(steps=steps, sim_time=self.t)
         # (the last step, shortened to land on the duration, is not a step the rule chose; dt_reference_factor:
@@ -463,7 +445,7 @@ class Recorder(mpm.Observer):
         if not self._pending:
             self.measure({"config_updates": float(self.updates.sum())})
         self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
-        if m["status"] == "interrupted" and self.spec.log.particles:
+        if m["status"] in ("interrupted", "preempted") and self.spec.log.particles:
             self.particles()
         if self.fracture is None or self.fracture_step != self.step:
             self.log_fracture()

@@ -227,3 +227,26 @@ def save_final_state(path: Path, model, state, X0: np.ndarray, step: int, t: flo
     compare these)."""
     np.savez(path, x=state.x.numpy(), v=state.v.numpy(), X0=X0, mass=model.mass.numpy(),
              body=model.body.numpy(), step=step, time=t)
+
+
+IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
+
+
+def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
+    """Time-series views of the recording's blueprint: scalar names, or entity
+    paths (the wall-clock timings, in the timings file)."""
+    momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
+                ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
+                 "angular_momentum_y", "angular_momentum_z"])
+    groups = {
+        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
+        "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
+        "step": ["dt", "dt_fresh", "max_speed"],
+        "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
+        "configuration updates": ["config_updates", "fracture", "fragments"] + marked,
+    }
+    if error:
+        groups["error"] = ["error/displacement", "error/velocity"]
+    if implicit:
+        groups["implicit solve"] = IMPLICIT_SCALARS
+    return groups
