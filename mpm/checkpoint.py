@@ -1,26 +1,29 @@
 """Checkpoints: a driver's whole state in one file, and a run resumed from it bit for bit.
 
 :func:`save` walks everything a :class:`mpm.Driver` can reach through
-``mpm`` objects, Warp structs, lists, tuples and dicts, and keeps each
-Warp array and each plain host value (numbers, bools, strings, NumPy arrays,
-small containers of them, random generator states) under its attribute path
-(``solver.state.x``, ``solver.layout.lo``). What every step recomputes before
-reading it (:data:`SCRATCH`: the grid's nodal fields) and what describes the
-run rather than its progress (:data:`SKIP`: the observers, a captured graph)
-is left out. An array reached twice (a struct's field aliasing a state's
-array) is kept once, at its first path.
+``mpm`` objects, Warp structs, lists, tuples and dicts, and keeps each Warp
+array and each host value (numbers, bools, strings, NumPy arrays, containers
+of them, Warp scalars and vectors, random generator states) under its
+attribute path (``state.x``, ``solver.layout.lo``). What every step
+recomputes before reading it (:data:`SCRATCH`: the grid's nodal fields) and
+what is not the run's progress (:data:`SKIP`: the observers, the scene as
+given, a captured graph) is left out. An array reached twice (a struct's
+field aliasing a state's array) is kept once, at its first path.
 
 The file is an ``npz`` written atomically (a temporary file in the same
 folder, flushed and synced, then renamed over the target): the arrays, and a
-pickled header with the format version, the :func:`signature` (every path
-with its kind, shape and dtype), the step, the time [s] and the caller's
-``meta`` (a configuration hash, a code version). :func:`resume` takes a
-fresh driver built from the same scene and options, prepares it as
-:meth:`mpm.Driver.start` would without its first steps, restores every
-value in place, lets the solver size what it sizes lazily, and tells the
-observers (:meth:`mpm.Observer.on_resume`). Only a checkpoint of the same
-configuration is taken: another signature is refused (:class:`CheckpointError`,
-one line)."""
+pickled header with the format version (:data:`FORMAT`), the
+:func:`signature` (every array's path, shape and dtype), the step, the time
+[s], the host values and the caller's ``meta`` (a configuration hash, a code
+version). :func:`resume` takes a fresh driver built from the same scene,
+options and policy, prepares it as :meth:`mpm.Driver.start` would without
+telling the observers, grows or builds what is made at first use
+(:data:`CAPACITY`, :data:`LAZY`), refuses a checkpoint of another
+configuration (another signature: :class:`CheckpointError`, one line),
+copies every array in place (a struct or a recorded launch holding one sees
+it), sizes the grid (:meth:`mpm.Solver.restored`) and tells the observers
+(:meth:`mpm.Observer.on_resume`).
+"""
 
 from __future__ import annotations
 
@@ -183,9 +186,13 @@ def save(driver, path, meta: dict | None = None) -> Path:
     """Write ``driver``'s checkpoint to ``path`` atomically (the previous file
     stays whole if anything fails); ``meta``: the caller's own values (a
     configuration hash, a code version), kept in the header. Only after
-    :meth:`mpm.Driver.start` (RuntimeError, one line, otherwise)."""
+    :meth:`mpm.Driver.start`, where the device holds the state of ``driver.step``
+    (``driver.current``; RuntimeError, one line, otherwise)."""
     if driver.initial is None:
         raise RuntimeError("save: the driver has not started; accepted: after start() (or run()), between steps")
+    if not driver.current:
+        raise RuntimeError(f"save: the device holds a later step than step {driver.step} (inside a batch); "
+                           "accepted: between advance() calls, or at a step an observer wants()")
     path = Path(path)
     arrays, values = {}, {}
 
@@ -243,7 +250,8 @@ class Checkpoint:
 
 def read(path) -> Checkpoint:
     """The checkpoint at ``path``; CheckpointError (one line) when it is missing,
-    damaged or of another format version."""
+    damaged or of another format version. The header is a pickle: read only
+    checkpoints you (or your runs) wrote."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path}: no such file")
