@@ -13,10 +13,11 @@ so far), so that ``metrics.json`` describes the whole run.
 On SIGTERM or SIGUSR1 (a cluster pre-empting the job; submitit's requeue) a
 run writes a checkpoint at the next step boundary and ends ``preempted`` with
 exit code :data:`PREEMPTED` (75, EX_TEMPFAIL: try again); the same command
-with ``run.resume=true`` continues it. The continued run logs into a new
-recording file ``<recording>.resumed-<step>.rrd`` with the first one's
-recording id, so the viewer shows the two files as one recording (open both);
-the first file is left as it was.
+with ``run.resume=true`` continues it. The continued run logs into
+``<recording>.resumed-<step>.rrd`` with the first file's recording id and,
+at its end, appends it to the first file (:func:`join_recordings`, Rerun's
+``rrd merge``): one recording, one file. Should the merge fail, both files
+stay, and the viewer still shows them as one recording when both are opened.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from mpm.checkpoint import CheckpointError
 
 from . import provenance
 from ..config.errors import EXIT_CODES
+from ..recording import recordings
+from ..recording.sinks import timings_path
 from ..config.fields import ConfigError
 
 DIR = "checkpoints"
@@ -152,3 +155,16 @@ def choose(out_dir: Path, identity: dict) -> tuple[mpm.checkpoint.Checkpoint, li
                                                 f"run's {mine[key]}); accepted: the same config and code")
         return data, notes
     raise ConfigError("run.resume", f"no checkpoint in {folder} reads back ({len(files)} damaged)")
+
+
+def join_recordings(first: Path, part: Path) -> str:
+    """Append a resumed run's recording ``part`` (and its timings file) to ``first``; "" or a note
+    saying why the two files stay apart."""
+    try:
+        for a, b in ((first, part), (timings_path(first), timings_path(part))):
+            if b.is_file():
+                recordings.merge(a, b)
+    except RuntimeError as e:
+        return f"note: {e}; open both files: the viewer shows them as one recording"
+    return ""
+

@@ -445,9 +445,10 @@ class Recorder(mpm.Observer):
         if not self._pending:
             self.measure({"config_updates": float(self.updates.sum())})
         self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
-        if m["status"] in ("interrupted", "preempted") and self.spec.log.particles:
+        if m["status"] == "interrupted" and self.spec.log.particles:
             self.particles()
-        if self.fracture is None or self.fracture_step != self.step:
+        # (pre-empted: the resumed run logs what comes next, into the same recording)
+        if self.fracture is None or self.fracture_step != self.step and m["status"] != "preempted":
             self.log_fracture()
         overall, per_body = self.fracture
         names = [b.name for b in self.spec.scene.bodies]

@@ -175,11 +175,12 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
     composed; they are stored in the recording with the provenance.
     ``identity`` (e.g. the config hash) goes into metrics.json as given.
     ``resume``: continue from this checkpoint (pipelines.run.checkpoints.choose), logging into
-    ``<recording>.resumed-<step>.rrd`` with the first recording's id."""
+    ``<recording>.resumed-<step>.rrd`` with the first recording's id, appended to the first file at the end."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     properties = recording_properties(spec, config_yaml, list(overrides), choices)
+    joined = sink is None and resume is not None  # the recording's part: appended to the first file at the end
     if sink is None:
         from ..recording.rerun_sink import RerunSink  # imported here: a run given a sink needs no rerun-sdk
 
@@ -258,6 +259,8 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             finally:
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 sink.close()
+                if joined and (note := checkpoints.join_recordings(out_dir / spec.log.recording, sink.path)):
+                    print(note, file=sys.stderr)
                 write_metrics(out_dir / "metrics.json", run.metrics)
         finally:
             if old_int is not None:

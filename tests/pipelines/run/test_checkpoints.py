@@ -18,6 +18,7 @@ import pytest
 import mpm
 from helpers import ROOT, run_cli
 from pipelines.config.fields import ConfigError
+from pipelines.recording import recordings
 from pipelines.run import checkpoints
 
 STEPS = ["run.steps=1500", "log.every=50"]
@@ -59,8 +60,16 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     m_whole, m_cut = (json.loads((d / "metrics.json").read_text()) for d in (whole, cut))
     assert m_cut["status"] == "completed" and m_cut["resumed_at"] == [stopped["steps"]]
     assert {k: m_cut.get(k) for k in SAME} == {k: m_whole.get(k) for k in SAME}
-    assert (cut / "recording.rrd").exists() and (cut / f"recording.resumed-{stopped['steps']}.rrd").exists()
     assert len(checkpoints.listed(cut / checkpoints.DIR)) == checkpoints.KEEP
+    # one recording in one file: the resumed part appended to the first, every step's scalars as the whole run's
+    assert sorted(p.name for p in cut.glob("*.rrd")) == ["recording.rrd", "recording.timings.rrd"]
+    one, other = (recordings.read(d / "recording.rrd") for d in (whole, cut))
+    assert set(one.scalars) == set(other.scalars) and {"kinetic_energy", "elastic_energy", "dt"} <= set(one.scalars)
+    for name in one.scalars:
+        (s1, v1), (s2, v2) = one.scalars[name], other.scalars[name]
+        assert np.array_equal(s1, s2) and np.array_equal(v1, v2), name
+    assert np.array_equal(one.steps, other.steps) and len(one.steps) == 1500 // 50 + 1  # the particle frames
+    assert all(np.array_equal(a, b) for a, b in zip(one.positions, other.positions))
 
 
 def test_resume_without_a_checkpoint_is_refused_in_one_line(tmp_path):
