@@ -2,8 +2,9 @@
 the recorder they keep, and which one ``run.resume=true`` continues from.
 
 ``run.checkpoint_every`` [s of simulated time]: 0 writes none; null writes
-one every :data:`AUTO_WALL_S` seconds of wall time (a checkpoint costs about
-as much as writing the particles once, far under 2 % of five minutes). Files
+one every :data:`AUTO_WALL_S` seconds of wall time, or every
+:data:`AUTO_COST` times the last write's time where that is longer, so that
+writing them takes under 2 % of the run. Files
 are ``<run dir>/checkpoints/ckpt-<step>.npz`` (mpm.checkpoint), the newest
 :data:`KEEP` kept; their meta holds the config hash, the code version (the git
 commit and the hash of the sources a run executes, pipelines.run.provenance),
@@ -42,6 +43,8 @@ KEEP = 2
 """checkpoints kept (the newest); an older one is removed once a newer one is written"""
 AUTO_WALL_S = 300.0
 """[s] wall time between checkpoints when run.checkpoint_every is null"""
+AUTO_COST = 50.0
+"""run.checkpoint_every null: at least this many times the last write's wall time between two (2 %)"""
 PREEMPTED = EXIT_CODES["preempted"]
 """a run's exit code after SIGTERM or SIGUSR1 left a checkpoint (EX_TEMPFAIL: requeue and resume)"""
 NAME = re.compile(r"ckpt-(\d+)\.npz")
@@ -95,6 +98,7 @@ class Checkpoints:
         self.every = every
         self.meta = {"config_hash": identity.get("config_hash"), **code_version(), "recording_id": recording_id}
         self._since = time.monotonic()
+        self._wall = AUTO_WALL_S  # [s] wall time between two (run.checkpoint_every null)
         self._next: float | None = None  # [s] the simulated time of the next one
 
     def describe(self) -> str:
@@ -109,18 +113,20 @@ class Checkpoints:
         if self.every == 0 or not driver.running:
             return False
         if self.every is None:
-            return time.monotonic() - self._since >= AUTO_WALL_S
+            return time.monotonic() - self._since >= self._wall
         if self._next is None:
             self._next = (driver.time // self.every + 1) * self.every
         return driver.time >= self._next * (1 - 1e-12)
 
     def write(self, driver: mpm.Driver, recorder) -> Path:
         """The driver's and the recorder's state at ``driver.step``; the older ones beyond KEEP removed."""
+        t0 = time.monotonic()
         self.dir.mkdir(parents=True, exist_ok=True)
         path = driver.save(self.dir / f"ckpt-{driver.step}.npz", {**self.meta, "recorder": recorder_state(recorder)})
         for old in listed(self.dir)[KEEP:]:
             old.unlink(missing_ok=True)
         self._since = time.monotonic()
+        self._wall = max(AUTO_WALL_S, AUTO_COST * (self._since - t0))
         if self.every:
             self._next = (driver.time // self.every + 1) * self.every
         return path

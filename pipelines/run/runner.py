@@ -216,6 +216,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
             driver.resume(resume.path)
             checkpoints.restore_recorder(run, resume.meta["recorder"])
             run.metrics.setdefault("resumed_at", []).append(driver.step)
+        run.metrics["checkpoints"] = ckpts.describe()
         if Progress.shown(spec.log.progress):
             print(ckpts.describe(), file=sys.stderr, flush=True)
         interrupts.deferred = True  # Ctrl-C, SIGTERM and SIGUSR1 end the run at a step boundary

@@ -124,4 +124,7 @@ def test_the_checkpoints_fall_due_every_simulated_interval(tmp_path):
     driver.time = 0.02
     assert every.due(driver)
     assert not checkpoints.Checkpoints(tmp_path, 0.0, {}, None).due(driver)
-    assert "every 5 minutes of wall time" in checkpoints.Checkpoints(tmp_path, None, {}, None).describe()
+    auto = checkpoints.Checkpoints(tmp_path, None, {}, None)
+    assert "every 5 minutes of wall time" in auto.describe() and not auto.due(driver)
+    auto._since -= checkpoints.AUTO_WALL_S
+    assert auto.due(driver)
