@@ -151,7 +151,7 @@ class Interrupts:
 
     def __init__(self):
         self.deferred = False
-        self.pending: type[KeyboardInterrupt] | None = None
+        self.pending: KeyboardInterrupt | None = None
 
     def handler(self, signum, frame):
         exc = KeyboardInterrupt() if signum == signal.SIGINT else _Terminate(signal.Signals(signum).name)
@@ -198,11 +198,13 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
                                     getattr(sink, "recording_id", None))
     previous = {}
     try:
-        for signum in (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT):
-            previous[signum] = signal.signal(signum, interrupts.handler)
+        for signum in (signal.SIGTERM, getattr(signal, "SIGUSR1", None), signal.SIGINT):
+            if signum is not None:  # (no SIGUSR1 on Windows)
+                previous[signum] = signal.signal(signum, interrupts.handler)
     except ValueError:  # not the main thread
         pass
     previous_int = previous.pop(signal.SIGINT, None)
+    stepping = False  # in the step loop: a pre-emption leaves a checkpoint
     try:
         run.metrics["precision_check"], note = precision_check(spec)
         if note:
@@ -219,7 +221,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         run.metrics["checkpoints"] = ckpts.describe()
         if Progress.shown(spec.log.progress):
             print(ckpts.describe(), file=sys.stderr, flush=True)
-        interrupts.deferred = True  # Ctrl-C, SIGTERM and SIGUSR1 end the run at a step boundary
+        interrupts.deferred = stepping = True  # Ctrl-C, SIGTERM and SIGUSR1 end the run at a step boundary
         try:
             while driver.running:
                 interrupts.check()
@@ -234,8 +236,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: list
         what = e.name if isinstance(e, _Terminate) else "Ctrl-C"
         run.metrics["status"] = "interrupted"
         run.metrics["reason"] = f"{what} at step {run.step} (t = {run.t:.6g} s)"
-        if isinstance(e, _Terminate) and run.driver is not None and run.driver.initial is not None \
-                and run.driver.running:  # pre-empted while stepping: a checkpoint to resume from
+        if isinstance(e, _Terminate) and stepping and run.driver.running:  # pre-empted: a checkpoint to resume from
             path = ckpts.write(run.driver, run)
             run.metrics["status"] = "preempted"
             run.metrics["reason"] += f"; checkpoint {path}: run.resume=true hydra.run.dir={out_dir} continues"
