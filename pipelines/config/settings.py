@@ -73,8 +73,9 @@ class RunSettings:
     checkpoint_every: Optional[float] = setting(None, "simulated time between checkpoints [s] (<run dir>/checkpoints, "
                                                       "the last two kept); 0: none; null: every 5 minutes of wall "
                                                       "time", ge=0.0)
-    resume: bool = setting(False, "continue from the newest valid checkpoint in the run directory "
-                                  "(hydra.run.dir=<dir>)")
+    resume: Optional[bool] = setting(False, "continue from the newest valid checkpoint in the run directory "
+                                            "(hydra.run.dir=<dir>); null: where it holds one, else start (a "
+                                            "requeued job)")
 
     def problems(self):
         if self.steps is not None and self.duration is not None:

@@ -82,9 +82,10 @@ def run(cfg: DictConfig) -> dict:
     if origins:  # materials and kernels defined outside mpm: where
         identity["plugins"] = origins
     resume = None
-    if cfg.run.resume:  # the newest checkpoint that reads back, of this config and code
-        from .checkpoints import choose
+    from .checkpoints import DIR, choose, listed
 
+    # the newest checkpoint that reads back, of this config and code (null: only where there is one)
+    if cfg.run.resume or cfg.run.resume is None and listed(out_dir / DIR):
         try:
             resume, notes = choose(out_dir, identity)
         except ConfigError as e:

@@ -14,7 +14,9 @@ so far), so that ``metrics.json`` describes the whole run.
 On SIGTERM or SIGUSR1 (a cluster pre-empting the job; submitit's requeue) a
 run writes a checkpoint at the next step boundary and ends ``preempted`` with
 exit code :data:`PREEMPTED` (75, EX_TEMPFAIL: try again); the same command
-with ``run.resume=true`` continues it. The continued run logs into
+with ``run.resume=true`` continues it (``run.resume=null``: where the run
+directory holds a checkpoint, else from the start: a requeued job's own
+command). The continued run logs into
 ``<recording>.resumed-<step>.rrd`` with the first file's recording id and,
 at its end, appends it to the first file (:func:`join_recordings`, Rerun's
 ``rrd merge``): one recording, one file. Should the merge fail, both files

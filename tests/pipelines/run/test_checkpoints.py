@@ -72,11 +72,14 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     assert all(np.array_equal(a, b) for a, b in zip(one.positions, other.positions))
 
 
-def test_resume_without_a_checkpoint_is_refused_in_one_line(tmp_path):
+def test_resume_without_a_checkpoint_is_refused_in_one_line_unless_null(tmp_path):
     p = run_cli(["run.steps=5", "run.resume=true", f"hydra.run.dir={tmp_path}"], cwd=ROOT, timeout=300)
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert p.returncode == 2 and len(lines) == 1, p.stderr
     assert lines[0].startswith(f"error: run.resume: no checkpoint in {tmp_path / checkpoints.DIR}"), p.stderr
+    # null (a requeued job's command): start anew where there is none
+    p = run_cli(["run.steps=5", "run.resume=null", f"hydra.run.dir={tmp_path}"], cwd=ROOT, timeout=300)
+    assert p.returncode == 0 and "resumed_at" not in json.loads((tmp_path / "metrics.json").read_text()), p.stderr
 
 
 def _driver(steps: int, end: int | None = None) -> mpm.Driver:
