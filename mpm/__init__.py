@@ -9,7 +9,8 @@ throughout (m, s, kg, Pa). :data:`__all__` is the public API; docs/library.md
 is its guide and docs/extending.md says how to add a material or a kernel.
 """
 
-from . import analytic, responses
+from . import analytic, checkpoint, responses
+from .checkpoint import CheckpointError
 from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
 from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
@@ -47,7 +48,7 @@ __all__ = [
     # building and stepping
     "build", "Model", "State", "SceneError", "Solver", "SolverOptions", "plan",
     "Driver", "StepPolicy", "Detection", "Detector", "DETECTION_ACTIONS", "Observer", "Event", "Outcome",
-    "StepReport", "cfl_dt", "Response", "responses",
+    "StepReport", "cfl_dt", "Response", "responses", "checkpoint", "CheckpointError",
     # closed-form solutions
     "analytic",
 ]

@@ -199,7 +199,6 @@ class Solver:
         self.scheme, self.options = scheme, resolved(options or SolverOptions(), model.scene, model.types.precision,
                                                      policy)
         opt, t, k, dev, scene = self.options, model.types, model.kernel, model.device, model.scene
-        assert None not in (opt.compensate, opt.track_energy, opt.track_J, scheme.affine), "resolved() decides"
         implicit, eulerian, batched = isinstance(opt.integrator, Implicit), isinstance(scheme, EMPM), opt.batched
         forcing = scene.solution if getattr(scene.solution, "has_body_force", False) else None
         nb = self.n_bodies = len(scene.bodies)
@@ -241,8 +240,7 @@ class Solver:
         self.fracture = FractureMeasure(model)
         self.implicit = ImplicitSolve(self, opt.integrator) if implicit else None
         self.timestep = StepRule(model, self.conditions.collider_speed)
-        # the device moves references only in batches, and only where the scheme can move them
-        self.device_moves = batched and not self.g2p_commits and scheme.name != "tlmpm"
+        self.device_moves = batched and not self.g2p_commits and scheme.name != "tlmpm"  # (batches; a moving scheme)
         self.pad = 0.0  # [m] grids grown by this much on every side at a refit (batches: room for k steps)
         self.time = 0.0  # [s] simulated time of the state, on the host (the device's is control.t)
         self.X0 = None  # [m] initial positions, float64 (after prepare)
@@ -265,10 +263,8 @@ class Solver:
         return load(self.kernels(), self.model.device)
 
     def prepare(self, state: State) -> None:
-        """Take the initial positions as every body's reference configuration
-        and record the neighbour pairs of the fracture measure."""
-        m = self.model
-        x = state.x.numpy()
+        """Take the initial positions as every body's reference, and the fracture measure's neighbour pairs."""
+        m, x = self.model, state.x.numpy()
         self.buffer.set(positions=1.0)  # no bound before the first step
         self.X0 = x.astype(np.float64)
         self.diagnostics.prepare(self.X0)
@@ -281,6 +277,10 @@ class Solver:
         hi = [x[s:s + c].max(axis=0) for s, c in m.body_ranges]
         self.references.fit(range(self.n_bodies), lo, hi, self.pad)
         self.references.move(state, range(self.n_bodies), self.const)
+
+    def restored(self, state: State) -> None:
+        """After mpm.checkpoint restored the state and the parts: the grid sized to the restored layout."""
+        self.grid.reserve(self.layout.n_nodes)
 
     # ------------------------------------------------------------------ a step on the device
     def attempt(self, state: State) -> NewtonReport | None:

@@ -44,16 +44,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .. import checkpoint
 from ..launch import load
 from ..params import instance_problem, param, violations
 from .policy import Policy
 from .detection import Detection, Detector
 from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, TRIP_SIZE, StepReport
-from .timestep import BINDINGS
+from .timestep import BINDINGS, CRUSHED, collapse_reason  # noqa: F401 (CRUSHED: the driver's limit)
 
 STATUSES = ("running", "completed", "unstable")
 SYNC_EVERY_CUDA = 10  # the default k on CUDA (batched solvers)
-CRUSHED = 0.05  # a step collapse with a reference cell narrower than this (s_min of F^sn) blames the reference
 
 
 @dataclass
@@ -135,6 +135,9 @@ class Observer:
 
     def on_event(self, driver: "Driver", event: Event) -> None:
         """A warning or notice."""
+
+    def on_resume(self, driver: "Driver") -> None:
+        """The state of a checkpoint restored (mpm.checkpoint.resume), in place of :meth:`on_start`."""
 
     def on_stop(self, driver: "Driver", outcome: Outcome) -> None:
         """The run ended unstable (``outcome.report``: the step that failed, if any)."""
@@ -231,15 +234,39 @@ class Driver:
 
     # ------------------------------------------------------------ run
     def run(self) -> Outcome:
-        """Start, step until the end or an instability; the outcome."""
-        self.start()
+        """Start (unless resumed), step until the end or an instability; the outcome."""
+        if self.initial is None:
+            self.start()
         while self.running:
             self.advance()
         return self.outcome
 
+    def save(self, path, meta: dict | None = None):
+        """Write this run's checkpoint to ``path`` between steps (mpm.checkpoint.save); the path."""
+        return checkpoint.save(self, path, meta)
+
+    def resume(self, path):
+        """Continue this fresh driver from the checkpoint at ``path`` (mpm.checkpoint.resume);
+        then :meth:`advance` or :meth:`run` as after :meth:`start`. The checkpoint read."""
+        return checkpoint.resume(self, path)
+
     def start(self) -> None:
-        """Prepare the solver, measure the initial state, check it, choose the
-        first step, and tell the observers."""
+        """:meth:`prepare`, then tell the observers and end a run that cannot start."""
+        problem, v = self.prepare()
+        for o in self.observers:
+            o.on_start(self)
+        if problem is not None:
+            message, criterion, body, values = problem
+            self._stop(message, criterion, body, None, **values)
+        elif int(v["halt"][0]) == COLLAPSE:
+            self._stop(collapse_reason(self, v), "dt_collapse")
+        elif self.done:
+            self.outcome.status = "completed"
+
+    def prepare(self) -> tuple:
+        """Prepare the solver, measure the initial state, check it and choose the
+        first step, telling no one (:meth:`start`; mpm.checkpoint.resume restores
+        over it); (the problem that stops the run or None, the step buffer's values)."""
         s, state, p = self.solver, self.state, self.policy
         s.time = 0.0  # a run's clock starts at 0 (the device's too: mpm.stepping.policy.Policy.start)
         if self.k > 1:  # room for k steps of at most cfl cells each (a fixed step: one; the device checks)
@@ -270,15 +297,7 @@ class Driver:
             v = s.buffer.read()
             s.buffer.set(halt=0.0, skip=0.0)  # the host holds the state (a collapse at the start included)
             self._chosen(v)
-        for o in self.observers:
-            o.on_start(self)
-        if problem is not None:
-            message, criterion, body, values = problem
-            self._stop(message, criterion, body, None, **values)
-        elif int(v["halt"][0]) == COLLAPSE:
-            self._stop(self._collapse(v), "dt_collapse")
-        elif self.done:
-            self.outcome.status = "completed"
+        return problem, (v if problem is None else None)
 
     def advance(self) -> None:
         """A batch of up to ``sync_every`` steps (one under the implicit
@@ -417,7 +436,7 @@ class Driver:
             return self.running
         self._chosen(v)
         if report.halt == COLLAPSE:
-            self._stop(self._collapse(v), "dt_collapse")
+            self._stop(collapse_reason(self, v), "dt_collapse")
             return False
         return True
 
@@ -428,25 +447,6 @@ class Driver:
         self.binding[BINDINGS[int(v["binding"][0])]] += 1
         if v["dt0_set"][0]:
             self.dt_first = float(v["dt0"][0])
-
-    def _collapse(self, v: dict) -> str:
-        """Why the next step cannot be taken."""
-        p, dt0, limit = self.policy, self.dt_first, float(v["dt_limit"][0])
-        if p.dt is None and dt0 is not None and not (limit >= p.dt_collapse * dt0):
-            said = f"time step collapsed to {limit:.3g} s, below {p.dt_collapse:g} of the first step ({dt0:.3g} s)"
-            s_min = math.sqrt(float(np.min(v["min_stretch2"])))  # the narrowest reference cell (inf: Eulerian)
-            if not s_min < CRUSHED:
-                return f"{said}: a particle's strain rate or compression is running away"
-            cause = f"{said}: a reference cell is crushed to {s_min:.2g} of its width"
-            scheme = self.solver.scheme.name
-            if scheme == "tlmpm":
-                return (f"{cause}; TLMPM never updates its reference, so this is the method's limit "
-                        f"(scheme=empm or aulmpm update it)")
-            if scheme == "aulmpm":
-                return f"{cause}; A-ULMPM's criterion did not update it in time (scheme.stretch_min bounds it)"
-            return cause
-        speed = math.sqrt(v["max_v2"][0]) if self.step else self.v0
-        return f"the time step is {self.dt:.3g} s (fastest particle {speed:.3g} m/s): the run cannot advance"
 
     def _request(self) -> None:
         """The observers' next wants: the device pauses there."""

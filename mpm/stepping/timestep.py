@@ -25,6 +25,7 @@ import warp as wp
 
 STRAIN_STEP = 0.25  # dt |L| <= STRAIN_STEP * cfl: the strain increment of one step
 TERMS = ("wave", "viscous", "strain_rate")
+CRUSHED = 0.05  # a step collapse with a reference cell narrower than this (s_min of F^sn) blames the reference
 
 
 def cfl_dt(dx: float, wave_speed: float, max_speed: float, cfl: float,
@@ -199,3 +200,23 @@ def make_step_rule(dim: int):
         return wave, viscous, strain, fresh
 
     return limits
+
+
+def collapse_reason(driver, v: dict) -> str:
+    """Why ``driver`` (an mpm.Driver) cannot take its next step, from the step buffer's values ``v``."""
+    p, dt0, limit = driver.policy, driver.dt_first, float(v["dt_limit"][0])
+    if p.dt is None and dt0 is not None and not (limit >= p.dt_collapse * dt0):
+        said = f"time step collapsed to {limit:.3g} s, below {p.dt_collapse:g} of the first step ({dt0:.3g} s)"
+        s_min = math.sqrt(float(np.min(v["min_stretch2"])))  # the narrowest reference cell (inf: Eulerian)
+        if not s_min < CRUSHED:
+            return f"{said}: a particle's strain rate or compression is running away"
+        cause = f"{said}: a reference cell is crushed to {s_min:.2g} of its width"
+        scheme = driver.solver.scheme.name
+        if scheme == "tlmpm":
+            return (f"{cause}; TLMPM never updates its reference, so this is the method's limit "
+                    f"(scheme=empm or aulmpm update it)")
+        if scheme == "aulmpm":
+            return f"{cause}; A-ULMPM's criterion did not update it in time (scheme.stretch_min bounds it)"
+        return cause
+    speed = math.sqrt(v["max_v2"][0]) if driver.step else driver.v0
+    return f"the time step is {driver.dt:.3g} s (fastest particle {speed:.3g} m/s): the run cannot advance"

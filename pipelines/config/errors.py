@@ -13,7 +13,8 @@ from . import plugins
 from .fields import ConfigError, override_key
 
 EXIT_CONFIG = 2
-EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130}  # of a run, by status
+EXIT_CODES = {"completed": 0, "failed": 1, "unstable": 3, "interrupted": 130,
+              "preempted": 75}  # of a run, by status (preempted: a checkpoint left; EX_TEMPFAIL)
 
 
 def _first_line(text: object) -> str:

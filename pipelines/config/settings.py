@@ -70,6 +70,12 @@ class RunSettings:
                                               "CPU, 10 on CUDA", ge=1)
     graph: Optional[bool] = setting(None, "replay a fixed-size scene's k steps as a CUDA graph; null: on CUDA "
                                           "where the scene allows it")
+    checkpoint_every: Optional[float] = setting(None, "simulated time between checkpoints [s] (<run dir>/checkpoints, "
+                                                      "the last two kept); 0: none; null: every 5 minutes of wall "
+                                                      "time", ge=0.0)
+    resume: Optional[bool] = setting(False, "continue from the newest valid checkpoint in the run directory "
+                                            "(hydra.run.dir=<dir>); null: where it holds one, else start (a "
+                                            "requeued job)")
 
     def problems(self):
         if self.steps is not None and self.duration is not None:

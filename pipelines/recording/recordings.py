@@ -106,6 +106,25 @@ def repair(path: str | Path) -> Path | None:
     return path.with_name(path.stem + ".backup.rrd")
 
 
+def merge(first: str | Path, part: str | Path) -> None:
+    """Append ``part`` (the recording of a resumed run, with ``first``'s recording id) to ``first``, in
+    place, with Rerun's own ``rerun rrd merge``; ``part`` is removed. RuntimeError (one line) when the
+    merge fails: both files are left as they were."""
+    first, part = Path(first), Path(part)
+    if not first.is_file():
+        part.replace(first)
+        return
+    tmp = first.with_name(first.stem + ".merging.rrd")
+    run = subprocess.run([sys.executable, "-m", "rerun", "rrd", "merge", str(first), str(part), "-o", str(tmp)],
+                         capture_output=True, text=True)
+    if run.returncode != 0 or not tmp.is_file():
+        tmp.unlink(missing_ok=True)
+        said = (run.stderr.strip().splitlines() or ["no output"])[-1][-300:]
+        raise RuntimeError(f"rerun rrd merge could not append {part.name} to {first.name}: {said}")
+    tmp.replace(first)
+    part.unlink()
+
+
 def read(path: str | Path, particles: bool = True) -> Recording:
     """A recording's contents; ``particles=False``: without its particle
     frames (no positions, dJ or fields: the scalars, events, properties and

@@ -94,10 +94,11 @@ class RerunSink(Sink):
     _names: list[str]
     _domain: tuple
 
-    def __init__(self, path: Path, flush_every: int = 500, threaded: bool = True):
+    def __init__(self, path: Path, flush_every: int = 500, threaded: bool = True, recording_id: str | None = None):
+        """``recording_id``: another file's, to continue its recording (the viewer merges the two); None: new."""
         self.path = Path(path)
         self.flush_every = flush_every
-        recording_id = str(uuid.uuid4())
+        self.recording_id = recording_id = recording_id or str(uuid.uuid4())
         self.rec = _stream(recording_id, self.path)
         self.clock = _stream(recording_id, timings_path(self.path))
         self._open = True

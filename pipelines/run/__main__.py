@@ -82,7 +82,20 @@ def run(cfg: DictConfig) -> dict:
         identity["meshes"] = spec.meshes
     if origins:  # materials and kernels defined outside mpm: where
         identity["plugins"] = origins
-    if hc.mode == RunMode.MULTIRUN and not cfg.run.force:
+    resume = None
+    from .checkpoints import DIR, choose, listed
+
+    # the newest checkpoint that reads back, of this config and code (null: only where there is one)
+    if cfg.run.resume or cfg.run.resume is None and listed(out_dir / DIR):
+        try:
+            resume, notes = choose(out_dir, identity)
+        except ConfigError as e:
+            print(f"error: {e}", file=sys.stderr)
+            _config_errors.append(str(e))
+            return {"status": "invalid", "reason": str(e)}
+        for note in notes:
+            print(note, file=sys.stderr)
+    elif hc.mode == RunMode.MULTIRUN and not cfg.run.force:
         done = finished(out_dir, identity["config_hash"])
         if done is not None:
             print(f"skipped: {out_dir} already holds this config's {done['status']} run "
@@ -101,7 +114,7 @@ def run(cfg: DictConfig) -> dict:
             print(f"run directory: {out_dir}", file=sys.stderr, flush=True)
 
         metrics = execute(spec, out_dir, OmegaConf.to_yaml(cfg, resolve=True), overrides, choices,
-                          identity=identity)
+                          identity=identity, resume=resume)
     _last_status.append(metrics["status"])
     summary = (f"{metrics['status']}: {metrics['steps']} steps, t = {metrics['sim_time']:.4g} s, "
                f"{metrics.get('step_time_ms') or float('nan'):.3f} ms/step; {out_dir}")
@@ -216,7 +229,8 @@ def main() -> None:
 
 # a sweep's exit code: the first status present among its jobs (0: all completed)
 SWEEP_EXIT = [("invalid", EXIT_CONFIG), ("failed", 1), ("unreadable", 1), ("unknown", 1), ("killed", 1), ("running", 1),
-              ("interrupted", EXIT_CODES["interrupted"]), ("unstable", EXIT_CODES["unstable"])]
+              ("interrupted", EXIT_CODES["interrupted"]), ("preempted", EXIT_CODES["preempted"]),
+              ("unstable", EXIT_CODES["unstable"])]
 
 
 if __name__ == "__main__":

@@ -80,9 +80,9 @@ def code_hash(root: Path = REPO) -> str:
     return h.hexdigest()[:16]
 
 
-# keys that do not change a run's result: they are left out of its hash
-# (scale only feeds interpolations, whose resolved values are hashed)
-UNHASHED = {"run": ("force", "plan"), "log": ("progress",), "scale": None}
+# keys that do not change a run's result: they are left out of its hash (scale only feeds
+# interpolations, whose resolved values are hashed; a resumed run keeps the hash of the run it continues)
+UNHASHED = {"run": ("force", "plan", "checkpoint_every", "resume"), "log": ("progress",), "scale": None}
 
 
 def config_hash(config: dict, code: str, files: dict | None = None) -> str:

@@ -140,12 +140,7 @@ class Recorder(mpm.Observer):
     def on_start(self, driver: mpm.Driver) -> None:
         """The initial state: its scalars, particles, fracture measure, and the scheme's announcement."""
         log = self.spec.log
-        self.started = True
-        assert self.solver.X0 is not None  # the driver prepared the solver
-        self.X0 = self.solver.X0  # initial positions [m], float64
-        self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
-        self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
-                       if self.spec.scene.colliders else None)
+        self.on_resume(driver)
         assert driver.initial is not None  # measured by driver.start() before it reports
         self._pending[:] = [0, 0.0, driver.initial.copy(), {
             "config_updates": 0.0, **(self.errors() if self.solution is not None else {})}]
@@ -156,10 +151,20 @@ class Recorder(mpm.Observer):
         if self.responses is not None:
             self.responses.update(self.state.x.numpy(), self.t, self.solver.removals.kept)
         self.announce_scheme()
-        self.progress = Progress(*self.spec.end, log.progress)
-        self.metrics["status"], self.metrics["reason"] = "running", ""
         if driver.running and 0.0 < driver.dt < math.inf:
             self.warn_size(driver.dt)
+
+    def on_resume(self, driver: mpm.Driver) -> None:
+        """The parts a run's tracks need, nothing logged (after a checkpoint's restore, the tracks' own
+        state comes back from it: pipelines.run.checkpoints)."""
+        self.started = True
+        assert self.solver.X0 is not None  # the driver prepared the solver
+        self.X0 = self.solver.X0  # initial positions [m], float64
+        self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
+        self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
+                       if self.spec.scene.colliders else None)
+        self.progress = Progress(*self.spec.end, self.spec.log.progress)
+        self.metrics["status"], self.metrics["reason"] = "running", ""
 
     def on_step(self, driver: mpm.Driver, report: mpm.StepReport) -> None:
         """A completed step: the last state's scalar row, events, this state's
@@ -402,8 +407,8 @@ class Recorder(mpm.Observer):
             self.progress.close()
         if self.started and m["status"] != "failed":
             self._final_state()
-        if m["status"] == "interrupted":
-            self.sink.event(self.step, self.t, f"interrupted: {m['reason']}", level="WARN")
+        if m["status"] in ("interrupted", "preempted"):
+            self.sink.event(self.step, self.t, f"{m['status']}: {m['reason']}", level="WARN")
         steps = self.step
         m.update(steps=steps, sim_time=self.t)
         # (the last step, shortened to land on the duration, is not a step the rule chose; dt_reference_factor:
@@ -456,7 +461,8 @@ class Recorder(mpm.Observer):
         self.emit(self.solver.measure(self.state)[self.names.index("elastic_energy")])
         if m["status"] == "interrupted" and self.spec.log.particles:
             self.particles()
-        if self.fracture is None or self.fracture_step != self.step:
+        # (pre-empted: the resumed run logs what comes next, into the same recording)
+        if self.fracture is None or self.fracture_step != self.step and m["status"] != "preempted":
             self.log_fracture()
         assert self.fracture is not None  # set by log_fracture()
         overall, per_body = self.fracture

@@ -3,9 +3,10 @@
 Hydra-free: ``pipelines.run`` composes the config and calls :func:`execute`,
 which steps the scene with ``mpm``'s driver (mpm.stepping.driver: the stable step,
 collapse and blow-up detection) and records what it reports through a
-:class:`pipelines.run.recorder.Recorder`. Whatever happens (completion,
-instability, Ctrl-C, SIGTERM, an exception), the recording is finalised and
-``metrics.json`` written.
+:class:`pipelines.run.recorder.Recorder`, writing checkpoints as
+``run.checkpoint_every`` asks (pipelines.run.checkpoints). Whatever happens
+(completion, instability, Ctrl-C, SIGTERM or SIGUSR1: a checkpoint first, an
+exception), the recording is finalised and ``metrics.json`` written.
 """
 
 from __future__ import annotations
@@ -25,10 +26,11 @@ from mpm.precision import compensates, for_policy
 from mpm.stepping.driver import SYNC_EVERY_CUDA
 from mpm.stepping.plan import plan as step_plan
 
-from . import provenance
+from . import checkpoints, provenance
 from ..config import plugins
 from ..config.validate import RunSpec
 from ..recording.sinks import Sink
+from .progress import Progress
 from .recorder import Recorder
 
 
@@ -134,11 +136,15 @@ def plan(spec: RunSpec) -> str:
 
 
 class _Terminate(KeyboardInterrupt):
-    """SIGTERM, handled like Ctrl-C (e.g. a cluster pre-empting the job)."""
+    """SIGTERM or SIGUSR1 (a cluster pre-empting the job): a checkpoint, then the end, once stepping."""
+
+    def __init__(self, name: str = "SIGTERM"):
+        super().__init__(name)
+        self.name = name
 
 
 class Interrupts:
-    """Ctrl-C and SIGTERM. Outside the step loop they raise at once; inside
+    """Ctrl-C, SIGTERM and SIGUSR1. Outside the step loop they raise at once; inside
     it they are remembered and raised at the next step boundary
     (:meth:`check`): Python ignores an exception raised while a finaliser
     runs (a Warp array's ``__del__``, say, which the loop triggers every step),
@@ -147,48 +153,61 @@ class Interrupts:
 
     def __init__(self):
         self.deferred = False
-        self.pending: type[KeyboardInterrupt] | None = None
+        self.pending: KeyboardInterrupt | None = None
 
     def handler(self, signum, frame):
-        exc = _Terminate if signum == signal.SIGTERM else KeyboardInterrupt
+        exc = KeyboardInterrupt() if signum == signal.SIGINT else _Terminate(signal.Signals(signum).name)
         if self.deferred and self.pending is None:
             self.pending = exc
             return
-        raise exc()
+        raise exc
 
     def check(self) -> None:
         if self.pending is not None:
             exc, self.pending = self.pending, None
-            raise exc()
+            raise exc
 
 
 def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequence[str] = (),
-            choices: dict | None = None, sink: Sink | None = None, identity: dict | None = None) -> dict:
+            choices: dict | None = None, sink: Sink | None = None, identity: dict | None = None,
+            resume: mpm.checkpoint.Checkpoint | None = None) -> dict:
     """Run ``spec``; write the recording and ``metrics.json`` into ``out_dir``.
 
     ``config_yaml``, ``overrides`` and ``choices`` describe how the spec was
     composed; they are stored in the recording with the provenance.
-    ``identity`` (e.g. the config hash) goes into metrics.json as given."""
+    ``identity`` (e.g. the config hash) goes into metrics.json as given.
+    ``resume``: continue from this checkpoint (pipelines.run.checkpoints.choose), logging into
+    ``<recording>.resumed-<step>.rrd`` with the first recording's id, appended to the first file at the end."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     properties = recording_properties(spec, config_yaml, list(overrides), choices)
+    joined: Path | None = None  # a resumed run's part of the recording: appended to the first file at the end
     if sink is None:
         from ..recording.rerun_sink import RerunSink  # imported here: a run given a sink needs no rerun-sdk
 
-        sink = RerunSink(out_dir / spec.log.recording, spec.log.flush_every)
+        name = spec.log.recording if resume is None else spec.log.recording.replace(
+            ".rrd", f".resumed-{resume.step}.rrd")
+        sink = RerunSink(out_dir / name, spec.log.flush_every,
+                         recording_id=resume.meta.get("recording_id") if resume is not None else None)
+        joined = sink.path if resume is not None else None
     run = Recorder(spec, out_dir, properties, sink)
     interrupts = Interrupts()
     run.metrics.update(identity or {})
     # what a run killed without warning leaves (python -m pipelines.replay <dir> --repair marks it killed)
     write_metrics(out_dir / "metrics.json", {**run.metrics, "status": "running",
                                              "reason": "started, not finished"})
-    previous_term = previous_int = None
+    ckpts = checkpoints.Checkpoints(out_dir, spec.run.checkpoint_every, identity or {},
+                                    getattr(sink, "recording_id", None))
+    previous = {}
     try:
-        previous_term = signal.signal(signal.SIGTERM, interrupts.handler)
-        previous_int = signal.signal(signal.SIGINT, interrupts.handler)
+        for signum in (signal.SIGTERM, getattr(signal, "SIGUSR1", None), signal.SIGINT):
+            if signum is not None:  # (no SIGUSR1 on Windows)
+                previous[signum] = signal.signal(signum, interrupts.handler)
     except ValueError:  # not the main thread
         pass
+    previous_int = previous.pop(signal.SIGINT, None)
+    stepping = False  # in the step loop: a pre-emption leaves a checkpoint
     try:
         run.metrics["precision_check"], note = precision_check(spec)
         if note:
@@ -197,20 +216,34 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
         sink.start(run.meta())
         driver = run.driver
         assert driver is not None  # made by run.build()
-        driver.start()
-        interrupts.deferred = True  # Ctrl-C and SIGTERM end the run at a step boundary
+        if resume is None:
+            driver.start()
+        else:
+            driver.resume(resume.path)
+            checkpoints.restore_recorder(run, resume.meta["recorder"])
+            run.metrics.setdefault("resumed_at", []).append(driver.step)
+        run.metrics["checkpoints"] = ckpts.describe()
+        if Progress.shown(spec.log.progress):
+            print(ckpts.describe(), file=sys.stderr, flush=True)
+        interrupts.deferred = stepping = True  # Ctrl-C, SIGTERM and SIGUSR1 end the run at a step boundary
         try:
             while driver.running:
                 interrupts.check()
                 driver.advance()
+                if ckpts.due(driver):
+                    ckpts.write(driver, run)
         finally:
             interrupts.deferred = False
         if driver.outcome.status == "completed":
             run.metrics["status"], run.metrics["reason"] = "completed", ""
     except KeyboardInterrupt as e:
+        what = e.name if isinstance(e, _Terminate) else "Ctrl-C"
         run.metrics["status"] = "interrupted"
-        what = "SIGTERM" if isinstance(e, _Terminate) else "Ctrl-C"
         run.metrics["reason"] = f"{what} at step {run.step} (t = {run.t:.6g} s)"
+        if isinstance(e, _Terminate) and stepping and run.driver is not None and run.driver.running:
+            path = ckpts.write(run.driver, run)  # pre-empted: a checkpoint to resume from
+            run.metrics["status"] = "preempted"
+            run.metrics["reason"] += f"; checkpoint {path}: run.resume=true hydra.run.dir={out_dir} continues"
     except Exception as e:
         run.metrics["status"] = "failed"
         run.metrics["reason"] = f"{type(e).__name__}: {e}"
@@ -232,12 +265,14 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
             finally:
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 sink.close()
+                if joined and (note := checkpoints.join_recordings(out_dir / spec.log.recording, joined)):
+                    print(note, file=sys.stderr)
                 write_metrics(out_dir / "metrics.json", run.metrics)
         finally:
             if old_int is not None:
                 signal.signal(signal.SIGINT, old_int)
-            if previous_term is not None:
-                signal.signal(signal.SIGTERM, previous_term)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
     return run.metrics
 
 

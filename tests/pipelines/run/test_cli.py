@@ -1,6 +1,6 @@
 """The command line: one-line configuration errors with exit code 2, clean
-stops on instability and on Ctrl-C/SIGTERM, each leaving a readable recording
-and metrics.json."""
+stops on instability, on Ctrl-C and on SIGTERM (a checkpoint first), each
+leaving a readable recording and metrics.json."""
 
 import json
 import math
@@ -356,8 +356,10 @@ def test_a_large_energy_loss_is_reported(tmp_path):
     assert -ENERGY_LOSS_NOTE < m["energy_change"] < 0 and "note: the total energy" not in ball.stderr
 
 
-@pytest.mark.parametrize("sig,name", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
-def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
+@pytest.mark.parametrize("sig,name,code,status", [(signal.SIGINT, "Ctrl-C", 130, "interrupted"),
+                                                  (signal.SIGTERM, "SIGTERM", 75, "preempted")])
+def test_interrupt_leaves_recording_and_metrics(sig, name, code, status, tmp_path):
+    """Ctrl-C ends a run; SIGTERM pre-empts it: a checkpoint first (pipelines.run.checkpoints), exit code 75."""
     rrd = tmp_path / "recording.rrd"
     proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", "run.steps=10000000",
                              "log.every=20", f"hydra.run.dir={tmp_path}"], cwd=ROOT,
@@ -371,9 +373,10 @@ def test_interrupt_leaves_recording_and_metrics(sig, name, tmp_path):
         _, err = proc.communicate(timeout=120)
     finally:
         proc.kill()
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert metrics["status"] == "interrupted" and metrics["reason"].startswith(f"{name} at step")
+    assert metrics["status"] == status and metrics["reason"].startswith(f"{name} at step")
+    assert (f"checkpoint {tmp_path / 'checkpoints'}" in metrics["reason"]) == (status == "preempted")
     assert metrics["steps"] > 0 and math.isfinite(metrics["energy_final"])
     verify(rrd)
 

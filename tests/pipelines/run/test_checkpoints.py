@@ -1,0 +1,133 @@
+"""Checkpoints of the command line (pipelines.run.checkpoints): a run
+pre-empted by SIGUSR1 leaves a checkpoint and exit code 75, and resumed with
+``run.resume=true`` ends bit for bit as the run that was never stopped, its
+metrics.json describing the whole run; a run writes its checkpoints every
+``run.checkpoint_every`` and keeps the last two; ``run.resume`` takes the
+newest that reads back and refuses, in one line, a folder without one or one
+of another configuration or code version."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import mpm
+from helpers import ROOT, run_cli
+from pipelines.config.fields import ConfigError
+from pipelines.recording import recordings
+from pipelines.run import checkpoints
+
+STEPS = ["run.steps=1500", "log.every=50"]
+SAME = ("steps", "sim_time", "config_hash", "energy_final", "fracture", "config_updates", "dt", "dt_min", "dt_max",
+        "dt_binding")
+
+
+def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_path):
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    p = run_cli([*STEPS, "run.checkpoint_every=0", f"hydra.run.dir={whole}"], cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr
+    # a checkpoint every 0.02 s of simulated time shows it is stepping; then SIGUSR1, as a scheduler pre-empts
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02",
+                             f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and not list((cut / checkpoints.DIR).glob("ckpt-*.npz")):
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1]
+        proc.send_signal(signal.SIGUSR1)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == checkpoints.PREEMPTED == 75, err
+    stopped = json.loads((cut / "metrics.json").read_text())
+    assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
+    assert 0 < stopped["steps"] < 1500
+    kept = checkpoints.listed(cut / checkpoints.DIR)
+    assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
+
+    p = run_cli([*STEPS, "run.checkpoint_every=0.02", "run.resume=true", f"hydra.run.dir={cut}"], cwd=ROOT,
+                timeout=300)
+    assert p.returncode == 0, p.stderr
+    a, b = np.load(whole / "final_state.npz"), np.load(cut / "final_state.npz")
+    assert a.files == b.files
+    for name in a.files:
+        assert np.array_equal(a[name], b[name]), name
+    m_whole, m_cut = (json.loads((d / "metrics.json").read_text()) for d in (whole, cut))
+    assert m_cut["status"] == "completed" and m_cut["resumed_at"] == [stopped["steps"]]
+    assert {k: m_cut.get(k) for k in SAME} == {k: m_whole.get(k) for k in SAME}
+    assert len(checkpoints.listed(cut / checkpoints.DIR)) == checkpoints.KEEP
+    # one recording in one file: the resumed part appended to the first, every step's scalars as the whole run's
+    assert sorted(p.name for p in cut.glob("*.rrd")) == ["recording.rrd", "recording.timings.rrd"]
+    one, other = (recordings.read(d / "recording.rrd") for d in (whole, cut))
+    assert set(one.scalars) == set(other.scalars) and {"kinetic_energy", "elastic_energy", "dt"} <= set(one.scalars)
+    for name in one.scalars:
+        (s1, v1), (s2, v2) = one.scalars[name], other.scalars[name]
+        assert np.array_equal(s1, s2) and np.array_equal(v1, v2), name
+    assert np.array_equal(one.steps, other.steps) and len(one.steps) == 1500 // 50 + 1  # the particle frames
+    assert all(np.array_equal(a, b) for a, b in zip(one.positions, other.positions))
+
+
+def test_resume_without_a_checkpoint_is_refused_in_one_line_unless_null(tmp_path):
+    p = run_cli(["run.steps=5", "run.resume=true", f"hydra.run.dir={tmp_path}"], cwd=ROOT, timeout=300)
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == 2 and len(lines) == 1, p.stderr
+    assert lines[0].startswith(f"error: run.resume: no checkpoint in {tmp_path / checkpoints.DIR}"), p.stderr
+    # null (a requeued job's command): start anew where there is none
+    p = run_cli(["run.steps=5", "run.resume=null", f"hydra.run.dir={tmp_path}"], cwd=ROOT, timeout=300)
+    assert p.returncode == 0 and "resumed_at" not in json.loads((tmp_path / "metrics.json").read_text()), p.stderr
+
+
+def _driver(steps: int, end: int | None = None) -> mpm.Driver:
+    """A small run after ``steps`` of its ``end`` (None: as many) steps."""
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16,
+                      bodies=[mpm.Body(mpm.Sphere((0.5, 0.4), 0.1), mpm.NeoHookean(E=1e5, nu=0.3))])
+    model, state = mpm.build(scene, mpm.QUADRATIC)
+    driver = mpm.Driver(mpm.Solver(model, mpm.EMPM()), state, mpm.StepPolicy(steps=end or steps))
+    driver.start()
+    for _ in range(steps):
+        driver.advance()
+    return driver
+
+
+def test_the_newest_checkpoint_that_reads_back_is_taken_and_another_config_refused(tmp_path):
+    identity = {"config_hash": "abc"}
+    every = checkpoints.Checkpoints(tmp_path, 0.0, identity, "rec-id")
+    recorder = type("Recorder", (), {})()
+    recorder.step_ms = [1.0, 2.0]
+    for steps in (2, 3, 4):  # three written, two kept
+        every.write(_driver(steps), recorder)
+    assert [p.name for p in checkpoints.listed(tmp_path / checkpoints.DIR)] == ["ckpt-4.npz", "ckpt-3.npz"]
+    data, notes = checkpoints.choose(tmp_path, identity)
+    assert data.step == 4 and notes == [] and data.meta["recording_id"] == "rec-id"
+    assert data.meta["recorder"]["step_ms"] == ("value", [1.0, 2.0])
+    newest = tmp_path / checkpoints.DIR / "ckpt-4.npz"
+    newest.write_bytes(newest.read_bytes()[:1000])  # a write cut short by a crash
+    data, notes = checkpoints.choose(tmp_path, identity)
+    assert data.step == 3 and len(notes) == 1 and "ckpt-4.npz: damaged" in notes[0] and "\n" not in notes[0]
+    with pytest.raises(ConfigError) as e:
+        checkpoints.choose(tmp_path, {"config_hash": "another"})
+    assert str(e.value).startswith("run.resume: ") and "of another configuration" in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_the_checkpoints_fall_due_every_simulated_interval(tmp_path):
+    every = checkpoints.Checkpoints(tmp_path, 0.01, {}, None)
+    driver = _driver(1, 10)
+    driver.time = 0.004
+    assert not every.due(driver)
+    driver.time = 0.0101
+    assert every.due(driver)
+    every.write(driver, type("Recorder", (), {})())
+    assert not every.due(driver)
+    driver.time = 0.02
+    assert every.due(driver)
+    assert not checkpoints.Checkpoints(tmp_path, 0.0, {}, None).due(driver)
+    auto = checkpoints.Checkpoints(tmp_path, None, {}, None)
+    assert "every 5 minutes of wall time" in auto.describe() and not auto.due(driver)
+    auto._since -= checkpoints.AUTO_WALL_S
+    assert auto.due(driver)
