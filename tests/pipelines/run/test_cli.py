@@ -82,7 +82,7 @@ BAD_INPUTS = [
     (["run.reference=/nonexistent/final_state.npz"], "run.reference: '/nonexistent/final_state.npz': no "
                                                      "final_state.npz there"),
     # input that was silently ignored
-    (["+run.stepz=5"], "run.stepz: unknown key; accepted: cfl, compensate, device, dt,"),
+    (["+run.stepz=5"], "run.stepz: unknown key; accepted: cfl, checkpoint_every, compensate, device, dt,"),
     (["+log.evry=3"], "log.evry: unknown key; accepted: channels, color, color_range, dJ, every,"),
     (["+foo=1"], "foo: unknown key; accepted: detect, expected, integrator,"),
     (["+scene.bodies.0.colour=red"], "scene.bodies[0].colour: unknown key; accepted: angular_velocity,"),
