@@ -7,6 +7,7 @@ newest that reads back and refuses, in one line, a folder without one or one
 of another configuration or code version."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -131,3 +132,32 @@ def test_the_checkpoints_fall_due_every_simulated_interval(tmp_path):
     assert "every 5 minutes of wall time" in auto.describe() and not auto.due(driver)
     auto._since -= checkpoints.AUTO_WALL_S
     assert auto.due(driver)
+
+
+def test_a_rerun_sweep_resumes_its_unfinished_job_from_its_checkpoint(tmp_path):
+    """Two jobs that differ in their frames only; the sweep is killed (SIGKILL) once the second has
+    written a checkpoint; the same command again skips the first and continues the second from its
+    checkpoint, to the first's final state bit for bit."""
+    sweep = tmp_path / "sweep"
+    args = ["-m", "log.every=50,51", "run.steps=1500", "scene.resolution=32", "run.checkpoint_every=0.01",
+            "hydra/launcher=basic", f"hydra.sweep.dir={sweep}"]
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and proc.poll() is None and not checkpoints.listed(sweep / "1" / checkpoints.DIR):
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finally:
+        proc.kill()
+    assert json.loads((sweep / "1" / "metrics.json").read_text())["status"] == "running"
+    kept = checkpoints.listed(sweep / "1" / checkpoints.DIR)
+    p = run_cli(args, cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert f"skipped: {sweep / '0'} already holds this config's completed run" in p.stderr
+    first, second = (json.loads((sweep / j / "metrics.json").read_text()) for j in ("0", "1"))
+    assert second["status"] == "completed" and second["resumed_at"][0] >= int(kept[0].stem.split("-")[1])
+    a, b = (np.load(sweep / j / "final_state.npz") for j in ("0", "1"))
+    assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
+    assert sorted(p.name for p in (sweep / "1").glob("*.rrd")) == ["recording.rrd", "recording.timings.rrd"]
