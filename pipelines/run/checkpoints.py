@@ -210,10 +210,9 @@ def resume_segments(out_dir: Path, recording: str, data: mpm.checkpoint.Checkpoi
     ``[name, size, timings size]`` each, in order ([] where the checkpoint kept none)."""
     out_dir = Path(out_dir)
     first, zero = out_dir / recording, out_dir / segment(recording, 0)
-    if first.is_file() and not zero.is_file():  # (both: the first is a join of the parts, killed before its end)
-        for a, b in ((first, zero), (timings_path(first), timings_path(zero))):
-            if a.is_file():
-                a.replace(b)
+    for a, b in ((first, zero), (timings_path(first), timings_path(zero))):
+        if a.is_file() and not b.is_file():  # (both: ``a`` is a join of the parts, killed before its end)
+            a.replace(b)
     parts = [[zero.name if name == recording else name, size, timed]
              for name, size, timed in data.meta.get("segments", [])]
     for name, size, timed in parts:

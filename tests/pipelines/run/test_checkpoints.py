@@ -161,3 +161,24 @@ def test_a_rerun_sweep_resumes_its_unfinished_job_from_its_checkpoint(tmp_path):
     a, b = (np.load(sweep / j / "final_state.npz") for j in ("0", "1"))
     assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
     assert sorted(p.name for p in (sweep / "1").glob("*.rrd")) == ["recording.rrd", "recording.timings.rrd"]
+
+
+def test_resuming_cuts_the_recording_back_to_its_sizes_at_the_checkpoint_whatever_a_kill_left(tmp_path):
+    """The first file renamed to part 0 (also when a kill came between renaming it and its timings),
+    each part cut back to its size in the checkpoint, the parts of later killed runs removed."""
+    (tmp_path / "recording.rrd").write_bytes(b"a" * 100)
+    (tmp_path / "recording.resumed-0.timings.rrd").write_bytes(b"t" * 50)  # renamed before the kill
+    (tmp_path / "recording.resumed-7.rrd").write_bytes(b"b" * 80)
+    (tmp_path / "recording.resumed-7.timings.rrd").write_bytes(b"u" * 40)
+    (tmp_path / "recording.resumed-9.rrd").write_bytes(b"c" * 10)  # a later run's, killed before its checkpoint
+    segments = [["recording.rrd", 60, 30], ["recording.resumed-7.rrd", 70, 20]]
+    data = type("Checkpoint", (), {"path": tmp_path / "ckpt-9.npz", "meta": {"segments": segments}})
+    parts = checkpoints.resume_segments(tmp_path, "recording.rrd", data)  # type: ignore[arg-type]
+    assert parts == [["recording.resumed-0.rrd", 60, 30], ["recording.resumed-7.rrd", 70, 20]]
+    sizes = {p.name: p.stat().st_size for p in tmp_path.glob("*.rrd")}
+    assert sizes == {"recording.resumed-0.rrd": 60, "recording.resumed-0.timings.rrd": 30,
+                     "recording.resumed-7.rrd": 70, "recording.resumed-7.timings.rrd": 20}
+    data.meta["segments"][1][1] = 90  # a part shorter than the checkpoint says: refused in one line
+    with pytest.raises(ConfigError) as e:
+        checkpoints.resume_segments(tmp_path, "recording.rrd", data)  # type: ignore[arg-type]
+    assert "recording.resumed-7.rrd is shorter than when ckpt-9.npz was written" in str(e.value)
