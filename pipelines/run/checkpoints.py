@@ -35,6 +35,7 @@ import os
 import pickle
 import re
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import mpm
@@ -232,10 +233,13 @@ def join_segments(out_dir: Path, recording: str, parts: list[str]) -> str:
     """The recording's parts (names, in order) joined into ``recording`` and its timings file; "" or a
     note saying why the parts stay apart. The parts are kept (:func:`drop_segments` once the run is recorded)."""
     out_dir = Path(out_dir)
+    jobs = ((out_dir / recording, [out_dir / n for n in parts]),
+            (timings_path(out_dir / recording), [timings_path(out_dir / n) for n in parts]))
     try:
-        for target, files in ((out_dir / recording, [out_dir / n for n in parts]),
-                              (timings_path(out_dir / recording), [timings_path(out_dir / n) for n in parts])):
-            recordings.join(target, [f for f in files if f.is_file()])
+        with ThreadPoolExecutor(len(jobs)) as pool:  # the two merges at once
+            for done in [pool.submit(recordings.join, target, [f for f in files if f.is_file()])
+                         for target, files in jobs]:
+                done.result()
     except RuntimeError as e:
         return f"note: {e}; open the parts: the viewer shows them as one recording"
     return ""

@@ -224,11 +224,12 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
         if resume is None:
             driver.start()
         else:
-            t0 = time.perf_counter()
+            t0, loaded = time.perf_counter(), run.metrics.get("compile_time_s")
             driver.resume(resume.path)
-            checkpoints.restore_recorder(run, resume.meta["recorder"])
+            checkpoints.restore_recorder(run, resume.meta["recorder"])  # (the first process's metrics)
             run.metrics.setdefault("resumed_at", []).append(driver.step)
             run.metrics["resume_s"] = time.perf_counter() - t0  # [s] reading and restoring the checkpoint
+            run.metrics["resume_compile_s"] = loaded  # [s] this process's compilation (or cache load)
         run.metrics["checkpoints"] = ckpts.describe()
         if Progress.shown(spec.log.progress):
             print(ckpts.describe(), file=sys.stderr, flush=True)
