@@ -6,11 +6,13 @@ configuration-update events), its recording joined into one file and no
 checkpoint's temporary file left."""
 
 import numpy as np
+import pytest
 
 from pipelines import kills
 from pipelines.run import checkpoints
 
 
+@pytest.mark.slow
 def test_a_run_killed_twice_once_inside_a_checkpoint_write_resumes_bit_for_bit(tmp_path, monkeypatch):
     monkeypatch.chdir(kills.Path(__file__).resolve().parents[2])
     monkeypatch.setitem(kills.CONFIGS, "aulmpm", [*kills.BALL, "scheme=aulmpm", "scheme.epsilon=0.01",

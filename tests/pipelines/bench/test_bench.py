@@ -246,6 +246,7 @@ def test_a_failing_genesis_peer_is_one_line_in_its_table(tmp_path, monkeypatch, 
     assert out[-1].startswith("genesis not measured: the Genesis peer failed") and "stub genesis" in out[-1]
 
 
+@pytest.mark.slow
 def test_the_checkpoint_table_writes_one_after_every_step_and_resumes_the_last(tmp_path, monkeypatch, capsys):
     """Each case's run writes a checkpoint per step (the mean write, the newest file's size), and its
     continuation starts from the one before the end; the default interval's share is write / 300 s."""

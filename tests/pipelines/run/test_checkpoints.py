@@ -134,6 +134,7 @@ def test_the_checkpoints_fall_due_every_simulated_interval(tmp_path):
     assert auto.due(driver)
 
 
+@pytest.mark.slow
 def test_a_rerun_sweep_resumes_its_unfinished_job_from_its_checkpoint(tmp_path):
     """Two jobs that differ in their frames only; the sweep is killed (SIGKILL) once the second has
     written a checkpoint; the same command again skips the first and continues the second from its
