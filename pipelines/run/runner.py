@@ -274,6 +274,8 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 run.metrics.update(ckpts.summary())
                 sink.close()
+                # the parts joined once the run has ended (pre-empted again, it goes on from them)
+                joined = joined if run.metrics.get("status") in ("completed", "unstable") else []
                 note = checkpoints.join_segments(out_dir, spec.log.recording, joined) if joined else ""
                 if note:
                     print(note, file=sys.stderr)

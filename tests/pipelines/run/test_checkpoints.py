@@ -31,25 +31,31 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     p = run_cli([*STEPS, "run.checkpoint_every=0", f"hydra.run.dir={whole}"], cwd=ROOT, timeout=300)
     assert p.returncode == 0, p.stderr
-    # a checkpoint every 0.02 s of simulated time shows it is stepping; then SIGUSR1, as a scheduler pre-empts
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02",
-                             f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        deadline = time.time() + 300
-        while time.time() < deadline and not list((cut / checkpoints.DIR).glob("ckpt-*.npz")):
-            time.sleep(0.05)
-        assert proc.poll() is None, proc.communicate()[1]
-        proc.send_signal(signal.SIGUSR1)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
-    assert proc.returncode == checkpoints.PREEMPTED == 75, err
-    stopped = json.loads((cut / "metrics.json").read_text())
-    assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
-    assert 0 < stopped["steps"] < 1500
-    kept = checkpoints.listed(cut / checkpoints.DIR)
-    assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
+    # a checkpoint every 0.02 s of simulated time shows it is stepping; then SIGUSR1, as a scheduler pre-empts;
+    # twice: the resumed run is pre-empted too, and keeps the recording's parts for the next
+    stops = []
+    for args in ([], ["run.resume=true"]):
+        before = checkpoints.listed(cut / checkpoints.DIR)
+        proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02", *args,
+                                 f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        try:
+            deadline = time.time() + 300
+            while time.time() < deadline and checkpoints.listed(cut / checkpoints.DIR)[:1] == before[:1]:
+                time.sleep(0.05)
+            assert proc.poll() is None, proc.communicate()[1]
+            proc.send_signal(signal.SIGUSR1)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        assert proc.returncode == checkpoints.PREEMPTED == 75, err
+        stopped = json.loads((cut / "metrics.json").read_text())
+        assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
+        assert 0 < stopped["steps"] < 1500
+        kept = checkpoints.listed(cut / checkpoints.DIR)
+        assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
+        stops.append(stopped["steps"])
+    assert (cut / f"recording.resumed-{stops[0]}.rrd").is_file() and (cut / "recording.resumed-0.rrd").is_file()
 
     p = run_cli([*STEPS, "run.checkpoint_every=0.02", "run.resume=true", f"hydra.run.dir={cut}"], cwd=ROOT,
                 timeout=300)
@@ -59,7 +65,7 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     for name in a.files:
         assert np.array_equal(a[name], b[name]), name
     m_whole, m_cut = (json.loads((d / "metrics.json").read_text()) for d in (whole, cut))
-    assert m_cut["status"] == "completed" and m_cut["resumed_at"] == [stopped["steps"]]
+    assert m_cut["status"] == "completed" and m_cut["resumed_at"] == stops
     assert {k: m_cut.get(k) for k in SAME} == {k: m_whole.get(k) for k in SAME}
     assert len(checkpoints.listed(cut / checkpoints.DIR)) == checkpoints.KEEP
     # one recording in one file: the resumed part appended to the first, every step's scalars as the whole run's
