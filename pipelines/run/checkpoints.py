@@ -22,9 +22,9 @@ recording's files hold everything logged so far (``Sink.sync``), and keeps
 their sizes; resuming cuts them back to those sizes (dropping what was logged
 after it, and a message cut short), a continued run logs into
 ``<recording>.resumed-<step>.rrd`` with the first file's recording id (the
-first file becomes ``<recording>.resumed-0.rrd``), and once the run has ended
-(completed or unstable) the parts are joined into ``<recording>``
-(:func:`join_segments`, Rerun's ``rrd merge``):
+first file becomes ``<recording>.resumed-0.rrd``), and at its end the parts
+are joined into ``<recording>`` (:func:`join_segments`, Rerun's ``rrd merge``),
+and removed once the run has ended (completed or unstable):
 one recording, one file, as the uninterrupted run's. Should the merge fail, the
 parts stay, and the viewer still shows them as one recording when all are opened.
 A checkpoint's temporary file left by a kill is removed by the next run.

@@ -274,13 +274,13 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
                 run.metrics.update(ckpts.summary())
                 sink.close()
-                # the parts joined once the run has ended (pre-empted again, it goes on from them)
-                joined = joined if run.metrics.get("status") in ("completed", "unstable") else []
                 note = checkpoints.join_segments(out_dir, spec.log.recording, joined) if joined else ""
                 if note:
                     print(note, file=sys.stderr)
                 write_metrics(out_dir / "metrics.json", run.metrics)
-                if joined and not note:  # (after metrics.json: a run killed before it resumes from the parts)
+                # the parts removed once the run has ended (after metrics.json: a run killed before, or
+                # pre-empted again, goes on from them)
+                if joined and not note and run.metrics.get("status") in ("completed", "unstable"):
                     checkpoints.drop_segments(out_dir, spec.log.recording)
         finally:
             if old_int is not None:

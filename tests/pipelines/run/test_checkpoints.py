@@ -27,6 +27,7 @@ SAME = ("steps", "sim_time", "config_hash", "energy_final", "fracture", "config_
         "dt_binding")
 
 
+@pytest.mark.slow
 def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_path):
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     p = run_cli([*STEPS, "run.checkpoint_every=0", f"hydra.run.dir={whole}"], cwd=ROOT, timeout=300)
@@ -56,6 +57,7 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
         assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
         stops.append(stopped["steps"])
     assert (cut / f"recording.resumed-{stops[0]}.rrd").is_file() and (cut / "recording.resumed-0.rrd").is_file()
+    assert recordings.read(cut / "recording.rrd").end[0] == stops[1]  # joined so far, to the second stop
 
     p = run_cli([*STEPS, "run.checkpoint_every=0.02", "run.resume=true", f"hydra.run.dir={cut}"], cwd=ROOT,
                 timeout=300)
