@@ -34,7 +34,7 @@ PIPELINES_FLOORS = [
     ("pipelines.report",),  # the report of a sweep's jobs
     ("pipelines.sweeps",),  # the end of a multirun: its report and outcomes
     ("pipelines.bench", "pipelines.replay", "pipelines.export", "pipelines.material_point", "pipelines.granular",
-     "pipelines.cfl_bound"),  # the other commands
+     "pipelines.cfl_bound", "pipelines.kills"),  # the other commands
 ]
 
 

@@ -57,6 +57,10 @@ Everything runs through the same code path as ``pipelines.run``
 11. order (``--only order`` alone, not in the default run): the 3D sphere
    with its particles in sampled and in random order (pipelines.bench.order):
    what a cell-order sort could gain on this device.
+12. checkpoint (``--only checkpoint`` alone): a checkpoint's write time and
+   size, its share of the run at the default interval, and a resumed run's
+   start-up on the 2D ball and the 3D ball at 100K+ particles
+   (pipelines.bench.checkpoint).
 
 ``--large`` adds the sphere at 1M and 10M particles (pipelines.bench.scale;
 meant for a GPU) and ``--sweep`` the runs per hour of a sweep of 2N jobs on
@@ -81,7 +85,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import order, peers, precision, scale, throughput
+from . import checkpoint, order, peers, precision, scale, throughput
 from ..config import schema
 from .runs import QUIET, RECORDING, execute, interleaved, loop_s, spec_for, timed
 from ..run.warp_setup import init_warp
@@ -252,7 +256,7 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 
 TABLES = ("speed", "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "precision", "paper", "scaling", "large", "sweep", "order")
+          "profile", "precision", "paper", "scaling", "large", "sweep", "order", "checkpoint")
 # tables in the default run: --no-<table> leaves one out
 SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel",
              "materials": "material", "integrators": "integrator", "fused": "fused-against-cached EMPM",
@@ -284,7 +288,8 @@ def main(argv=None) -> None:
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
     p.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"),
                    help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
-    p.set_defaults(speed=True, order=False)  # the first table (--only may leave it out); order: --only alone
+    p.set_defaults(speed=True, order=False, checkpoint=False)  # speed: the first (--only may leave it out); order
+    # and checkpoint: --only alone
     args = p.parse_args(argv)
     if args.steps is not None and args.steps < 1:
         p.error(f"--steps: {args.steps}; accepted: an integer >= 1")
@@ -338,6 +343,7 @@ def main(argv=None) -> None:
         large = scale.bench_large(energies=(True, False)) if args.large else []
         sweep = throughput.bench_sweep(Path(tmp)) if args.sweep else []
         orders = order.bench_order(device) if args.order else []
+        ckpts = checkpoint.bench_checkpoint(Path(tmp)) if args.checkpoint else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
@@ -429,13 +435,16 @@ def main(argv=None) -> None:
         scale.print_large(large)
     if sweep:
         throughput.print_sweep(sweep)
+    if ckpts:
+        checkpoint.print_checkpoint(ckpts)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "peers": peer_rows + genesis_rows, "kernels": kernels, "materials": materials,
                                          "integrators": integrators, "fused": fused, "sync": sync,
                                          "stages": stages,
                                          "profile": profile, "order": orders, "precision": precisions, "paper": paper,
-                                         "scaling": scaling, "large": large, "sweep": sweep}, indent=2) + "\n")
+                                         "scaling": scaling, "large": large, "sweep": sweep,
+                                         "checkpoint": ckpts}, indent=2) + "\n")
 
 
 if __name__ == "__main__":

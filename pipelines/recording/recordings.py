@@ -106,23 +106,19 @@ def repair(path: str | Path) -> Path | None:
     return path.with_name(path.stem + ".backup.rrd")
 
 
-def merge(first: str | Path, part: str | Path) -> None:
-    """Append ``part`` (the recording of a resumed run, with ``first``'s recording id) to ``first``, in
-    place, with Rerun's own ``rerun rrd merge``; ``part`` is removed. RuntimeError (one line) when the
-    merge fails: both files are left as they were."""
-    first, part = Path(first), Path(part)
-    if not first.is_file():
-        part.replace(first)
-        return
-    tmp = first.with_name(first.stem + ".merging.rrd")
-    run = subprocess.run([sys.executable, "-m", "rerun", "rrd", "merge", str(first), str(part), "-o", str(tmp)],
+def join(target: str | Path, parts: list) -> None:
+    """Write ``parts`` (one recording's files, in order: a run and its resumed continuations, with or
+    without footer) as one file at ``target``, atomically, with Rerun's own ``rerun rrd merge``; the parts
+    are left as they are. RuntimeError (one line) when the merge fails: ``target`` is left as it was."""
+    target = Path(target)
+    tmp = target.with_name(target.stem + ".merging.rrd")
+    run = subprocess.run([sys.executable, "-m", "rerun", "rrd", "merge", *map(str, parts), "-o", str(tmp)],
                          capture_output=True, text=True)
     if run.returncode != 0 or not tmp.is_file():
         tmp.unlink(missing_ok=True)
         said = (run.stderr.strip().splitlines() or ["no output"])[-1][-300:]
-        raise RuntimeError(f"rerun rrd merge could not append {part.name} to {first.name}: {said}")
-    tmp.replace(first)
-    part.unlink()
+        raise RuntimeError(f"rerun rrd merge could not join {', '.join(Path(p).name for p in parts)}: {said}")
+    tmp.replace(target)
 
 
 def read(path: str | Path, particles: bool = True) -> Recording:

@@ -313,6 +313,8 @@ class RerunSink(Sink):
                     self._write_particles(*frame)
                 except BaseException as e:  # noqa: BLE001 - handed to the main thread
                     self._failure = e
+            self._frames.task_done()
+        self._frames.task_done()
 
     def _check_writer(self) -> None:
         if self._failure is not None:
@@ -404,6 +406,16 @@ class RerunSink(Sink):
                         columns=rr.Scalars.columns(scalars=np.asarray(vals, dtype=np.float64)))
             buffer.clear()
         self._rows = 0
+
+    def sync(self) -> dict[str, int]:
+        """The frames in flight written, the scalars sent, both streams flushed to their files; their sizes."""
+        if self._frames is not None and self._writer is not None and self._writer.is_alive():
+            self._frames.join()
+        self._check_writer()
+        self.flush()
+        self.rec.flush()
+        self.clock.flush()
+        return {p.name: p.stat().st_size for p in (self.path, timings_path(self.path))}
 
     def close(self):
         if not self._open:

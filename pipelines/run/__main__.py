@@ -41,7 +41,9 @@ _config_errors: list[str] = []
 def run(cfg: DictConfig) -> dict:
     """Validate, run and return the metrics of one composed config. In a
     sweep, a job whose directory already holds a finished run of the same
-    config hash returns that run's metrics instead, unless ``run.force``."""
+    config hash returns that run's metrics instead, unless ``run.force``, and
+    an unfinished one with a checkpoint continues from it; so does a run
+    with ``run.resume`` true or null, unless it has finished."""
     hc = HydraConfig.get()
     out_dir = Path(hc.runtime.output_dir)
     try:
@@ -85,23 +87,29 @@ def run(cfg: DictConfig) -> dict:
     resume = None
     from .checkpoints import DIR, choose, listed
 
-    # the newest checkpoint that reads back, of this config and code (null: only where there is one)
-    if cfg.run.resume or cfg.run.resume is None and listed(out_dir / DIR):
-        try:
-            resume, notes = choose(out_dir, identity)
-        except ConfigError as e:
-            print(f"error: {e}", file=sys.stderr)
-            _config_errors.append(str(e))
-            return {"status": "invalid", "reason": str(e)}
-        for note in notes:
-            print(note, file=sys.stderr)
-    elif hc.mode == RunMode.MULTIRUN and not cfg.run.force:
+    sweep = hc.mode == RunMode.MULTIRUN and not cfg.run.force
+    if sweep or cfg.run.resume is not False:  # a finished run is not continued: its record is kept
         done = finished(out_dir, identity["config_hash"])
         if done is not None:
             print(f"skipped: {out_dir} already holds this config's {done['status']} run "
                   f"(hash {identity['config_hash']}); run.force=true runs it again", file=sys.stderr)
             _last_status.append(done["status"])
             return done
+    # the newest checkpoint that reads back, of this config and code (null, and a re-run sweep's unfinished
+    # job: only where there is one)
+    if cfg.run.resume or (cfg.run.resume is None or sweep) and listed(out_dir / DIR):
+        try:
+            resume, notes = choose(out_dir, identity)
+        except ConfigError as e:
+            if sweep and not cfg.run.resume:  # another config's job once held this directory: run anew
+                print(f"note: {e}; {out_dir} runs from the start", file=sys.stderr)
+                notes = []
+            else:
+                print(f"error: {e}", file=sys.stderr)
+                _config_errors.append(str(e))
+                return {"status": "invalid", "reason": str(e)}
+        for note in notes:
+            print(note, file=sys.stderr)
     if spec.stability_map is not None:  # a stability map: its points in this process
         from .stability_map import run_map
 

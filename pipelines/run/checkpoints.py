@@ -16,18 +16,27 @@ run writes a checkpoint at the next step boundary and ends ``preempted`` with
 exit code :data:`PREEMPTED` (75, EX_TEMPFAIL: try again); the same command
 with ``run.resume=true`` continues it (``run.resume=null``: where the run
 directory holds a checkpoint, else from the start: a requeued job's own
-command). The continued run logs into
-``<recording>.resumed-<step>.rrd`` with the first file's recording id and,
-at its end, appends it to the first file (:func:`join_recordings`, Rerun's
-``rrd merge``): one recording, one file. Should the merge fail, both files
-stay, and the viewer still shows them as one recording when both are opened.
+command). Killed without warning (SIGKILL, a node lost), a run is continued
+the same way from its newest checkpoint: a checkpoint is written once the
+recording's files hold everything logged so far (``Sink.sync``), and keeps
+their sizes; resuming cuts them back to those sizes (dropping what was logged
+after it, and a message cut short), a continued run logs into
+``<recording>.resumed-<step>.rrd`` with the first file's recording id (the
+first file becomes ``<recording>.resumed-0.rrd``), and at its end the parts
+are joined into ``<recording>`` (:func:`join_segments`, Rerun's ``rrd merge``),
+and removed once the run has ended (completed or unstable):
+one recording, one file, as the uninterrupted run's. Should the merge fail, the
+parts stay, and the viewer still shows them as one recording when all are opened.
+A checkpoint's temporary file left by a kill is removed by the next run.
 """
 
 from __future__ import annotations
 
+import os
 import pickle
 import re
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import mpm
@@ -95,10 +104,17 @@ def restore_recorder(recorder, state: dict) -> None:
 class Checkpoints:
     """A run's checkpoints: :meth:`due` after each batch of steps, :meth:`write` when it is."""
 
-    def __init__(self, out_dir: Path, every: float | None, identity: dict, recording_id: str | None):
+    def __init__(self, out_dir: Path, every: float | None, identity: dict, recording_id: str | None,
+                 segments: list | None = None):
+        """``segments``: the recording's earlier parts, ``[name, size, timings size]`` each
+        (:func:`resume_segments`)."""
         self.dir = Path(out_dir) / DIR
         self.every = every
         self.meta = {"config_hash": identity.get("config_hash"), **code_version(), "recording_id": recording_id}
+        self.segments = list(segments or [])
+        self.write_s: list[float] = []  # [s] each write's wall time (this process's)
+        for tmp in self.dir.glob(".ckpt-*.tmp"):  # a write cut short by a kill
+            tmp.unlink(missing_ok=True)
         self._since = time.monotonic()
         self._wall = AUTO_WALL_S  # [s] wall time between two (run.checkpoint_every null)
         self._next: float | None = None  # [s] the simulated time of the next one
@@ -124,14 +140,29 @@ class Checkpoints:
         """The driver's and the recorder's state at ``driver.step``; the older ones beyond KEEP removed."""
         t0 = time.monotonic()
         self.dir.mkdir(parents=True, exist_ok=True)
-        path = driver.save(self.dir / f"ckpt-{driver.step}.npz", {**self.meta, "recorder": recorder_state(recorder)})
+        meta = {**self.meta, "recorder": recorder_state(recorder)}
+        sink = getattr(recorder, "sink", None)
+        if sink is not None and len(sizes := list(sink.sync().items())) == 2:  # the recording and its timings
+            (name, size), (_, timed) = sizes
+            meta["segments"] = [*self.segments, [name, size, timed]]
+        path = driver.save(self.dir / f"ckpt-{driver.step}.npz", meta)
         for old in listed(self.dir)[KEEP:]:
             old.unlink(missing_ok=True)
         self._since = time.monotonic()
         self._wall = max(AUTO_WALL_S, AUTO_COST * (self._since - t0))
+        self.write_s.append(self._since - t0)
         if self.every:
             self._next = (driver.time // self.every + 1) * self.every
         return path
+
+
+    def summary(self) -> dict:
+        """metrics.json's entries: this process's checkpoint writes, their mean wall time [s] and the last
+        one's size [bytes]."""
+        files = listed(self.dir) if self.write_s else []
+        return {"checkpoint_writes": len(self.write_s),
+                "checkpoint_write_s": sum(self.write_s) / len(self.write_s) if self.write_s else None,
+                "checkpoint_bytes": files[0].stat().st_size if files else None}
 
 
 def listed(folder: Path) -> list[Path]:
@@ -165,14 +196,57 @@ def choose(out_dir: Path, identity: dict) -> tuple[mpm.checkpoint.Checkpoint, li
     raise ConfigError("run.resume", f"no checkpoint in {folder} reads back ({len(files)} damaged)")
 
 
-def join_recordings(first: Path, part: Path) -> str:
-    """Append a resumed run's recording ``part`` (and its timings file) to ``first``; "" or a note
-    saying why the two files stay apart."""
+def segment(recording: str, step: int) -> str:
+    """The name of a recording's part continued from ``step``: ``recording.rrd`` -> ``recording.resumed-<step>.rrd``."""
+    return recording.replace(".rrd", f".resumed-{step}.rrd")
+
+
+def _segment_files(out_dir: Path, recording: str) -> list[Path]:
+    """Every part of ``recording`` in ``out_dir``, timings files included."""
+    return sorted(Path(out_dir).glob(segment(recording, 0).replace("-0.rrd", "-*.rrd")))
+
+
+def resume_segments(out_dir: Path, recording: str, data: mpm.checkpoint.Checkpoint) -> list:
+    """Before continuing from ``data``: the recording's parts as the checkpoint found them (the first file
+    renamed to part 0, each cut back to its size then, the parts of later killed runs removed);
+    ``[name, size, timings size]`` each, in order ([] where the checkpoint kept none)."""
+    out_dir = Path(out_dir)
+    first, zero = out_dir / recording, out_dir / segment(recording, 0)
+    for a, b in ((first, zero), (timings_path(first), timings_path(zero))):
+        if a.is_file() and not b.is_file():  # (both: ``a`` is a join of the parts, killed before its end)
+            a.replace(b)
+    parts = [[zero.name if name == recording else name, size, timed]
+             for name, size, timed in data.meta.get("segments", [])]
+    for name, size, timed in parts:
+        for path, n in ((out_dir / name, size), (timings_path(out_dir / name), timed)):
+            if not path.is_file() or path.stat().st_size < n:
+                raise ConfigError("run.resume", f"{path} is shorter than when {data.path.name} was written; "
+                                                f"accepted: the run directory as the run left it")
+            os.truncate(path, n)
+    keep = {p for name, _, _ in parts for p in (out_dir / name, timings_path(out_dir / name))}
+    for path in _segment_files(out_dir, recording):
+        if path not in keep:
+            path.unlink()
+    return parts
+
+
+def join_segments(out_dir: Path, recording: str, parts: list[str]) -> str:
+    """The recording's parts (names, in order) joined into ``recording`` and its timings file; "" or a
+    note saying why the parts stay apart. The parts are kept (:func:`drop_segments` once the run is recorded)."""
+    out_dir = Path(out_dir)
+    jobs = ((out_dir / recording, [out_dir / n for n in parts]),
+            (timings_path(out_dir / recording), [timings_path(out_dir / n) for n in parts]))
     try:
-        for a, b in ((first, part), (timings_path(first), timings_path(part))):
-            if b.is_file():
-                recordings.merge(a, b)
+        with ThreadPoolExecutor(len(jobs)) as pool:  # the two merges at once
+            for done in [pool.submit(recordings.join, target, [f for f in files if f.is_file()])
+                         for target, files in jobs]:
+                done.result()
     except RuntimeError as e:
-        return f"note: {e}; open both files: the viewer shows them as one recording"
+        return f"note: {e}; open the parts: the viewer shows them as one recording"
     return ""
 
+
+def drop_segments(out_dir: Path, recording: str) -> None:
+    """Remove the recording's parts (joined, or of a run started anew)."""
+    for path in _segment_files(out_dir, recording):
+        path.unlink(missing_ok=True)

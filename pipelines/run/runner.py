@@ -177,20 +177,25 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
     composed; they are stored in the recording with the provenance.
     ``identity`` (e.g. the config hash) goes into metrics.json as given.
     ``resume``: continue from this checkpoint (pipelines.run.checkpoints.choose), logging into
-    ``<recording>.resumed-<step>.rrd`` with the first recording's id, appended to the first file at the end."""
+    ``<recording>.resumed-<step>.rrd`` with the first recording's id, the parts joined at the end."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     properties = recording_properties(spec, config_yaml, list(overrides), choices)
-    joined: Path | None = None  # a resumed run's part of the recording: appended to the first file at the end
+    joined: list[str] = []  # a resumed run's parts of the recording, this run's last: joined at the end
+    parts: list = []
     if sink is None:
         from ..recording.rerun_sink import RerunSink  # imported here: a run given a sink needs no rerun-sdk
 
-        name = spec.log.recording if resume is None else spec.log.recording.replace(
-            ".rrd", f".resumed-{resume.step}.rrd")
+        recording = spec.log.recording
+        if resume is None:
+            checkpoints.drop_segments(out_dir, recording)
+        else:
+            parts = checkpoints.resume_segments(out_dir, recording, resume)
+        name = recording if resume is None else checkpoints.segment(recording, resume.step)
         sink = RerunSink(out_dir / name, spec.log.flush_every,
                          recording_id=resume.meta.get("recording_id") if resume is not None else None)
-        joined = sink.path if resume is not None else None
+        joined = [p[0] for p in parts] + [name] if resume is not None else []
     run = Recorder(spec, out_dir, properties, sink)
     interrupts = Interrupts()
     run.metrics.update(identity or {})
@@ -198,7 +203,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
     write_metrics(out_dir / "metrics.json", {**run.metrics, "status": "running",
                                              "reason": "started, not finished"})
     ckpts = checkpoints.Checkpoints(out_dir, spec.run.checkpoint_every, identity or {},
-                                    getattr(sink, "recording_id", None))
+                                    getattr(sink, "recording_id", None), parts)
     previous = {}
     try:
         for signum in (signal.SIGTERM, getattr(signal, "SIGUSR1", None), signal.SIGINT):
@@ -219,9 +224,12 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
         if resume is None:
             driver.start()
         else:
+            t0, loaded = time.perf_counter(), run.metrics.get("compile_time_s")
             driver.resume(resume.path)
-            checkpoints.restore_recorder(run, resume.meta["recorder"])
+            checkpoints.restore_recorder(run, resume.meta["recorder"])  # (the first process's metrics)
             run.metrics.setdefault("resumed_at", []).append(driver.step)
+            run.metrics["resume_s"] = time.perf_counter() - t0  # [s] reading and restoring the checkpoint
+            run.metrics["resume_compile_s"] = loaded  # [s] this process's compilation (or cache load)
         run.metrics["checkpoints"] = ckpts.describe()
         if Progress.shown(spec.log.progress):
             print(ckpts.describe(), file=sys.stderr, flush=True)
@@ -264,10 +272,16 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
                 raise
             finally:
                 run.metrics["wall_time_s"] = time.perf_counter() - t_start
+                run.metrics.update(ckpts.summary())
                 sink.close()
-                if joined and (note := checkpoints.join_recordings(out_dir / spec.log.recording, joined)):
+                note = checkpoints.join_segments(out_dir, spec.log.recording, joined) if joined else ""
+                if note:
                     print(note, file=sys.stderr)
                 write_metrics(out_dir / "metrics.json", run.metrics)
+                # the parts removed once the run has ended (after metrics.json: a run killed before, or
+                # pre-empted again, goes on from them)
+                if joined and not note and run.metrics.get("status") in ("completed", "unstable"):
+                    checkpoints.drop_segments(out_dir, spec.log.recording)
         finally:
             if old_int is not None:
                 signal.signal(signal.SIGINT, old_int)

@@ -116,6 +116,10 @@ def check(cmd: str, tiny_run, tmp_path) -> None:
         p = tool(argv, ROOT)
         assert p.returncode == 0 and "| quadratic |" in p.stdout, p.stderr
         return
+    if argv[:2] == ["-m", "pipelines.kills"]:  # minutes: tests/pipelines/test_kills.py runs it; its options exist
+        p = tool([*argv[:2], "--help"], ROOT)
+        assert p.returncode == 0 and all(a in p.stdout for a in argv if a.startswith("--")), p.stdout
+        return
     if argv[:2] == ["-m", "pipelines.bench"] or argv[0].startswith("examples/"):
         # a benchmark takes minutes and the examples run in tests/mpm/test_examples.py: their options exist
         p = tool([*(argv[:2] if argv[0] == "-m" else argv[:1]), "--help"], ROOT)
@@ -132,7 +136,8 @@ def check(cmd: str, tiny_run, tmp_path) -> None:
 def test_the_readme_has_examples_of_every_command():
     cmds = readme_commands()
     for entry in ("pipelines.run", "pipelines.replay", "pipelines.export", "pipelines.report", "pipelines.bench",
-                  "pipelines.material_point", "pipelines.granular", "pipelines.cfl_bound", "examples/"):
+                  "pipelines.material_point", "pipelines.granular", "pipelines.cfl_bound", "pipelines.kills",
+                  "examples/"):
         assert any(entry in c for c in cmds), entry
 
 

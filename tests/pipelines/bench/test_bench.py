@@ -244,3 +244,20 @@ def test_a_failing_genesis_peer_is_one_line_in_its_table(tmp_path, monkeypatch, 
     peers.print_genesis(rows)
     out = capsys.readouterr().out.strip().splitlines()
     assert out[-1].startswith("genesis not measured: the Genesis peer failed") and "stub genesis" in out[-1]
+
+
+@pytest.mark.slow
+def test_the_checkpoint_table_writes_one_after_every_step_and_resumes_the_last(tmp_path, monkeypatch, capsys):
+    """Each case's run writes a checkpoint per step (the mean write, the newest file's size), and its
+    continuation starts from the one before the end; the default interval's share is write / 300 s."""
+    from helpers import ROOT
+    from pipelines.bench import checkpoint
+    from pipelines.run import checkpoints
+
+    monkeypatch.chdir(ROOT)
+    monkeypatch.setattr(checkpoint, "CASES", {"tiny": (["scene.resolution=16", "log.every=1"], 4)})
+    (row,) = checkpoint.bench_checkpoint(tmp_path)
+    assert row["resumed_at"] == [3] and row["bytes"] > 1000 and 0 < row["write_s"] < 10
+    assert row["fraction"] == row["write_s"] / checkpoints.AUTO_WALL_S and row["resumed_startup_s"] > 0
+    checkpoint.print_checkpoint([row])
+    assert "tiny" in capsys.readouterr().out

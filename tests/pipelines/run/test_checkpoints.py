@@ -7,6 +7,7 @@ newest that reads back and refuses, in one line, a folder without one or one
 of another configuration or code version."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -26,29 +27,37 @@ SAME = ("steps", "sim_time", "config_hash", "energy_final", "fracture", "config_
         "dt_binding")
 
 
+@pytest.mark.slow
 def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_path):
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     p = run_cli([*STEPS, "run.checkpoint_every=0", f"hydra.run.dir={whole}"], cwd=ROOT, timeout=300)
     assert p.returncode == 0, p.stderr
-    # a checkpoint every 0.02 s of simulated time shows it is stepping; then SIGUSR1, as a scheduler pre-empts
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02",
-                             f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        deadline = time.time() + 300
-        while time.time() < deadline and not list((cut / checkpoints.DIR).glob("ckpt-*.npz")):
-            time.sleep(0.05)
-        assert proc.poll() is None, proc.communicate()[1]
-        proc.send_signal(signal.SIGUSR1)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
-    assert proc.returncode == checkpoints.PREEMPTED == 75, err
-    stopped = json.loads((cut / "metrics.json").read_text())
-    assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
-    assert 0 < stopped["steps"] < 1500
-    kept = checkpoints.listed(cut / checkpoints.DIR)
-    assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
+    # a checkpoint every 0.02 s of simulated time shows it is stepping; then SIGUSR1, as a scheduler pre-empts;
+    # twice: the resumed run is pre-empted too, and keeps the recording's parts for the next
+    stops = []
+    for args in ([], ["run.resume=true"]):
+        before = checkpoints.listed(cut / checkpoints.DIR)
+        proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02", *args,
+                                 f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        try:
+            deadline = time.time() + 300
+            while time.time() < deadline and checkpoints.listed(cut / checkpoints.DIR)[:1] == before[:1]:
+                time.sleep(0.05)
+            assert proc.poll() is None, proc.communicate()[1]
+            proc.send_signal(signal.SIGUSR1)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        assert proc.returncode == checkpoints.PREEMPTED == 75, err
+        stopped = json.loads((cut / "metrics.json").read_text())
+        assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
+        assert 0 < stopped["steps"] < 1500
+        kept = checkpoints.listed(cut / checkpoints.DIR)
+        assert 1 <= len(kept) <= checkpoints.KEEP and kept[0].name == f"ckpt-{stopped['steps']}.npz"
+        stops.append(stopped["steps"])
+    assert (cut / f"recording.resumed-{stops[0]}.rrd").is_file() and (cut / "recording.resumed-0.rrd").is_file()
+    assert recordings.read(cut / "recording.rrd").end[0] == stops[1]  # joined so far, to the second stop
 
     p = run_cli([*STEPS, "run.checkpoint_every=0.02", "run.resume=true", f"hydra.run.dir={cut}"], cwd=ROOT,
                 timeout=300)
@@ -58,7 +67,7 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     for name in a.files:
         assert np.array_equal(a[name], b[name]), name
     m_whole, m_cut = (json.loads((d / "metrics.json").read_text()) for d in (whole, cut))
-    assert m_cut["status"] == "completed" and m_cut["resumed_at"] == [stopped["steps"]]
+    assert m_cut["status"] == "completed" and m_cut["resumed_at"] == stops
     assert {k: m_cut.get(k) for k in SAME} == {k: m_whole.get(k) for k in SAME}
     assert len(checkpoints.listed(cut / checkpoints.DIR)) == checkpoints.KEEP
     # one recording in one file: the resumed part appended to the first, every step's scalars as the whole run's
@@ -131,3 +140,54 @@ def test_the_checkpoints_fall_due_every_simulated_interval(tmp_path):
     assert "every 5 minutes of wall time" in auto.describe() and not auto.due(driver)
     auto._since -= checkpoints.AUTO_WALL_S
     assert auto.due(driver)
+
+
+@pytest.mark.slow
+def test_a_rerun_sweep_resumes_its_unfinished_job_from_its_checkpoint(tmp_path):
+    """Two jobs that differ in their frames only; the sweep is killed (SIGKILL) once the second has
+    written a checkpoint; the same command again skips the first and continues the second from its
+    checkpoint, to the first's final state bit for bit."""
+    sweep = tmp_path / "sweep"
+    args = ["-m", "log.every=50,51", "run.steps=1500", "scene.resolution=32", "run.checkpoint_every=0.01",
+            "hydra/launcher=basic", f"hydra.sweep.dir={sweep}"]
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and proc.poll() is None and not checkpoints.listed(sweep / "1" / checkpoints.DIR):
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finally:
+        proc.kill()
+    assert json.loads((sweep / "1" / "metrics.json").read_text())["status"] == "running"
+    kept = checkpoints.listed(sweep / "1" / checkpoints.DIR)
+    p = run_cli(args, cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert f"skipped: {sweep / '0'} already holds this config's completed run" in p.stderr
+    first, second = (json.loads((sweep / j / "metrics.json").read_text()) for j in ("0", "1"))
+    assert second["status"] == "completed" and second["resumed_at"][0] >= int(kept[0].stem.split("-")[1])
+    a, b = (np.load(sweep / j / "final_state.npz") for j in ("0", "1"))
+    assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
+    assert sorted(p.name for p in (sweep / "1").glob("*.rrd")) == ["recording.rrd", "recording.timings.rrd"]
+
+
+def test_resuming_cuts_the_recording_back_to_its_sizes_at_the_checkpoint_whatever_a_kill_left(tmp_path):
+    """The first file renamed to part 0 (also when a kill came between renaming it and its timings),
+    each part cut back to its size in the checkpoint, the parts of later killed runs removed."""
+    (tmp_path / "recording.rrd").write_bytes(b"a" * 100)
+    (tmp_path / "recording.resumed-0.timings.rrd").write_bytes(b"t" * 50)  # renamed before the kill
+    (tmp_path / "recording.resumed-7.rrd").write_bytes(b"b" * 80)
+    (tmp_path / "recording.resumed-7.timings.rrd").write_bytes(b"u" * 40)
+    (tmp_path / "recording.resumed-9.rrd").write_bytes(b"c" * 10)  # a later run's, killed before its checkpoint
+    segments = [["recording.rrd", 60, 30], ["recording.resumed-7.rrd", 70, 20]]
+    data = type("Checkpoint", (), {"path": tmp_path / "ckpt-9.npz", "meta": {"segments": segments}})
+    parts = checkpoints.resume_segments(tmp_path, "recording.rrd", data)  # type: ignore[arg-type]
+    assert parts == [["recording.resumed-0.rrd", 60, 30], ["recording.resumed-7.rrd", 70, 20]]
+    sizes = {p.name: p.stat().st_size for p in tmp_path.glob("*.rrd")}
+    assert sizes == {"recording.resumed-0.rrd": 60, "recording.resumed-0.timings.rrd": 30,
+                     "recording.resumed-7.rrd": 70, "recording.resumed-7.timings.rrd": 20}
+    data.meta["segments"][1][1] = 90  # a part shorter than the checkpoint says: refused in one line
+    with pytest.raises(ConfigError) as e:
+        checkpoints.resume_segments(tmp_path, "recording.rrd", data)  # type: ignore[arg-type]
+    assert "recording.resumed-7.rrd is shorter than when ckpt-9.npz was written" in str(e.value)
