@@ -11,9 +11,10 @@ commit and the hash of the sources a run executes, pipelines.run.provenance),
 the recording's id and the recorder's state (its series, tracks and metrics
 so far), so that ``metrics.json`` describes the whole run.
 
-On SIGTERM or SIGUSR1 (a cluster pre-empting the job; submitit's requeue) a
-run writes a checkpoint at the next step boundary and ends ``preempted`` with
-exit code :data:`PREEMPTED` (75, EX_TEMPFAIL: try again); the same command
+On SIGTERM or SIGUSR1 (a cluster pre-empting the job) a run writes a
+checkpoint at the next step boundary, ends ``preempted`` with exit code
+:data:`PREEMPTED` (75, EX_TEMPFAIL: try again) and hands the signal on to the
+handler that was there before it (submitit's requeue, pipelines.run.runner); the same command
 with ``run.resume=true`` continues it (``run.resume=null``: where the run
 directory holds a checkpoint, else from the start: a requeued job's own
 command). Killed without warning (SIGKILL, a node lost), a run is continued

@@ -141,6 +141,7 @@ class _Terminate(KeyboardInterrupt):
     def __init__(self, name: str = "SIGTERM"):
         super().__init__(name)
         self.name = name
+        self.signum = signal.Signals[name]
 
 
 class Interrupts:
@@ -213,6 +214,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
         pass
     previous_int = previous.pop(signal.SIGINT, None)
     stepping = False  # in the step loop: a pre-emption leaves a checkpoint
+    preempted_by = None  # the signal, handed on at the end to whoever listened before (submitit's requeue)
     try:
         run.metrics["precision_check"], note = precision_check(spec)
         if note:
@@ -250,7 +252,7 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
         run.metrics["reason"] = f"{what} at step {run.step} (t = {run.t:.6g} s)"
         if isinstance(e, _Terminate) and stepping and run.driver is not None and run.driver.running:
             path = ckpts.write(run.driver, run)  # pre-empted: a checkpoint to resume from
-            run.metrics["status"] = "preempted"
+            run.metrics["status"], preempted_by = "preempted", e.signum
             run.metrics["reason"] += f"; checkpoint {path}: run.resume=true hydra.run.dir={out_dir} continues"
     except Exception as e:
         run.metrics["status"] = "failed"
@@ -287,6 +289,8 @@ def execute(spec: RunSpec, out_dir: Path, config_yaml: str = "", overrides: Sequ
                 signal.signal(signal.SIGINT, old_int)
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
+    if preempted_by is not None and callable(listener := previous.get(preempted_by)):
+        listener(preempted_by, None)  # e.g. submitit's: requeue the job, whose command then resumes
     return run.metrics
 
 

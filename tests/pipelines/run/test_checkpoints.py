@@ -81,6 +81,36 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     assert all(np.array_equal(a, b) for a, b in zip(one.positions, other.positions))
 
 
+HANDED_ON = """
+import runpy, signal, sys
+marker = sys.argv.pop(1)
+signal.signal(signal.SIGUSR1, lambda signum, frame: open(marker, "w").write(str(signum)))
+sys.argv[0] = "pipelines.run"
+runpy.run_module("pipelines.run", run_name="__main__")
+"""
+
+
+def test_a_preemption_hands_its_signal_on_to_the_handler_that_was_there_before(tmp_path):
+    """A scheduler's own handler (submitit's requeue on its pre-emption signal) still hears the signal, once the
+    run has written its checkpoint and metrics.json: the run then ends as pre-empted runs do (exit code 75)."""
+    marker, out = tmp_path / "handed_on", tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-c", HANDED_ON, str(marker), *STEPS, "run.checkpoint_every=0.02",
+                             f"hydra.run.dir={out}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and not checkpoints.listed(out / checkpoints.DIR) and proc.poll() is None:
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1]
+        proc.send_signal(signal.SIGUSR1)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == checkpoints.PREEMPTED, err
+    assert json.loads((out / "metrics.json").read_text())["status"] == "preempted"
+    assert marker.read_text() == str(int(signal.SIGUSR1))  # after the checkpoint, not instead of it
+
+
 def test_resume_without_a_checkpoint_is_refused_in_one_line_unless_null(tmp_path):
     p = run_cli(["run.steps=5", "run.resume=true", f"hydra.run.dir={tmp_path}"], cwd=ROOT, timeout=300)
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
