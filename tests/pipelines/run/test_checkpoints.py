@@ -27,6 +27,25 @@ SAME = ("steps", "sim_time", "config_hash", "energy_final", "fracture", "config_
         "dt_binding")
 
 
+def _preempted(args: list[str], out) -> tuple[int, str]:
+    """Run ``python <args>``, send it SIGUSR1 (as a scheduler pre-empts) once it has written a checkpoint newer
+    than those in ``out`` now (it is stepping); its exit code and stderr."""
+    before = checkpoints.listed(out / checkpoints.DIR)[:1]
+    proc = subprocess.Popen([sys.executable, *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        deadline = time.time() + 300
+        while (time.time() < deadline and checkpoints.listed(out / checkpoints.DIR)[:1] == before
+               and proc.poll() is None):
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1]
+        proc.send_signal(signal.SIGUSR1)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    return proc.returncode, err
+
+
 @pytest.mark.slow
 def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_path):
     whole, cut = tmp_path / "whole", tmp_path / "cut"
@@ -36,20 +55,9 @@ def test_a_preempted_run_resumes_to_the_end_of_the_whole_run_bit_for_bit(tmp_pat
     # twice: the resumed run is pre-empted too, and keeps the recording's parts for the next
     stops = []
     for args in ([], ["run.resume=true"]):
-        before = checkpoints.listed(cut / checkpoints.DIR)
-        proc = subprocess.Popen([sys.executable, "-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02", *args,
-                                 f"hydra.run.dir={cut}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True)
-        try:
-            deadline = time.time() + 300
-            while time.time() < deadline and checkpoints.listed(cut / checkpoints.DIR)[:1] == before[:1]:
-                time.sleep(0.05)
-            assert proc.poll() is None, proc.communicate()[1]
-            proc.send_signal(signal.SIGUSR1)
-            _, err = proc.communicate(timeout=120)
-        finally:
-            proc.kill()
-        assert proc.returncode == checkpoints.PREEMPTED == 75, err
+        code, err = _preempted(["-m", "pipelines.run", *STEPS, "run.checkpoint_every=0.02", *args,
+                                f"hydra.run.dir={cut}"], cut)
+        assert code == checkpoints.PREEMPTED == 75, err
         stopped = json.loads((cut / "metrics.json").read_text())
         assert stopped["status"] == "preempted" and stopped["reason"].startswith("SIGUSR1 at step"), stopped["reason"]
         assert 0 < stopped["steps"] < 1500
@@ -94,19 +102,9 @@ def test_a_preemption_hands_its_signal_on_to_the_handler_that_was_there_before(t
     """A scheduler's own handler (submitit's requeue on its pre-emption signal) still hears the signal, once the
     run has written its checkpoint and metrics.json: the run then ends as pre-empted runs do (exit code 75)."""
     marker, out = tmp_path / "handed_on", tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-c", HANDED_ON, str(marker), *STEPS, "run.checkpoint_every=0.02",
-                             f"hydra.run.dir={out}"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        deadline = time.time() + 300
-        while time.time() < deadline and not checkpoints.listed(out / checkpoints.DIR) and proc.poll() is None:
-            time.sleep(0.05)
-        assert proc.poll() is None, proc.communicate()[1]
-        proc.send_signal(signal.SIGUSR1)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
-    assert proc.returncode == checkpoints.PREEMPTED, err
+    code, err = _preempted(["-c", HANDED_ON, str(marker), *STEPS, "run.checkpoint_every=0.02",
+                            f"hydra.run.dir={out}"], out)
+    assert code == checkpoints.PREEMPTED, err
     assert json.loads((out / "metrics.json").read_text())["status"] == "preempted"
     assert marker.read_text() == str(int(signal.SIGUSR1))  # after the checkpoint, not instead of it
 
