@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..recording import recordings
 
@@ -70,7 +69,7 @@ def read(run_dir: Path, every: int = 1) -> Run:
     removed = any(i is not None for i in rec.index)  # then every frame has its particles' numbers
     frames = [Frame(int(rec.steps[k]), float(rec.times[k]), pad(rec.positions[k]).astype(np.float32),
                     _channels(rec, k, removed)) for k in picked]
-    config = _config(rec)
+    config = recordings.scene_config(rec)
     colliders = [_collider(name, geo, rec, [int(rec.steps[k]) for k in picked])
                  for name, geo in (rec.colliders or {}).items()]
     return Run(rec.dim or int(config.get("dim", 2)), frames, float(rec.radius), colliders, walls(config))
@@ -90,15 +89,6 @@ def _channels(rec: recordings.Recording, k: int, numbered: bool) -> dict[str, np
     if numbered:
         out["index"] = np.arange(len(rec.positions[k]), dtype=np.int64) if index is None else index
     return out
-
-
-def _config(rec: recordings.Recording) -> dict:
-    """The resolved ``scene`` config the run recorded (empty if none)."""
-    text = (rec.properties.get("config:yaml") or [""])[0]
-    try:
-        return (yaml.safe_load(text) or {}).get("scene") or {}
-    except yaml.YAMLError:
-        return {}
 
 
 def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Surface:

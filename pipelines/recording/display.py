@@ -34,12 +34,9 @@ def open_viewer(path: Path, web: bool) -> int:
 
 def _domain(rec: recordings.Recording, positions) -> np.ndarray:
     """The domain's size [m] from the recorded config (else the particles' extent)."""
-    import yaml
-
-    text = (rec.properties.get("config:yaml") or [""])[0]
     try:
-        return np.asarray(yaml.safe_load(text)["scene"]["domain"], float)
-    except (TypeError, KeyError, ValueError, yaml.YAMLError):
+        return np.asarray(recordings.scene_config(rec)["domain"], float)
+    except (TypeError, KeyError, ValueError):
         return np.concatenate(positions).max(axis=0)
 
 
@@ -155,12 +152,10 @@ def body_names(rec: recordings.Recording) -> list[str]:
     n = int(rec.body.max()) + 1 if rec.body is not None and len(rec.body) else 0
     names = list(rec.properties.get("bodies:names") or [])
     if len(names) != n:
-        import yaml
-
         try:
-            bodies = yaml.safe_load((rec.properties.get("config:yaml") or [""])[0])["scene"]["bodies"]
+            bodies = recordings.scene_config(rec)["bodies"]
             names = [b.get("name") or f"body{i}" for i, b in enumerate(bodies)]
-        except (TypeError, KeyError, AttributeError, yaml.YAMLError):
+        except (TypeError, KeyError, AttributeError):
             names = []
     return names if len(names) == n else [f"body{i}" for i in range(n)]
 

@@ -182,6 +182,17 @@ def read(path: str | Path, particles: bool = True) -> Recording:
                      *_timings(timings_path(path)), index, complete, end, clock, radius)
 
 
+def scene_config(rec: Recording) -> dict:
+    """The resolved ``scene`` config the run recorded (property ``config:yaml``); empty if none or unreadable."""
+    import yaml
+
+    try:
+        config = yaml.safe_load((rec.properties.get("config:yaml") or [""])[0])
+    except yaml.YAMLError:
+        return {}
+    return (config.get("scene") or {}) if isinstance(config, dict) else {}
+
+
 def _end(df, steps: list, times: list) -> tuple[int, float]:
     """The last step reached and its simulated time [s]: the last particle
     frame's, or the scalar rows' (``df``) if they go further."""
