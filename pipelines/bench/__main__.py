@@ -61,6 +61,10 @@ Everything runs through the same code path as ``pipelines.run``
    size, its share of the run at the default interval, and a resumed run's
    start-up on the 2D ball and the 3D ball at 100K+ particles
    (pipelines.bench.checkpoint).
+13. gpu-profile (``--only gpu-profile`` alone): where a step's time goes on
+   the device at 1M and 10M particles (``--profile-sizes``), per kernel,
+   with the bytes each kernel moves and its share of the copy bandwidth
+   (pipelines.bench.gpu_profile; meant for a GPU).
 
 ``--large`` adds the sphere at 1M and 10M particles (pipelines.bench.scale;
 meant for a GPU) and ``--sweep`` the runs per hour of a sweep of 2N jobs on
@@ -85,7 +89,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import checkpoint, order, peers, precision, scale, throughput
+from . import checkpoint, gpu_profile, order, peers, precision, scale, throughput
 from ..config import schema
 from .runs import QUIET, RECORDING, execute, interleaved, loop_s, spec_for, timed
 from ..run.warp_setup import init_warp
@@ -256,7 +260,8 @@ def bench_sync(workdir: Path, device: str) -> list[dict]:
 
 
 TABLES = ("speed", "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages",
-          "profile", "precision", "paper", "scaling", "large", "sweep", "order", "checkpoint")
+          "profile", "precision", "paper", "scaling", "large", "sweep", "order", "checkpoint",
+          "gpu-profile")
 # tables in the default run: --no-<table> leaves one out
 SKIPPABLE = {"peers": "peer-code (Taichi)", "schemes": "scheme", "updates": "update-cost", "kernels": "kernel",
              "materials": "material", "integrators": "integrator", "fused": "fused-against-cached EMPM",
@@ -288,8 +293,10 @@ def main(argv=None) -> None:
     p.add_argument("--only", default=None, help=f"comma-separated tables to run: {', '.join(TABLES)}")
     p.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"),
                    help="the Warp device of every run (default: $MPM_DEVICE, else auto: CUDA where Warp finds a GPU)")
-    p.set_defaults(speed=True, order=False, checkpoint=False)  # speed: the first (--only may leave it out); order
-    # and checkpoint: --only alone
+    p.add_argument("--profile-sizes", default=",".join(scale.LARGE),
+                   help="gpu-profile: comma-separated sizes, 1M, 10M or a sphere resolution (default: 1M,10M)")
+    p.set_defaults(speed=True, order=False, checkpoint=False, **{"gpu-profile": False})  # speed: the first (--only
+    # may leave it out); order, checkpoint and gpu-profile: --only alone
     args = p.parse_args(argv)
     if args.steps is not None and args.steps < 1:
         p.error(f"--steps: {args.steps}; accepted: an integer >= 1")
@@ -298,6 +305,12 @@ def main(argv=None) -> None:
     if args.genesis_python and (problem := peers.genesis_python_problem(args.genesis_python)):
         p.error(f"--genesis-python: {args.genesis_python}: {problem}; accepted: a Python executable where "
                 f"genesis-world is installed")
+    sizes = [s for s in args.profile_sizes.split(",") if s]
+    for s in sizes:
+        try:
+            gpu_profile.resolution_of(s)
+        except ValueError as e:
+            p.error(str(e))
     for c in args.cases:
         if c not in CASES:
             p.error(f"unknown case {c!r}; accepted: {', '.join(CASES)}")
@@ -344,6 +357,7 @@ def main(argv=None) -> None:
         sweep = throughput.bench_sweep(Path(tmp)) if args.sweep else []
         orders = order.bench_order(device) if args.order else []
         ckpts = checkpoint.bench_checkpoint(Path(tmp)) if args.checkpoint else []
+        where = gpu_profile.gpu_profile(sizes) if getattr(args, "gpu-profile") else []
     if rows:
         print(f"speed (EMPM, float32, {device})")
         print(f"{'case':<9} {'particles':>9} {'grid':>8} {'compile s':>9} {'ms/step':>8} "
@@ -437,6 +451,8 @@ def main(argv=None) -> None:
         throughput.print_sweep(sweep)
     if ckpts:
         checkpoint.print_checkpoint(ckpts)
+    if where:
+        gpu_profile.print_gpu_profile(where)
     if args.json:
         args.json.write_text(json.dumps({"speed": rows, "schemes": schemes, "updates": updates,
                                          "peers": peer_rows + genesis_rows, "kernels": kernels, "materials": materials,
@@ -444,7 +460,7 @@ def main(argv=None) -> None:
                                          "stages": stages,
                                          "profile": profile, "order": orders, "precision": precisions, "paper": paper,
                                          "scaling": scaling, "large": large, "sweep": sweep,
-                                         "checkpoint": ckpts}, indent=2) + "\n")
+                                         "checkpoint": ckpts, "gpu_profile": where}, indent=2) + "\n")
 
 
 if __name__ == "__main__":
