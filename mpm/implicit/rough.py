@@ -1,5 +1,7 @@
 """Coulomb friction at the colliders inside the implicit solve
-(mpm.implicit), as between bodies (mpm.contact.friction).
+(mpm.implicit), as between bodies (mpm.contact.friction), under the
+surface rule (mpm.surface; the node rule applies it after the solve, as
+earlier versions did: mpm.implicit.system ``make_friction``).
 
 A node that a slip or separating collider with mu > 0 holds along its
 normal n (mpm.collider_device ``constrain``: friction ``mu``, the

@@ -45,8 +45,9 @@ friction between the bodies a bin sticks (its whole relative velocity
 constrained) or slides (its normal row, and the Coulomb load in v*): the
 solve starts with every frictional bin stuck and is repeated from its last
 solution while a bin changes state or its load moves (mpm.contact.friction).
-Coulomb friction at a collider is decided the same way per node
-(mpm.implicit.rough): a node in frictional contact starts stuck (its
+Coulomb friction at a collider is decided the same way per node under
+the surface rule (mpm.implicit.rough; the node rule applies it after the
+solve, as it was): a node in frictional contact starts stuck (its
 surface point fixed to the collider, Pi = 0), and slides (its normal row,
 the load mu R_n against its slip in v*) once its tangential reaction
 leaves the cone. Applied after the solve with the solve's normal reaction,
@@ -75,7 +76,7 @@ import numpy as np
 import warp as wp
 
 from .system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, make_apply,
-                              make_boundary_work, make_evaluate, make_node_kernels)
+                              make_boundary_work, make_evaluate, make_friction, make_node_kernels)
 from ..materials.differential import make_tangent_type
 from .rough import NONE, make_rough
 from .rounds import Rounds
@@ -104,7 +105,10 @@ class ImplicitSolve:
         (self._finish_residual, self._finish_apply, self._cg_start, self._cg_step, self._cg_direction,
          self._trial) = make_node_kernels(t)
         self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
-        self.rough: tuple = make_rough(t) if self.with_friction else ()  # collider friction (mpm.implicit.rough)
+        # collider friction inside the solve (mpm.implicit.rough); the node rule's after it, as it was
+        surface = m.scene.boundary_rule == "surface"
+        self.rough: tuple = make_rough(t) if self.with_friction and surface else ()
+        self._friction = make_friction(t) if self.with_friction and not surface else None
         self._work = make_boundary_work(t)
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact  # mpm.contact.Contact, or None
@@ -149,7 +153,7 @@ class ImplicitSolve:
         return ([k for k, _ in self._evaluate] + [self._apply, self._finish_residual, self._finish_apply,
                                                   self._cg_start, self._cg_step, self._cg_direction,
                                                   self._trial, self._work]
-                + list(self.rough)
+                + list(self.rough) + ([self._friction] if self._friction else [])
                 + list(self.rounds.sides or ())
                 + list(self._contact))
 
@@ -162,7 +166,7 @@ class ImplicitSolve:
             (self.v_star, self.v_trial, self.residual, self.diag, self.inv_diag, self.delta, self.r, self.z,
              self.d, self.Ad, self.reaction) = (wp.zeros(n, dtype=vec) for _ in range(11))
             self.free = wp.zeros(n, dtype=self.t.mat)
-            k = n if self.rough else 1
+            k = n if self.with_friction else 1
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
             self.friction_shift = wp.zeros(k, dtype=vec)  # the surface's velocity minus the node's (mpm.surface)
@@ -312,7 +316,9 @@ class ImplicitSolve:
         """The constraints' work (:func:`make_boundary_work`: a stuck node's
         friction is part of its reaction), the work of friction between
         sliding bodies (mpm.contact.friction ``work``) and that of the
-        loads of the nodes sliding on a collider (mpm.implicit.rough ``work``)."""
+        loads of the nodes sliding on a collider (mpm.implicit.rough
+        ``work``); under the node rule, Coulomb friction at the colliders
+        on the solution (mpm.implicit.system ``make_friction``)."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, self.contact_id, s.buffer.status])
@@ -323,6 +329,10 @@ class ImplicitSolve:
         if self.rough:
             wp.launch(self.rough[2], s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.cstate, self.cload, self.held, self.contact_id, s.grid.v, s.buffer.status])
+        if self._friction is not None:  # the node rule's, after the solve
+            wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
+                s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
+                self.friction_shift, self.contact_id, s.grid.v, s.buffer.status])
 
     def hold(self, fresh: bool = False) -> None:
         """The collider nodes' states on the constraints and their loads in v*

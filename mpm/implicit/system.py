@@ -2,8 +2,10 @@
 particle the energy, residual and Hessian action of the incremental
 potential (``make_evaluate``, ``make_apply``), per node the passes of
 Newton's method and of conjugate gradients (``make_node_kernels``), the
-constraints' work, and the rounds of the one-sided constraints
-(``make_side_kernels``; collider friction's: mpm.implicit.rough). Sums go into one
+constraints' work, Coulomb friction at the colliders after a solve under
+the node rule (``make_friction``; the surface rule's is inside the solve,
+mpm.implicit.rough), and the rounds of the one-sided constraints
+(``make_side_kernels``). Sums go into one
 float64 accumulator at the slots below.
 """
 
@@ -384,7 +386,8 @@ def make_boundary_work(t: Types):
     ``make_constraints``; one entry without colliders) into its row of
     ``status.collider_impulse`` (a node stuck on a frictional collider:
     the whole reaction, normal and tangential; a sliding node's load adds
-    its own, mpm.implicit.rough ``work``)."""
+    its own, mpm.implicit.rough ``work``, and under the node rule the
+    friction after the solve its own, :func:`make_friction`)."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
@@ -401,6 +404,43 @@ def make_boundary_work(t: Types):
                     add_impulse(status.collider_impulse, contact_id[i], m[i] * reaction[i])
 
     return boundary_work
+
+
+@functools.cache
+def make_friction(t: Types):
+    """Kernel: Coulomb friction at the colliders after the solve, under the
+    node rule (``Scene.boundary_rule`` "nodes", as earlier versions; the
+    surface rule's is inside the solve, mpm.implicit.rough): the tangential
+    velocity relative to the collider loses mu times the normal velocity
+    the constraint removed (its reaction, while it pushes). Its impulse and
+    work go into ``status`` as the constraints' do (:func:`make_boundary_work`)."""
+    S = t.scalar
+    vec = t.vec
+    work = make_work(t)
+    add_impulse = make_add_impulse(t)
+
+    @warp_kernel
+    def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
+                 mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
+                 shift: wp.array(dtype=vec), contact_id: wp.array(dtype=wp.int32), v: wp.array(dtype=vec),
+                 status: StepStatus):
+        i = wp.tid()
+        if m[i] <= S(0.0) or mu[i] <= S(0.0):
+            return
+        push = wp.dot(reaction[i], normal[i])  # > 0: the constraint held the node out of the collider
+        if push <= S(0.0):
+            return
+        vr = v[i] + shift[i] - u[i]  # the surface point's velocity relative to the collider (mpm.surface)
+        vt = free[i] * vr
+        lt = wp.length(vt)
+        if lt > S(0.0):
+            v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt) - shift[i]
+            work(m[i], v[i], v_new, status)
+            if contact_id[i] >= 0:
+                add_impulse(status.collider_impulse, contact_id[i], m[i] * (v_new - v[i]))
+            v[i] = v_new
+
+    return friction
 
 
 @functools.cache
