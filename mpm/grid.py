@@ -177,8 +177,8 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
     into, or a slip collider, fixes the normal component. ``with_friction``:
     per node the friction coefficient, velocity and normal of its frictional
     collider (mu = 0: none) and the extrapolation from the node to the
-    surface, for the friction after the solve. Nodes without mass get
-    Pi = 0 (not part of the system)."""
+    surface, for the friction inside the solve (mpm.implicit.rough). Nodes
+    without mass get Pi = 0 (not part of the system)."""
     S = t.scalar
     mat = t.mat
     dim = t.dim

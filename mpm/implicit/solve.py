@@ -45,6 +45,14 @@ friction between the bodies a bin sticks (its whole relative velocity
 constrained) or slides (its normal row, and the Coulomb load in v*): the
 solve starts with every frictional bin stuck and is repeated from its last
 solution while a bin changes state or its load moves (mpm.contact.friction).
+Coulomb friction at a collider is decided the same way per node under
+the surface rule (mpm.implicit.rough; the node rule applies it after the
+solve, as it was): a node in frictional contact starts stuck (its
+surface point fixed to the collider, Pi = 0), and slides (its normal row,
+the load mu R_n against its slip in v*) once its tangential reaction
+leaves the cone. Applied after the solve with the solve's normal reaction,
+as earlier versions did, it let a disk rolling on a collider slip 0.2-0.8
+cells over 0.3 s.
 
 One-sided constraints (a separating collider, a slip wall: held only while
 the body moves into them) are first decided from the predictor, which
@@ -55,7 +63,7 @@ pulls is let go, a free node the solution moves into the solid is held.
 Decided once, a node the solution moved into a plate stayed free, the
 body's surface entered the solid unopposed and its stress was never paid
 for: a cylinder pressed by separating plates at 2 ms steps stored 72 %
-more energy than the plates' work. Both kinds of rounds together make at
+more energy than the plates' work. All kinds of rounds together make at
 most ROUNDS solves per step; a step still changing after them is counted
 (``NewtonReport.unsettled``, the nodes and bins its last solve does not
 satisfy) and keeps its last solve.
@@ -70,6 +78,7 @@ import warp as wp
 from .system import (DOT_A, DOT_B, ENERGY, MOMENTUM2, RESIDUAL2, STIFFNESS2, make_apply,
                               make_boundary_work, make_evaluate, make_friction, make_node_kernels)
 from ..materials.differential import make_tangent_type
+from .rough import NONE, make_rough
 from .rounds import Rounds
 from ..stepping.status import NewtonReport
 
@@ -96,7 +105,10 @@ class ImplicitSolve:
         (self._finish_residual, self._finish_apply, self._cg_start, self._cg_step, self._cg_direction,
          self._trial) = make_node_kernels(t)
         self.with_friction = any(c.friction > 0 for c in m.scene.colliders)
-        self._friction = make_friction(t) if self.with_friction else None
+        # collider friction inside the solve (mpm.implicit.rough); the node rule's after it, as it was
+        surface = m.scene.boundary_rule == "surface"
+        self.rough: tuple = make_rough(t) if self.with_friction and surface else ()
+        self._friction = make_friction(t) if self.with_friction and not surface else None
         self._work = make_boundary_work(t)
         self.eps = float(np.finfo(np.float32 if t.precision == "float32" else np.float64).eps)
         self.contact = solver.contact  # mpm.contact.Contact, or None
@@ -141,7 +153,7 @@ class ImplicitSolve:
         return ([k for k, _ in self._evaluate] + [self._apply, self._finish_residual, self._finish_apply,
                                                   self._cg_start, self._cg_step, self._cg_direction,
                                                   self._trial, self._work]
-                + ([self._friction] if self._friction else [])
+                + list(self.rough) + ([self._friction] if self._friction else [])
                 + list(self.rounds.sides or ())
                 + list(self._contact))
 
@@ -154,7 +166,7 @@ class ImplicitSolve:
             (self.v_star, self.v_trial, self.residual, self.diag, self.inv_diag, self.delta, self.r, self.z,
              self.d, self.Ad, self.reaction) = (wp.zeros(n, dtype=vec) for _ in range(11))
             self.free = wp.zeros(n, dtype=self.t.mat)
-            k = n if self._friction is not None else 1
+            k = n if self.with_friction else 1
             self.friction = wp.zeros(k, dtype=self.t.scalar)
             self.friction_u, self.friction_n = wp.zeros(k, dtype=vec), wp.zeros(k, dtype=vec)
             self.friction_shift = wp.zeros(k, dtype=vec)  # the surface's velocity minus the node's (mpm.surface)
@@ -164,6 +176,13 @@ class ImplicitSolve:
             self.cbin = wp.full(k, -1, dtype=wp.int32)
             self.coef = wp.zeros(k, dtype=vec)
             self.v_star0 = wp.zeros(n if self.sliding else 1, dtype=vec)  # v* without the sliding loads
+            # v* with the loads between bodies, without the colliders' (mpm.implicit.rough); the
+            # collider nodes' state, load and projector on the constraints (and the next round's)
+            self.v_base = wp.zeros(n, dtype=vec) if self.rough else self.v_star
+            k = n if self.rough else 1
+            self.cstate, self.cstate_after = (wp.full(k, NONE, dtype=wp.int32) for _ in range(2))
+            self.cload, self.cload_after = (wp.zeros(k, dtype=vec) for _ in range(2))
+            self.held = wp.zeros(k, dtype=self.t.mat)
         self.rounds.grow(n)
 
     def _sum(self) -> np.ndarray:
@@ -274,9 +293,9 @@ class ImplicitSolve:
 
     def begin(self) -> None:
         """The solve's start: keep the predictor v*, constrain grid_v, and the
-        projectors onto the free velocities (and the frictional contacts);
-        with contact, the constraints between bodies and grid_v projected
-        onto them."""
+        projectors onto the free velocities (the nodes in frictional contact
+        with a collider stuck, mpm.implicit.rough); with contact, the
+        constraints between bodies and grid_v projected onto them."""
         s = self.solver
         n = s.layout.n_nodes
         self._grow(s.grid.capacity)
@@ -285,18 +304,21 @@ class ImplicitSolve:
             wp.copy(self.v_star0, s.grid.v, count=n)
         s.conditions.constrain(s.grid, n, s.step_time, self.free, self.friction, self.friction_u, self.friction_n,
                                self.friction_shift, self.contact_id)
+        if self.rough:  # every node in frictional contact with a collider starts stuck
+            wp.copy(self.v_base, self.v_star, count=n)
+            self.cstate.fill_(NONE)
+            self.hold(fresh=True)
         if self.contact is not None:
             self._activate()
             self.project(0, s.grid.v)
 
     def finish(self) -> None:
-        """The constraints' work (:func:`make_boundary_work`), then Coulomb
-        friction on the solved velocities of the nodes in frictional
-        contact: the tangential velocity relative to the collider loses mu
-        times the normal velocity the constraint removed (|(I - Pi) R| / m at
-        the solution, while it pushes into the collider) - the explicit
-        step's rule with the implicit normal impulse; and the work of
-        friction between sliding bodies (mpm.contact.friction ``work``)."""
+        """The constraints' work (:func:`make_boundary_work`: a stuck node's
+        friction is part of its reaction), the work of friction between
+        sliding bodies (mpm.contact.friction ``work``) and that of the
+        loads of the nodes sliding on a collider (mpm.implicit.rough
+        ``work``); under the node rule, Coulomb friction at the colliders
+        on the solution (mpm.implicit.system ``make_friction``)."""
         s, m = self.solver, self.solver.model
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, self.contact_id, s.buffer.status])
@@ -304,10 +326,22 @@ class ImplicitSolve:
             wp.launch(self.sliding[5], s.layout.n_nodes, device=m.device, inputs=[
                 self.cbin, self.coef, self.bnormal, self.bstate, self.force, self.free, m.kernel.n_grids,
                 s.grid.v, s.buffer.status])
-        if self._friction is not None:
+        if self.rough:
+            wp.launch(self.rough[2], s.layout.n_nodes, device=m.device, inputs=[
+                s.grid.m, self.cstate, self.cload, self.held, self.contact_id, s.grid.v, s.buffer.status])
+        if self._friction is not None:  # the node rule's, after the solve
             wp.launch(self._friction, s.layout.n_nodes, device=m.device, inputs=[
                 s.grid.m, self.free, self.reaction, self.friction, self.friction_u, self.friction_n,
                 self.friction_shift, self.contact_id, s.grid.v, s.buffer.status])
+
+    def hold(self, fresh: bool = False) -> None:
+        """The collider nodes' states on the constraints and their loads in v*
+        (mpm.implicit.rough ``hold``; ``fresh``: the constraints have just
+        classified the nodes)."""
+        s, m = self.solver, self.solver.model
+        wp.launch(self.rough[0], s.layout.n_nodes, device=m.device, inputs=[
+            int(fresh), s.grid.m, self.friction, self.friction_u, self.friction_shift, self.cstate, self.cload,
+            self.held, self.free, s.grid.v, self.v_base, self.v_star])
 
     # ------------------------------------------------------------ solve
     def _classify(self, rep: NewtonReport, R: float, R_before: float, goal: float) -> None:
@@ -331,10 +365,10 @@ class ImplicitSolve:
     def solve(self, state, dt) -> NewtonReport:
         """The grid velocities of the step: on entry ``solver.grid.v`` holds the
         predictor v* (momentum / mass + dt g) and ``solver.grid.q`` the node
-        positions; on exit grid_v holds the solution, before the boundary
-        conditions' friction and the explicit contact pass (mpm.solver).
-        With friction between bodies, or one-sided constraints under the
-        surface rule, the solve is repeated from its solution while a bin's
+        positions; on exit grid_v holds the solution, before the explicit
+        contact pass (mpm.solver). With friction between bodies or at a
+        collider, or one-sided constraints under the surface rule, the
+        solve is repeated from its solution while a bin's or a node's
         stick / slip state or load, or a node's classification, changes
         (mpm.implicit.rounds)."""
         self.begin()

@@ -2,8 +2,10 @@
 particle the energy, residual and Hessian action of the incremental
 potential (``make_evaluate``, ``make_apply``), per node the passes of
 Newton's method and of conjugate gradients (``make_node_kernels``), the
-constraints' work and Coulomb friction after a solve, and the rounds of
-the one-sided constraints (``make_side_kernels``). Sums go into one
+constraints' work, Coulomb friction at the colliders after a solve under
+the node rule (``make_friction``; the surface rule's is inside the solve,
+mpm.implicit.rough), and the rounds of the one-sided constraints
+(``make_side_kernels``). Sums go into one
 float64 accumulator at the slots below.
 """
 
@@ -382,8 +384,10 @@ def make_boundary_work(t: Types):
     into ``status.boundary_work`` (mpm.grid ``make_work``, mpm.stepping.detection),
     and that of a node a collider constrains (``contact_id``, mpm.grid
     ``make_constraints``; one entry without colliders) into its row of
-    ``status.collider_impulse``. The Coulomb friction applied after the solve
-    (:func:`make_friction`) adds its own."""
+    ``status.collider_impulse`` (a node stuck on a frictional collider:
+    the whole reaction, normal and tangential; a sliding node's load adds
+    its own, mpm.implicit.rough ``work``, and under the node rule the
+    friction after the solve its own, :func:`make_friction`)."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
@@ -404,9 +408,12 @@ def make_boundary_work(t: Types):
 
 @functools.cache
 def make_friction(t: Types):
-    """Kernel: Coulomb friction after the solve (ImplicitSolve.finish); its
-    impulse and work go into ``status`` as the constraints' do
-    (:func:`make_boundary_work`)."""
+    """Kernel: Coulomb friction at the colliders after the solve, under the
+    node rule (``Scene.boundary_rule`` "nodes", as earlier versions; the
+    surface rule's is inside the solve, mpm.implicit.rough): the tangential
+    velocity relative to the collider loses mu times the normal velocity
+    the constraint removed (its reaction, while it pushes). Its impulse and
+    work go into ``status`` as the constraints' do (:func:`make_boundary_work`)."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
