@@ -11,7 +11,7 @@ import mpm
 from collider_sdf import evaluate, evaluate_at
 from mpm.collider_device import kinds_of
 from mpm.colliders import TURNING, Collider, rotation_of
-from mpm.materials import FixedCorotated
+from mpm.materials import FixedCorotated, Sand
 from mpm.meshes import MeshShape
 
 EPS12 = 8 * np.finfo(np.float64).eps  # coordinates <= 1 m, a rotation of a few ulps more
@@ -102,6 +102,91 @@ def test_every_shape_turns_with_its_surface(rest):
     surface = q - phi0[:, None] * n0
     rate = (moving.place(surface, t + dt) - moving.place(surface, t - dt)) / (2 * dt)
     np.testing.assert_allclose(u[far], rate[far], atol=1e-7 + tol)  # the difference's truncation ~ (omega dt)^2
+
+
+# ------------------------------------------------------------------ dynamics
+def _run(scene, scheme="empm", integrator="explicit", duration=0.2, cap=1e-3):
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64")
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
+    solver.prepare(state)
+    x0 = state.x.numpy().copy()
+    factor = 5.0 if integrator == "implicit" else 1.0
+    t, report = 0.0, None
+    while t < duration:
+        dt = min(factor * solver.timestep.stable_dt(0.4, report), factor * cap)
+        report = solver.advance(state, dt)
+        assert report.reason is None, report.reason
+        t += dt
+    assert not solver.conditions.inside_colliders(state.x, solver.time).any()
+    return x0, state.x.numpy(), state.v.numpy(), solver.time
+
+
+@pytest.mark.parametrize("boundary, friction", [("sticky", 0.0), ("separate", 1.0)])
+def test_a_turning_drum_carries_the_sand_on_its_wall(boundary, friction):
+    """Sand filling the lower half of a circular drum (R = 0.4 m, 32 cells
+    across 1 m) that turns at omega = 2 rad/s, sticky or with mu = 1: after
+    0.25 s (0.5 rad, short of the 35 deg the sand would slide at) the sand
+    within a cell of the wall moves with the wall, at the tangential speed
+    omega r. Measured: v_t / (omega r) 0.994 (sticky) and 0.990 (mu = 1)
+    on average, each particle's v_t / (omega R) >= 0.88 and 0.85: the
+    wall's nodes move at omega R, a particle a cell in at omega (R - dx) =
+    0.92 omega R, less what the grid blends in from the sand further in.
+    A wall at rest leaves it at about 0."""
+    res, omega, R = 32, 2.0, 0.4
+    c, dx = np.array([0.5, 0.5]), 1.0 / res
+    sand = mpm.Body(mpm.scene.Bowl(tuple(c), 1e-3, R - 0.5 * dx, 0.0),  # the lower half disc
+                    Sand(E=1e6, nu=0.3, rho=2200.0, friction_angle=35.0))
+    drum = Collider.sphere(tuple(c), R, inside=True, boundary=boundary, friction=friction, angular_velocity=omega)
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[sand], gravity=(0.0, -9.81),
+                      colliders=[drum])
+    _, x, v, _ = _run(scene, duration=0.25)
+    d = x - c
+    r = np.linalg.norm(d, axis=1)
+    vt = np.einsum("ij,ij->i", v, np.stack([-d[:, 1], d[:, 0]], axis=1) / r[:, None])  # counter-clockwise
+    wall = r > R - dx
+    assert wall.sum() > 100
+    assert np.mean(vt[wall] / (omega * r[wall])) == pytest.approx(1.0, abs=0.02)
+    assert vt[wall].min() > 0.8 * omega * R and vt[wall].max() < omega * R * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("scheme, integrator", [("empm", "explicit"), ("tlmpm", "explicit"), ("empm", "implicit")])
+def test_a_body_stuck_to_a_turning_box_turns_with_it(scheme, integrator):
+    """An elastic square frame around a sticky box collider (32 cells across
+    1 m, no gravity) that turns at 1 rad/s about its centre: after 0.2 rad
+    every particle is where the rotation carries it, R(theta)(x0 - c) + c,
+    within 0.02 cells (measured 0.0016 explicit EMPM, 0.0007 TLMPM, 0.0065
+    implicit) while the frame's corners have moved 1.2 cells: the wall
+    hands the frame its rigid velocity omega x r and the frame is stiff
+    (E = 1e6 Pa: its centripetal load omega^2 r rho strains it by 1e-7)."""
+    res, omega, h, w = 32, 1.0, 0.08, 0.06
+    c = np.array([0.5, 0.5])
+    parts = (mpm.Box((0.5, 0.5 + h + w / 2), (h + w, w / 2)), mpm.Box((0.5, 0.5 - h - w / 2), (h + w, w / 2)),
+             mpm.Box((0.5 + h + w / 2, 0.5), (w / 2, h)), mpm.Box((0.5 - h - w / 2, 0.5), (w / 2, h)))
+    frame = mpm.Body(mpm.scene.Compound(parts), FixedCorotated(E=1e6, nu=0.3, rho=1000.0))
+    box = Collider.box(tuple(c), (h, h), boundary="sticky", angular_velocity=omega)
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=res, bodies=[frame], gravity=(0.0, 0.0),
+                      colliders=[box])
+    x0, x, _, time = _run(scene, scheme, integrator, duration=0.2)
+    turned = (x0 - c) @ rotation_of((0.0, 0.0, omega * time), 2).T + c
+    assert np.linalg.norm(x - x0, axis=1).max() * res > 1.1
+    assert np.linalg.norm(x - turned, axis=1).max() * res < 0.02
+
+
+def test_a_collider_turning_at_zero_moves_as_one_that_does_not_turn():
+    """The rotation code with omega = 0 (compiled, turning by the identity)
+    and the translation alone (the code of every scene without a turning
+    collider) give the same run to round-off: a block dragged by a moving
+    frictional floor and pushed by a moving sticky box."""
+    runs = []
+    for spin in (None, 0.0):
+        body = mpm.Body(mpm.Box((0.4, 0.33), (0.08, 0.03)), FixedCorotated(E=1e5, nu=0.3, rho=1000.0))
+        cols = [Collider.half_space((0.5, 0.3), (0.0, 1.0), boundary="separate", friction=0.4, velocity=(0.5, 0.0),
+                                    angular_velocity=spin),
+                Collider.box((0.2, 0.35), (0.05, 0.05), boundary="sticky", velocity=(0.3, 0.0), start=0.05)]
+        scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=32, bodies=[body], gravity=(0.0, -9.81),
+                          colliders=cols)
+        runs.append(_run(scene, duration=0.15)[1])
+    np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-12)
 
 
 def test_only_turning_scenes_compile_the_rotation():
