@@ -302,12 +302,18 @@ class Collider:
             return 0.0
         return np.asarray(self.velocity, float) * (min(max(t, self.start), self.end) - self.start)
 
+    def pose(self, t: float, dim: int) -> tuple[np.ndarray, np.ndarray]:
+        """(R, b): a point q of the rest shape is at R q + b at time ``t`` [s]
+        (R the rotation about the pivot, b = p + s(t) - R p)."""
+        R = self.rotation(t, dim)
+        p = np.asarray(self.rest_pivot(dim))
+        return R, p + self.offset(t) - R @ p
+
     def place(self, q: np.ndarray, t: float) -> np.ndarray:
         """Points ``q`` [m] of the rest shape moved to where they are at time ``t`` [s]."""
         q = np.asarray(q, float)
-        dim = q.shape[-1]
-        p = np.asarray(self.rest_pivot(dim))
-        return (q - p) @ self.rotation(t, dim).T + p + self.offset(t)
+        R, b = self.pose(t, q.shape[-1])
+        return q @ R.T + b
 
     def record(self, dim: int) -> dict:
         """The packed fields of mpm.collider_device.make_collider_data (numbers only)."""
