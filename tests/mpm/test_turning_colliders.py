@@ -195,6 +195,19 @@ def test_only_turning_scenes_compile_the_rotation():
     assert kinds_of(still + [Collider.box((0.5, 0.2), (0.1, 0.1), angular_velocity=0.0)]) == ("box", "sphere", TURNING)
 
 
+def test_a_turning_collider_s_speed_enters_the_time_step():
+    """|u| + |omega| times the farthest corner of the domain from the pivot:
+    a drum turning at 2 rad/s about the middle of a 1 m square, moving at
+    0.1 m/s, bounds its surface's speed by 0.1 + 2 sqrt(0.5) m/s."""
+    drum = Collider.sphere((0.5, 0.5), 0.4, inside=True, angular_velocity=-2.0, velocity=(0.0, 0.1))
+    assert drum.speed((1.0, 1.0)) == pytest.approx(0.1 + 2.0 * np.sqrt(0.5), rel=1e-12)
+    assert drum.speed() == pytest.approx(0.1)  # no domain: the translation alone, as before
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=8, colliders=[drum],
+                      bodies=[mpm.Body(mpm.Sphere((0.5, 0.5), 0.1), FixedCorotated())])
+    model, _ = mpm.build(scene, mpm.QUADRATIC)
+    assert mpm.Solver(model).conditions.speed() == pytest.approx(0.1 + 2.0 * np.sqrt(0.5), rel=1e-12)
+
+
 @pytest.mark.parametrize("dim, keys, key", [
     (2, dict(angular_velocity=(1.0, 2.0)), "colliders[0].angular_velocity"),
     (2, dict(angular_velocity=float("nan")), "colliders[0].angular_velocity"),
