@@ -286,7 +286,7 @@ def compare(a: Recording, b: Recording) -> dict:
         dev = float(np.max(np.abs(pa - pb))) if pa.size else 0.0
         largest["positions"] = max(largest.get("positions", 0.0), dev)
     for da, db in zip(a.dJ, b.dJ):
-        if da is not None and db is not None and da.shape == db.shape:
+        if da is not None and db is not None and da.shape == db.shape and da.size:  # (a frame may be empty)
             largest["dJ"] = max(largest.get("dJ", 0.0), float(np.max(np.abs(da - db))))
     for name, (sa, va) in a.scalars.items():
         if name not in b.scalars or not np.array_equal(sa, b.scalars[name][0]):
