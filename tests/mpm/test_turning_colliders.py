@@ -172,6 +172,30 @@ def test_a_body_stuck_to_a_turning_box_turns_with_it(scheme, integrator):
     assert np.linalg.norm(x - turned, axis=1).max() * res < 0.02
 
 
+def test_a_shell_stuck_to_a_box_turning_about_a_tilted_axis_turns_with_it():
+    """3D: an elastic shell of six slabs around a sticky box collider that
+    turns at |omega| = 1.04 rad/s about the axis (0.3, 0.6, 0.8) (16 cells
+    across 1 m, one particle per cell): after 0.2 s every particle is where
+    the rigid motion carries it (Collider.place) within 0.1 cells (measured
+    0.026) while the shell's corners have moved 1.24 cells."""
+    res, h, w = 16, 0.125, 0.125
+    c = np.full(3, 0.5)
+    parts = []
+    for k in range(3):
+        for side in (-1, 1):
+            centre, half = c.copy(), np.full(3, h + w)
+            centre[k] += side * (h + w / 2)
+            half[k] = w / 2
+            parts.append(mpm.Box(tuple(centre), tuple(half)))
+    shell = mpm.Body(mpm.scene.Compound(tuple(parts)), FixedCorotated(E=1e6, nu=0.3, rho=1000.0))
+    box = Collider.box(tuple(c), (h,) * 3, boundary="sticky", angular_velocity=(0.3, 0.6, 0.8))
+    scene = mpm.Scene(dim=3, domain=(1.0,) * 3, resolution=res, bodies=[shell], gravity=(0.0,) * 3, ppc=1,
+                      walls=("slip",) * 6, colliders=[box])
+    x0, x, _, time = _run(scene, duration=0.2)
+    assert np.linalg.norm(x - x0, axis=1).max() * res > 1.1
+    assert np.linalg.norm(x - box.place(x0, time), axis=1).max() * res < 0.1
+
+
 def test_a_collider_turning_at_zero_moves_as_one_that_does_not_turn():
     """The rotation code with omega = 0 (compiled, turning by the identity)
     and the translation alone (the code of every scene without a turning
