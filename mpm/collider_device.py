@@ -2,36 +2,22 @@
 mpm.colliders; their records and shapes: mpm.collider_shapes): the grid
 rule, where a node is in contact with a collider (mpm.surface), the implicit
 solve's constraints and the count of particles gone through a collider. The
-kernels compile only the shapes present (:func:`kinds_of`)."""
+kernels compile only the shapes present, and the rotation only where a
+collider turns (:func:`kinds_of`; mpm.collider_motion)."""
 
 import functools
 
 import numpy as np
 import warp as wp
 
-from .collider_shapes import make_collider_data, make_sdf
-from .colliders import BOUNDARIES, KINDS, Collider
+from .collider_motion import make_place
+from .collider_shapes import make_collider_data
+from .colliders import BOUNDARIES, KINDS, TURNING, Collider
 from .launch import warp_kernel
 from .surface import APART, CONTACT, make_profile_type, make_surface
 from .types import Types
 
 STICKY, SLIP, SEPARATE = range(len(BOUNDARIES))
-
-
-@functools.cache
-def make_motion(t: Types):
-    """``motion(c, time) -> (displacement, velocity)`` of collider ``c``."""
-    S, vec, Data = t.scalar, t.vec, make_collider_data(t)
-
-    @wp.func
-    def motion(c: Data, time: S):
-        tc = wp.min(wp.max(time, c.window[0]), c.window[1])
-        u = vec()
-        if time >= c.window[0] and time < c.window[1]:
-            u = c.u
-        return (tc - c.window[0]) * c.u, u
-
-    return motion
 
 
 @functools.cache
@@ -112,8 +98,7 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
     velocity in contact is the node's, and its momentum goes to the
     collider's row of ``impulse``."""
     S, vec, Data = t.scalar, t.vec, make_collider_data(t)
-    sdf = make_sdf(t, kinds)
-    motion = make_motion(t)
+    place = make_place(t, kinds)
     respond = make_respond(t)
     reach = make_reach(t, rule, gradients)
     add_impulse = make_add_impulse(t)
@@ -124,8 +109,7 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
                 impulse: wp.array(dtype=wp.float64)):
         for k in range(colliders.shape[0]):
             c = colliders[k]
-            shift, u = motion(c, time)
-            phi, n = sdf(c, q - shift)
+            phi, n, u = place(c, q, time)
             state, vs = reach(phi, n, V, G, v, profile)
             if state == CONTACT:
                 dv = respond(vs, u, n, c) - vs
@@ -179,8 +163,7 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
     integrator slipped 0.15 cells over 0.3 s where it now slips 0.09 (64
     cells, EMPM)."""
     S, vec, mat, Data = t.scalar, t.vec, t.mat, make_collider_data(t)
-    sdf = make_sdf(t, kinds)
-    motion = make_motion(t)
+    place = make_place(t, kinds)
     remove_direction = make_remove_direction(t)
     reach = make_reach(t, rule, gradients)
     surface_velocity = make_surface(t)[2]
@@ -196,8 +179,7 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
         hit = int(-1)
         for k in range(colliders.shape[0]):
             c = colliders[k]
-            shift, u = motion(c, time)
-            phi, n = sdf(c, q - shift)
+            phi, n, u = place(c, q, time)
             state, vs = reach(phi, n, V, G, v, profile)
             if state != APART:  # (DEEP too: see the docstring)
                 if state != CONTACT and c.friction > S(0.0) and c.boundary != STICKY:
@@ -225,16 +207,14 @@ def make_constrain(t: Types, kinds: tuple[str, ...], rule: str = "surface", grad
 def make_inside_count(t: Types, kinds: tuple[str, ...]):
     """Kernel: per collider, the particles deeper inside it than ``depth`` [m]."""
     S, Data = t.scalar, make_collider_data(t)
-    sdf = make_sdf(t, kinds)
+    place = make_place(t, kinds)
 
     @warp_kernel
     def inside_count(x: wp.array(dtype=t.vec), time: S, depth: S, colliders: wp.array(dtype=Data),
                      count: wp.array(dtype=wp.int32)):
         p = wp.tid()
         for k in range(colliders.shape[0]):
-            c = colliders[k]
-            tc = wp.min(wp.max(time, c.window[0]), c.window[1])
-            phi, n = sdf(c, x[p] - (tc - c.window[0]) * c.u)
+            phi, n, u = place(colliders[k], x[p], time)
             if phi < -depth:
                 wp.atomic_add(count, k, 1)
 
@@ -242,8 +222,10 @@ def make_inside_count(t: Types, kinds: tuple[str, ...]):
 
 
 def kinds_of(colliders: list[Collider]) -> tuple[str, ...]:
-    """The shapes present, in KINDS order (the kernels' specialisation key)."""
-    return tuple(k for k in KINDS if any(c.type == k for c in colliders))
+    """The shapes present, in KINDS order, and TURNING last where a collider
+    turns (the kernels' specialisation key)."""
+    return (tuple(k for k in KINDS if any(c.type == k for c in colliders))
+            + ((TURNING,) if any(c.turns for c in colliders) else ()))
 
 
 def build_meshes(colliders: list[Collider], device) -> dict:

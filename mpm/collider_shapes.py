@@ -30,6 +30,8 @@ def make_collider_data(t: Types):
         w: t.scalar  # wall thickness
         u: t.vec  # velocity while moving [m/s]
         window: wp.types.vector(2, t.scalar)  # (start, end) of the motion [s]
+        omega: wp.types.vector(3, t.scalar)  # angular velocity while moving [rad/s] (2D: about z)
+        pivot: t.vec  # the point it turns about, at rest [m]
         mesh: wp.uint64  # wp.Mesh id (mesh colliders)
 
     return ColliderData
@@ -47,9 +49,10 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device) -> wp.array:
         d = Data()
         d.kind, d.boundary, d.invert = rec["kind"], rec["boundary"], rec["invert"]
         d.friction, d.r, d.a, d.w = (t.scalar(float(rec[k])) for k in ("friction", "r", "a", "w"))
-        for k in ("p", "n0", "n1", "h", "u"):
+        for k in ("p", "n0", "n1", "h", "u", "pivot"):
             setattr(d, k, t.vec(*rec[k]))
         d.window = wp.types.vector(2, t.scalar)(*rec["window"])
+        d.omega = wp.types.vector(3, t.scalar)(*rec["omega"])
         d.mesh = wp.uint64(meshes[i].id if i in meshes else 0)
         out.append(d)
     return wp.array(out, dtype=Data, device=device)

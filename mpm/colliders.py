@@ -24,9 +24,20 @@ v_t = v_r - v_n n: |v_t| shrinks by mu |v_n| and stops at zero,
     v = u + max(0, 1 - mu |v_n| / |v_t|) v_t;
 the node's velocity changes by what the rule changes v by.
 
-A collider may move with a constant ``velocity`` [m/s] while
+A collider may move with a constant ``velocity`` u [m/s] while
 ``start <= t < end`` [s]; its shape is then displaced by
-u (clamp(t, start, end) - start). Shapes (every one 2D and 3D except the mesh):
+u (clamp(t, start, end) - start). Over the same window it may also turn at
+a constant ``angular_velocity`` omega [rad/s] (2D: a number, about z; 3D: a
+vector) about a ``pivot`` [m] (default: the shape's ``center``, the
+``point`` of a half-space or wedge, the mesh's centre) that moves with the
+translation: at time t the shape is its rest shape turned by the angle
+omega (clamp(t, start, end) - start) about the pivot, then displaced. Its
+signed distance at q is the rest shape's at q mapped back (turned back about
+the moved pivot), its normal the rest normal turned forward, and the
+velocity of its surface at a point q_s is u + omega x (q_s - pivot(t)),
+taken at the surface point q - phi n below a node or particle
+(mpm.collider_motion). Only scenes with a turning collider compile the
+rotation. Shapes (every one 2D and 3D except the mesh):
 
   half_space  the solid behind a plane through ``point`` with outward ``normal``
   wedge       the intersection of two half-spaces through ``point`` (a ridge)
@@ -55,6 +66,9 @@ if TYPE_CHECKING:
 
 KINDS = ("half_space", "wedge", "box", "sphere", "cylinder", "cup", "bowl", "mesh")
 """the collider shapes (Collider.type); the module docstring says what each takes"""
+TURNING = "turning"
+"""the key the kernels add to the shapes present when a collider turns
+(mpm.collider_device.kinds_of): only then is the rotation compiled"""
 BOUNDARIES = ("sticky", "slip", "separate")
 """what a node inside a collider does (Collider.boundary; module docstring)"""
 INSIDE_DEPTH = 1.0
@@ -69,6 +83,21 @@ through it"""
 def _unit(v) -> tuple[float, ...]:
     v = np.asarray(v, float)
     return tuple(v / np.linalg.norm(v))
+
+
+def rotation_of(angle, dim: int) -> np.ndarray:
+    """The rotation by the rotation vector ``angle`` [rad] (3 numbers; 2D:
+    its z component), as a dim x dim matrix."""
+    angle = np.asarray(angle, float)
+    if dim == 2:
+        c, s = np.cos(angle[2]), np.sin(angle[2])
+        return np.array([[c, -s], [s, c]])
+    theta = float(np.linalg.norm(angle))
+    if theta == 0.0:
+        return np.eye(3)
+    k = angle / theta
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * K @ K
 
 
 def axis_vector(axis, dim: int) -> tuple[float, ...]:
@@ -91,6 +120,7 @@ class Collider:
     "sticky", "separate", :data:`BOUNDARIES`), ``friction`` (Coulomb mu, 0),
     ``name`` (""), ``inside`` (False; True: a container, the solid is the
     outside of the shape) and the motion ``velocity`` [m/s] (None: at rest)
+    and ``angular_velocity`` [rad/s] about ``pivot`` [m] (None: no turning)
     while ``start`` (0 s) <= t < ``end`` (inf s). The same keys, with
     ``type``, describe a collider in a scene file (``scene.colliders``)."""
 
@@ -134,6 +164,12 @@ class Collider:
     """when the motion starts [s]"""
     end: float = float("inf")
     """when it stops [s]"""
+    angular_velocity: float | Sequence[float] | None = None
+    """constant angular velocity [rad/s] while start <= t < end: 2D a number
+    (about z, counter-clockwise), 3D a vector (None: no turning)"""
+    pivot: Sequence[float] | None = None
+    """the point [m] it turns about, at rest (None: the shape's centre, the
+    half-space's or wedge's point, the mesh's centre); it moves with ``velocity``"""
 
     @classmethod
     def half_space(cls, point, normal, **keys) -> "Collider":
@@ -198,10 +234,67 @@ class Collider:
             out.append(("type", f"mesh in {dim}D; accepted: mesh colliders in 3D only"))
         if not (self.friction >= 0.0):
             out.append(("friction", f"{self.friction}; accepted: a number >= 0"))
+        return out + self._motion_problems(dim)
+
+    def _motion_problems(self, dim: int) -> list[tuple[str, str]]:
+        """The velocity, angular velocity and pivot: sized for ``dim``, finite."""
+        out = []
+        spin = "a number (about z) [rad/s] in 2D" if dim == 2 else "3 numbers [rad/s] in 3D"
+        for key, value, accepted, scalar in (("velocity", self.velocity, f"{dim} finite numbers [m/s]", False),
+                                            ("angular_velocity", self.angular_velocity, f"{spin}, finite", dim == 2),
+                                            ("pivot", self.pivot, f"{dim} finite numbers [m]", False)):
+            if value is None:
+                continue
+            try:
+                v = np.asarray(value, float)
+            except (TypeError, ValueError):
+                out.append((key, f"{value!r}; accepted: {accepted}"))
+                continue
+            if (v.ndim != 0 if scalar else v.shape != (3 if key == "angular_velocity" else dim,)):
+                out.append((key, f"{value!r}; accepted: {accepted}"))
+            elif not np.all(np.isfinite(v)):
+                out.append((key, f"{value!r} is not finite; accepted: {accepted}"))
         return out
 
-    def speed(self) -> float:
-        return float(np.linalg.norm(self.velocity)) if self.velocity is not None else 0.0
+    @property
+    def turns(self) -> bool:
+        """Whether it has an angular velocity (zero counts: the scene compiles the rotation)."""
+        return self.angular_velocity is not None
+
+    def omega(self, dim: int) -> np.ndarray:
+        """The angular velocity [rad/s] as a 3-vector (2D: about z; zero when not turning)."""
+        if self.angular_velocity is None:
+            return np.zeros(3)
+        if dim == 2:
+            return np.array([0.0, 0.0, float(self.angular_velocity)])  # pyright: ignore[reportArgumentType]
+        return np.asarray(self.angular_velocity, float)
+
+    def rest_pivot(self, dim: int) -> tuple[float, ...]:
+        """The point it turns about, at rest [m] (``pivot`` or its default)."""
+        if self.pivot is not None:
+            return tuple(float(x) for x in self.pivot)
+        if self.type in ("half_space", "wedge") and self.point is not None:
+            return tuple(float(x) for x in self.point)
+        if self.type == "mesh" and self.mesh is not None:
+            return tuple(float(x) for x in self.mesh.center)
+        return tuple(float(x) for x in self.center) if self.center is not None else (0.0,) * dim
+
+    def speed(self, domain: Sequence[float] | None = None) -> float:
+        """The fastest its surface moves over ``domain`` [m] (the box from the
+        origin; None: the translation alone) [m/s]: |u| and, turning,
+        |omega| times the farthest corner of the domain from the pivot."""
+        u = float(np.linalg.norm(self.velocity)) if self.velocity is not None else 0.0
+        if not self.turns or domain is None:
+            return u
+        dim = len(domain)
+        corners = np.array(np.meshgrid(*[(0.0, L) for L in domain])).reshape(dim, -1).T
+        reach = float(np.linalg.norm(corners - np.asarray(self.rest_pivot(dim)), axis=1).max())
+        return u + float(np.linalg.norm(self.omega(dim))) * reach
+
+    def rotation(self, t: float, dim: int) -> np.ndarray:
+        """The rotation matrix of the shape at time ``t`` [s] (identity when not turning)."""
+        angle = self.omega(dim) * (min(max(t, self.start), self.end) - self.start)
+        return rotation_of(angle, dim)
 
     def offset(self, t: float) -> np.ndarray | float:
         """Displacement of the shape at time ``t`` [s] (0.0 for a collider at rest)."""
@@ -209,13 +302,26 @@ class Collider:
             return 0.0
         return np.asarray(self.velocity, float) * (min(max(t, self.start), self.end) - self.start)
 
+    def pose(self, t: float, dim: int) -> tuple[np.ndarray, np.ndarray]:
+        """(R, b): a point q of the rest shape is at R q + b at time ``t`` [s]
+        (R the rotation about the pivot, b = p + s(t) - R p)."""
+        R = self.rotation(t, dim)
+        p = np.asarray(self.rest_pivot(dim))
+        return R, p + self.offset(t) - R @ p
+
+    def place(self, q: np.ndarray, t: float) -> np.ndarray:
+        """Points ``q`` [m] of the rest shape moved to where they are at time ``t`` [s]."""
+        q = np.asarray(q, float)
+        R, b = self.pose(t, q.shape[-1])
+        return q @ R.T + b
+
     def record(self, dim: int) -> dict:
         """The packed fields of mpm.collider_device.make_collider_data (numbers only)."""
         z = (0.0,) * dim
         r = dict(kind=KINDS.index(self.type), boundary=BOUNDARIES.index(self.boundary),
                  friction=self.friction, invert=int(self.inside), p=z, n0=z, n1=z, h=z,
                  r=self.radius, a=0.0, w=self.thickness, u=tuple(self.velocity or z),
-                 window=(self.start, min(self.end, 1e30)))
+                 window=(self.start, min(self.end, 1e30)), omega=tuple(self.omega(dim)), pivot=self.rest_pivot(dim))
         if self.type in ("half_space", "wedge"):
             assert self.point is not None, "checked by problems()"
             r["p"] = tuple(self.point)

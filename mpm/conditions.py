@@ -62,7 +62,7 @@ class Conditions:
         self.inside = make_inside_count(t, self.collider_kinds) if scene.colliders else None
         # particles put back out of the solids in G2P (mpm.keep_out)
         self.keep_out = rule == "surface" and bool(scene.colliders or self.closed[0].any() or self.closed[1].any())
-        self.collider_speed = max([c.speed() for c in scene.colliders], default=0.0)  # [m/s]
+        self.collider_speed = max([c.speed(scene.domain) for c in scene.colliders], default=0.0)  # [m/s]
         with wp.ScopedDevice(model.device):
             self._meshes = build_meshes(scene.colliders, model.device)  # kept alive for their ids
             self.data = self._pack()

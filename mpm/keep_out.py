@@ -20,8 +20,8 @@ import functools
 
 import warp as wp
 
-from .collider_device import STICKY, make_add_impulse, make_motion
-from .collider_shapes import make_sdf
+from .collider_device import STICKY, make_add_impulse
+from .collider_motion import make_place
 from .grid import make_boundary_data
 from .scene import WALL_TYPES
 from .stepping.status import StepStatus
@@ -40,8 +40,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
     S, vec = t.scalar, t.vec
     f64 = wp.float64
     Data = make_boundary_data(t)
-    sdf = make_sdf(t, kinds)
-    motion = make_motion(t)
+    place = make_place(t, kinds)
     add_impulse = make_add_impulse(t)
 
     @wp.func
@@ -68,8 +67,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
         if wp.static(len(kinds) > 0):
             for k in range(data.colliders.shape[0]):
                 c = data.colliders[k]
-                shift, u = motion(c, time)
-                phi, n = sdf(c, x - shift)
+                phi, n, u = place(c, x, time)
                 if phi < S(0.0):
                     v_in = v
                     x, v = put_back(x, v, phi, n, u, c.boundary == STICKY)

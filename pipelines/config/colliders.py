@@ -40,6 +40,17 @@ def _axis(key: str, value, ctx: Context):
     return number(key, value, int, {"keyed": True, "ge": 0, "le": ctx.dim - 1})
 
 
+def _angular(key: str, value, ctx: Context):
+    """A number about z in 2D, three numbers in 3D [rad/s]."""
+    if ctx.dim == 2:
+        if isinstance(value, (list, tuple)):
+            raise ConfigError(key, f"{value!r}; accepted: a number [rad/s] (about z) in 2D")
+        return number(key, value, float)
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [rad/s] in 3D")
+    return vector(key, value, 3)
+
+
 def _center(doc: str = "centre [m]"):
     return setting(None, doc, size="dim", required=True)
 
@@ -54,8 +65,8 @@ AXIS = "0, 1, 2 or a direction; null: 1 (+y)"
 @dataclass
 class _Collider:
     """The keys of every collider: ``boundary`` with Coulomb ``friction``,
-    ``inside: true`` (the shape is a container), ``velocity`` while
-    start <= t < end."""
+    ``inside: true`` (the shape is a container), ``velocity`` and
+    ``angular_velocity`` about ``pivot`` while start <= t < end."""
 
     geometry: ClassVar[tuple[str, ...]]  # each type's keys of its shape (build)
     type: str = setting("half_space", "the kind of collider")
@@ -67,6 +78,11 @@ class _Collider:
                                                     "null: static", size="dim")
     start: float = setting(0.0, "[s] when the motion starts", ge=0.0)
     end: Optional[float] = setting(None, "[s] when the motion ends; null: never")
+    angular_velocity: Optional[Any] = setting(None, "[rad/s] turns the collider about its pivot while "
+                                                    "start <= t < end: a number (about z) in 2D, a list of 3 "
+                                                    "in 3D; null: no turning", parse=_angular)
+    pivot: Optional[List[float]] = setting(None, "[m] the point it turns about, at rest (it moves with velocity); "
+                                                 "null: its centre (half_space, wedge: its point)", size="dim")
 
     def problems(self):
         if self.end is not None and not self.end > self.start:
@@ -76,7 +92,8 @@ class _Collider:
     def common(self) -> dict:
         return dict(type=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
                     inside=self.inside, velocity=self.velocity, start=self.start,
-                    end=float("inf") if self.end is None else self.end)
+                    end=float("inf") if self.end is None else self.end,
+                    angular_velocity=self.angular_velocity, pivot=self.pivot)
 
     def build(self, key: str, ctx: Context) -> mpm.Collider:
         geometry = {k: getattr(self, k) for k in self.geometry}

@@ -36,6 +36,8 @@ class Surface:
     triangles: np.ndarray  # (k, 3) indices into vertices; (0, 3) for polylines
     lines: list[int] = field(default_factory=list)  # vertices per polyline, in order (2D); empty for triangles
     shifts: list[np.ndarray] | None = None  # a moving collider's translation (3,) [m] at each exported frame
+    turns: list[np.ndarray] | None = None  # a turning collider's rotation (3, 3) at each exported frame: a vertex
+    # q is at turns[k] q + shifts[k]
 
 
 @dataclass
@@ -93,7 +95,8 @@ def _channels(rec: recordings.Recording, k: int, numbered: bool) -> dict[str, np
 
 def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Surface:
     """A recorded collider surface (a triangle mesh, or a 2D outline's
-    polylines) with its translation at each exported frame when it moves."""
+    polylines) with its translation at each exported frame when it moves,
+    and its rotation when it turns."""
     if isinstance(geo, tuple):
         vertices, triangles = geo
         surface = Surface(name, pad(vertices).astype(np.float64), np.asarray(triangles, np.int64))
@@ -105,6 +108,11 @@ def _collider(name: str, geo, rec: recordings.Recording, steps: list[int]) -> Su
         at, shift = moves
         idx = np.searchsorted(at, steps, side="right") - 1
         surface.shifts = [pad(shift[i:i + 1])[0] if i >= 0 else np.zeros(3) for i in idx]
+    turns = (rec.collider_turn or {}).get(name)
+    if turns is not None:
+        at, mats = turns
+        idx = np.searchsorted(at, steps, side="right") - 1
+        surface.turns = [mats[i] if i >= 0 else np.eye(3) for i in idx]
     return surface
 
 

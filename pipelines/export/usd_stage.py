@@ -81,7 +81,14 @@ def _solid(stage: Usd.Stage, path: str, s: Surface, codes: list[float], width: f
     geom.CreatePointsAttr(points)
     geom.CreateExtentAttr(_extent(s.vertices))
     geom.CreateDisplayColorAttr(Vt.Vec3fArray([Gf.Vec3f(*SOLID_RGB)]))
-    if s.shifts is not None:
+    if s.shifts is not None and s.turns is not None:  # USD's row vectors: q' = q M, M = [[R^T, 0], [shift, 1]]
+        op = geom.AddTransformOp()
+        for code, shift, turn in zip(codes, s.shifts, s.turns, strict=True):
+            M = np.eye(4)
+            M[:3, :3] = np.asarray(turn, float).T
+            M[3, :3] = shift
+            op.Set(Gf.Matrix4d(*map(float, M.reshape(-1))), Usd.TimeCode(code))
+    elif s.shifts is not None:
         op = geom.AddTranslateOp()
         for code, shift in zip(codes, s.shifts, strict=True):
             op.Set(Gf.Vec3d(*map(float, shift)), Usd.TimeCode(code))

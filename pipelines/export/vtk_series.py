@@ -61,11 +61,13 @@ def particles(frame: Frame) -> vtkPolyData:
     return poly
 
 
-def surface(s: Surface, shift: np.ndarray | None = None) -> vtkPolyData:
-    """A solid's surface as PolyData (translated by ``shift`` [m]):
-    triangles, or the polylines of a 2D outline."""
+def surface(s: Surface, shift: np.ndarray | None = None, turn: np.ndarray | None = None) -> vtkPolyData:
+    """A solid's surface as PolyData (turned by ``turn`` (3, 3) about the
+    origin, then translated by ``shift`` [m]): triangles, or the polylines
+    of a 2D outline."""
     poly = vtkPolyData()
-    poly.SetPoints(_points(s.vertices + (0.0 if shift is None else shift)))
+    v = s.vertices if turn is None else s.vertices @ np.asarray(turn).T
+    poly.SetPoints(_points(v + (0.0 if shift is None else shift)))
     if s.lines:
         poly.SetLines(_cells(np.cumsum([0, *s.lines]), np.arange(sum(s.lines))))
     else:
@@ -125,8 +127,9 @@ def write(run: Run, out: Path, progress=None) -> list[Path]:
             written.append(write_vtp(surface(c), out / f"{base}.vtp"))
             continue
         series = []
-        for k, (frame, shift) in enumerate(zip(run.frames, c.shifts, strict=True)):
-            written.append(write_vtp(surface(c, shift), out / f"{base}_{k:06d}.vtp"))
+        turns = c.turns or [None] * len(c.shifts)
+        for k, (frame, shift, turn) in enumerate(zip(run.frames, c.shifts, turns, strict=True)):
+            written.append(write_vtp(surface(c, shift, turn), out / f"{base}_{k:06d}.vtp"))
             series.append((frame.time, f"{base}_{k:06d}.vtp"))
         written.append(write_pvd(out / f"{base}.pvd", series))
     return written

@@ -109,12 +109,33 @@ def render_frames(rec: recordings.Recording, out: Path, every: int = 1, size: fl
 
 
 def _collider_shifts(rec: recordings.Recording, step: int) -> dict:
+    """Per moving collider, its pose at ``step``: a function that moves its
+    recorded geometry (points, (n, dim)) there (translated; turned first
+    where it turns: R q + shift)."""
     out = {}
+    turns = rec.collider_turn or {}
     for name, (steps, shifts) in (rec.collider_shift or {}).items():
         i = np.searchsorted(steps, step, side="right") - 1
-        if i >= 0:
-            out[name] = shifts[i][:rec.dim]
+        if i < 0:
+            continue
+        shift = shifts[i][:rec.dim]
+        R = None
+        if name in turns:
+            at, mats = turns[name]
+            j = np.searchsorted(at, step, side="right") - 1
+            R = mats[j][:rec.dim, :rec.dim] if j >= 0 else None
+        out[name] = _mover(shift, R)
     return out
+
+
+def _mover(shift: np.ndarray, R: np.ndarray | None):
+    if R is None:
+        return lambda v: v + shift
+    return lambda v: v @ R.T + shift
+
+
+def _still(v):
+    return v
 
 
 NO_VALUE = (0.6, 0.6, 0.6)  # a particle without a value of the field (another body's material)
@@ -198,7 +219,7 @@ def _draw_3d(ax, rec, x, rgb, val, vmin, vmax, L, shift, elev, azim):
     for name, geo in (rec.colliders or {}).items():
         if isinstance(geo, tuple):
             v, f = geo
-            v = v + shift.get(name, 0.0)
+            v = shift.get(name, _still)(v)
             ax.add_collection3d(Poly3DCollection(v[:, swap][f], facecolor=(0.6, 0.6, 0.65, 0.25),
                                                  edgecolor=(0.4, 0.4, 0.45, 0.15), linewidths=0.2))
     ax.set_xlim(0, L[0])
@@ -241,13 +262,13 @@ def _draw_2d(ax, rec, x, rgb, val, vmin, vmax, L, view, shift):
     for name, geo in (rec.colliders or {}).items():
         if isinstance(geo, list):  # 2D outlines
             for line in geo:
-                line = line + shift.get(name, 0.0)
+                line = shift.get(name, _still)(line)
                 ax.plot(line[:, 0], line[:, 1], color=COLLIDER_EDGE, linewidth=1.0)
         else:  # a 3D surface, projected: its triangles filled, those seen edge-on as lines
             from matplotlib.collections import LineCollection, PolyCollection
 
             v, f = geo
-            tri = (v + shift.get(name, 0.0))[:, [a, b]][f]  # (triangles, 3, 2) [m]
+            tri = shift.get(name, _still)(v)[:, [a, b]][f]  # (triangles, 3, 2) [m]
             e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
             edge_on = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) <= 1e-9 * L[a] * L[b]
             ax.add_collection(PolyCollection(tri[~edge_on], facecolors=COLLIDER_FACE, edgecolors="none", zorder=0))

@@ -43,6 +43,8 @@ class Recording:
     end: tuple = (0, 0.0)  # the last step with a scalar row or particles, and its time [s]
     clock: tuple = (np.zeros(0, np.int64), np.zeros(0))  # (steps, simulated times [s]) of the scalar rows
     radius: float = 0.0  # the particles' drawn radius [m] (0: not recorded)
+    collider_turn: dict | None = None  # name -> (steps, (n, 3, 3) rotations) of a turning collider: a rest
+    # point q is drawn at R q + its collider_shift
 
     @property
     def dim(self) -> int:
@@ -176,10 +178,10 @@ def read(path: str | Path, particles: bool = True) -> Recording:
     events = data.reader(index="step", contents="/events").to_pandas()
     update_steps = [int(s) for s, u in zip(cast(Iterable, events.get("step", [])),  # (pandas: get's type has None)
                                            cast(Iterable, events.get("/events:update_step", []))) if u is not None]
-    colliders, shifts = _colliders(data)
+    colliders, shifts, turns = _colliders(data)
     return Recording(np.asarray(steps), np.asarray(times), positions, dJs, fields, body, colors, scalars,
                      props, np.asarray(update_steps, dtype=np.int64), colliders, shifts,
-                     *_timings(timings_path(path)), index, complete, end, clock, radius)
+                     *_timings(timings_path(path)), index, complete, end, clock, radius, turns)
 
 
 def scene_config(rec: Recording) -> dict:
@@ -229,8 +231,9 @@ def _timings(path: Path) -> tuple[dict, dict]:
     return series, run
 
 
-def _colliders(data) -> tuple[dict, dict]:
-    """The colliders' static geometry and the translations of moving ones."""
+def _colliders(data) -> tuple[dict, dict, dict]:
+    """The colliders' static geometry, the translations of moving ones and
+    the rotations of turning ones (Rerun keeps a mat3x3 column by column)."""
     meshes: dict = {}
     strips: dict = {}
     static = data.reader(index=None, contents="/colliders/**").to_pandas()
@@ -250,13 +253,17 @@ def _colliders(data) -> tuple[dict, dict]:
            for name, m in meshes.items() if len(m) == 2}
     geo.update(strips)
     moving = data.reader(index="step", contents="/colliders/**").to_pandas()
-    shifts = {}
+    shifts, turns = {}, {}
     for c in moving.columns:
         if c.startswith("/colliders/") and c.endswith(":translation"):
             rows = moving[["step", c]].dropna()
             shifts[c[len("/colliders/"):].split(":")[0]] = (
                 rows["step"].to_numpy(), np.stack([_flat(v) for v in rows[c]]))
-    return geo, shifts
+        if c.startswith("/colliders/") and c.endswith(":mat3x3"):
+            rows = moving[["step", c]].dropna()
+            turns[c[len("/colliders/"):].split(":")[0]] = (
+                rows["step"].to_numpy(), np.stack([_flat(v).reshape(3, 3).T for v in rows[c]]))
+    return geo, shifts, turns
 
 
 def _flat(value) -> np.ndarray:
@@ -279,7 +286,7 @@ def compare(a: Recording, b: Recording) -> dict:
         dev = float(np.max(np.abs(pa - pb))) if pa.size else 0.0
         largest["positions"] = max(largest.get("positions", 0.0), dev)
     for da, db in zip(a.dJ, b.dJ):
-        if da is not None and db is not None and da.shape == db.shape:
+        if da is not None and db is not None and da.shape == db.shape and da.size:  # (a frame may be empty)
             largest["dJ"] = max(largest.get("dJ", 0.0), float(np.max(np.abs(da - db))))
     for name, (sa, va) in a.scalars.items():
         if name not in b.scalars or not np.array_equal(sa, b.scalars[name][0]):

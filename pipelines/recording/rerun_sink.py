@@ -164,7 +164,9 @@ class RerunSink(Sink):
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
-        static; a moving one is translated at every logged particle step."""
+        static; a moving one is translated, and a turning one turned about
+        its pivot, at every logged particle step (Transform3D: translation,
+        and mat3x3 where it turns)."""
         self._moving = []
         for i, c in enumerate(meta.colliders):
             path = f"colliders/{c.name or c.type + str(i)}"
@@ -176,8 +178,8 @@ class RerunSink(Sink):
             else:
                 self.rec.log(path, rr.LineStrips2D(surfaces.outline_2d(c, np.zeros(2), meta.domain),
                                                    colors=[color]), static=True)
-            if c.velocity is not None:
-                self._moving.append((path, c))
+            if c.velocity is not None or c.turns:
+                self._moving.append((path, c, meta.dim))
 
     def _log_region(self, reg, t: float, static: bool = False) -> None:
         """A kinematic region's outline where its particles are at ``t`` [s]."""
@@ -332,12 +334,14 @@ class RerunSink(Sink):
     def _write_particles(self, step, t, x, dJ, fields=None, index=None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
-        for path, c in self._moving:
-            shift = np.asarray(c.offset(t), float)
-            if len(shift) == 3:
-                self.rec.log(path, rr.Transform3D(translation=shift))
-            else:
-                self.rec.log(path, rr.Transform3D(translation=[*shift, 0.0]))
+        for path, c, dim in self._moving:
+            if not c.turns:
+                self.rec.log(path, rr.Transform3D(translation=[*np.asarray(c.offset(t), float), 0.0][:3]))
+                continue
+            R, shift = c.pose(t, dim)
+            R3 = np.eye(3)
+            R3[:dim, :dim] = R
+            self.rec.log(path, rr.Transform3D(translation=[*shift, 0.0][:3], mat3x3=R3))
         for reg in self._regions:
             if not reg.still:
                 self._log_region(reg, t)

@@ -35,7 +35,8 @@ constant or a per-particle moment matrix and with the linear kernel's
 gradient (the other factories reach the interpolation kernel only through
 the stencil functions of ``mpm.stencil``, which the transfers and the
 configuration update compile for every pair); the collider kinds are
-compiled all together in every kernel that takes them, and each alone in
+compiled all together in every kernel that takes them (with and without
+a turning collider, whose rotation is a block of its own), and each alone in
 ``make_inside_count``, which evaluates nothing but the signed distance (a
 block that needed another would fail there).
 
@@ -79,7 +80,7 @@ import pytest
 import warp as wp
 
 import mpm
-from mpm.colliders import KINDS, Collider
+from mpm.colliders import KINDS, TURNING, Collider
 from mpm.kernels import Kernel
 from mpm.loads import Load
 from mpm.launch import kernel_name
@@ -179,6 +180,7 @@ class Case:
     regions: bool = False
     colliders: tuple[str, ...] = ()  # kinds
     friction: bool = False
+    turning: bool = False  # the first collider turns (mpm.collider_motion: the kinds take TURNING)
     open_walls: bool = False
     fuse: bool | None = None
     record_dJ: bool = False
@@ -198,7 +200,7 @@ class Case:
         return ",".join(f"{k}={v}" for k, v in vars(self).items() if v != getattr(default, k)) or "base"
 
 
-def _collider(kind: str, dim: int, friction: float) -> Collider:
+def _collider(kind: str, dim: int, friction: float, turning: bool = False) -> Collider:
     def at(*c):
         return tuple(c[:dim])
 
@@ -212,7 +214,8 @@ def _collider(kind: str, dim: int, friction: float) -> Collider:
         "bowl": dict(center=at(0.5, 0.7, 0.5), radius=0.1, thickness=0.02, rim=0.05, axis=1),
         "mesh": dict(mesh=MeshShape("warp:cube", (0.5, 0.12, 0.5), 0.08)),
     }
-    return Collider(kind, friction=friction, **shapes[kind])
+    spin = None if not turning else (1.0 if dim == 2 else (0.0, 1.0, 0.5))
+    return Collider(kind, friction=friction, angular_velocity=spin, **shapes[kind])
 
 
 def scene(case: Case, dim: int) -> mpm.Scene:
@@ -227,7 +230,8 @@ def scene(case: Case, dim: int) -> mpm.Scene:
     if case.regions:
         regions = [mpm.KinematicRegion(body=0, select=mpm.Box((centres[0],) + (0.5,) * (dim - 1), (0.05,) * dim),
                                        velocity=(0.1,) + (0.0,) * (dim - 1))]
-    colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0) for i, k in enumerate(case.colliders)]
+    colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0, case.turning and i == 0)
+                 for i, k in enumerate(case.colliders)]
     loads = []
     if case.loads:
         c, f = (centres[0],) + (0.5,) * (dim - 1), (0.0, -1.0, 0.0)[:dim]
@@ -333,6 +337,9 @@ def cases(dim: int) -> list[Case]:
         out += [Case(colliders=every, friction=friction), Case(materials=two, colliders=every, friction=friction),
                 Case(scheme="tlmpm", colliders=every, friction=friction, implicit=True)]
     out += [Case(colliders=(k,)) for k in every]
+    # a turning collider among them (the rotation compiled: the kinds end with TURNING)
+    out += [Case(colliders=every, friction=True, turning=True),
+            Case(scheme="tlmpm", colliders=every, friction=True, implicit=True, turning=True)]
     # the node rule of earlier versions (walls and colliders on the nodes inside them)
     out += [Case(rule="nodes", colliders=every, friction=True), Case(rule="nodes", materials=two, colliders=every),
             Case(rule="nodes", scheme="tlmpm", colliders=every, friction=True, implicit=True)]
@@ -387,8 +394,9 @@ PAIRWISE = ("_make_p2g", "make_g2p")
 def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
     """The values an argument must take in dimension and precision ``t``:
     every value it can take, except that a kernel's collider kinds are none
-    and all (each kind alone only where the signed distance is all a kernel
-    evaluates, ``make_inside_count``, which is built only with colliders)."""
+    and all, with and without TURNING (each kind alone only where the signed
+    distance is all a kernel evaluates, ``make_inside_count``, which is
+    built only with colliders)."""
     name, annotation = parameter.name, str(parameter.annotation)
     if name == "t":
         return {t}
@@ -401,9 +409,9 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
     if name == "project":
         return {None} | {cls.project for cls in mpm.MATERIALS.values() if cls.project is not None}
     if name == "colliders":
-        return {(), kinds(t.dim)}
+        return {(), kinds(t.dim), kinds(t.dim) + (TURNING,)}
     if name == "kinds":
-        return {kinds(t.dim)} | {(k,) for k in kinds(t.dim)}
+        return {kinds(t.dim), kinds(t.dim) + (TURNING,)} | {(k,) for k in kinds(t.dim)}
     if name == "n_grids":
         return {k.n_grids for k in mpm.KERNELS.values()}
     if name == "dim":

@@ -437,3 +437,33 @@ def test_a_stability_map_without_its_experiment_is_one_line(override):
     check_stability_map(["+experiment=stability", "stability_map.steps=3"])
     with pytest.raises(ConfigError, match=r"stability_map.steps: 0 out of range; accepted: stability_map.steps >= 1"):
         resolve(compose_cfg(["+experiment=stability", "stability_map.steps=0"]))
+
+
+@pytest.mark.parametrize("overrides, key, fragment", [
+    (["scene=drum_2d", "scene.colliders.0.angular_velocity=[1.0,2.0]"], "scene.colliders[0].angular_velocity",
+     "accepted: a number [rad/s] (about z) in 2D"),
+    (["scene=drum_2d", "scene.colliders.0.angular_velocity=nan"], "scene.colliders[0].angular_velocity",
+     "is not finite"),
+    (["scene=drum_2d", "scene.colliders.0.pivot=[0.5,0.5,0.5]"], "scene.colliders[0].pivot",
+     "accepted: a list of 2 numbers"),
+    (["scene=drum_2d", "scene.colliders.0.pivot=[0.5,inf]"], "scene.colliders[0].pivot[1]", "is not finite"),
+    (["scene=viscous_cup", "scene.colliders.0.angular_velocity=1.5"], "scene.colliders[0].angular_velocity",
+     "accepted: a list of 3 numbers [rad/s] in 3D"),
+    (["scene=viscous_cup", "scene.colliders.0.angular_velocity=[0.0,inf,0.0]"],
+     "scene.colliders[0].angular_velocity[1]", "is not finite"),
+])
+def test_a_bad_turning_collider_names_its_key(overrides, key, fragment):
+    err = refused(overrides)
+    assert err.key == key and fragment in str(err), str(err)
+
+
+def test_a_turning_collider_reaches_the_solver():
+    """The scene keys become mpm.Collider's: a number about z in 2D, three
+    numbers in 3D, the pivot where given (else the shape's centre)."""
+    from helpers import spec_for
+
+    drum = spec_for(["scene=drum_2d"]).scene.colliders[0]
+    assert drum.angular_velocity == 1.5 and drum.pivot is None and drum.rest_pivot(2) == (0.5, 0.5)
+    cup = spec_for(["scene=viscous_cup", "scene.colliders.0.angular_velocity=[0.0,2.0,0.0]",
+                    "scene.colliders.0.pivot=[0.5,0.3,0.5]"]).scene.colliders[0]
+    assert tuple(cup.angular_velocity) == (0.0, 2.0, 0.0) and tuple(cup.pivot) == (0.5, 0.3, 0.5)

@@ -54,6 +54,21 @@ def test_compare_reports_the_largest_deviation(tmp_path):
     assert np.array_equal(recs[0].steps, [0, 10, 20])
 
 
+def test_compare_takes_frames_left_empty():
+    """Every particle removed (through an open wall): the last frames hold
+    none, and two such recordings still compare (they failed on their empty
+    dJ)."""
+    def rec(x):
+        frames = [x, x[:0], x[:0]]
+        return recordings.Recording(
+            steps=np.arange(3), times=np.arange(3) * 0.1, positions=frames, dJ=[np.ones(len(f)) for f in frames],
+            fields=[{}] * 3, body=None, colors=None, scalars={}, properties={}, update_steps=np.zeros(0, np.int64))
+
+    x = np.random.default_rng(0).uniform(size=(10, 2))
+    assert recordings.compare(rec(x), rec(x))["match"]
+    assert not recordings.compare(rec(x), rec(x + 1e-3))["match"]
+
+
 @pytest.mark.slow
 def test_frames_of_a_3d_scene_with_colliders(tmp_path):
     """The cup is read back from the recording and drawn; a field colours the

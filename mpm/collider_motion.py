@@ -1,0 +1,120 @@
+"""Where a collider is at a time, on the device: its translation
+(:func:`make_motion`) and, for a collider that turns, its rotation about the
+moving pivot (:func:`make_place`; mpm.colliders describes both).
+
+A turning collider's shape at time t is its rest shape turned by the
+rotation vector theta = omega (clamp(t, start, end) - start) about the pivot
+p, then displaced by s(t): a point q is in the shape where its rest shape
+holds R(-theta) (q - p - s) + p, so the signed distance there is the rest
+shape's, and the outward normal the rest normal turned by R(theta). The
+velocity of the solid at the point q_s of its surface below q,
+q_s = q - phi n, is the rigid motion's
+
+    u(q_s) = u + omega x (q_s - p - s(t))
+
+(2D: omega about z, omega x r = omega (-r_y, r_x)), zero rotation rate
+outside the window like the translation. Only the shapes ``kinds`` that
+name :data:`mpm.colliders.TURNING` compile the rotation; the others place a
+collider by its translation alone, as before turning existed.
+"""
+
+import functools
+
+import warp as wp
+
+from .collider_shapes import make_collider_data, make_sdf
+from .colliders import TURNING
+from .types import Types
+
+
+@functools.cache
+def make_motion(t: Types):
+    """``motion(c, time) -> (displacement, velocity)`` of collider ``c``."""
+    S, vec, Data = t.scalar, t.vec, make_collider_data(t)
+
+    @wp.func
+    def motion(c: Data, time: S):
+        tc = wp.min(wp.max(time, c.window[0]), c.window[1])
+        u = vec()
+        if time >= c.window[0] and time < c.window[1]:
+            u = c.u
+        return (tc - c.window[0]) * c.u, u
+
+    return motion
+
+
+@functools.cache
+def make_turn(t: Types):
+    """``turn(v, angle) -> R(angle) v``: ``v`` turned by the rotation vector
+    ``angle`` [rad] (3 numbers; 2D: about z, its third); ``spin(w, r) -> w x r``
+    (2D: w about z)."""
+    S, vec = t.scalar, t.vec
+    V3 = wp.types.vector(3, S)
+
+    if t.dim == 2:
+        @wp.func
+        def turn(v: vec, angle: V3):  # pyright: ignore[reportRedeclaration]
+            c = wp.cos(angle[2])
+            s = wp.sin(angle[2])
+            return vec(c * v[0] - s * v[1], s * v[0] + c * v[1])  # pyright: ignore[reportCallIssue]
+
+        @wp.func
+        def spin(w: V3, r: vec):  # pyright: ignore[reportRedeclaration]
+            return vec(-w[2] * r[1], w[2] * r[0])  # pyright: ignore[reportCallIssue]
+
+        return turn, spin
+
+    @wp.func
+    def turn(v: vec, angle: V3):
+        theta = wp.length(angle)
+        if theta == S(0.0):
+            return v
+        k = vec(angle[0], angle[1], angle[2]) / theta  # pyright: ignore[reportCallIssue]
+        c = wp.cos(theta)
+        # Rodrigues: v cos + (k x v) sin + k (k . v)(1 - cos)
+        return v * c + wp.cross(k, v) * wp.sin(theta) + k * (wp.dot(k, v) * (S(1.0) - c))
+
+    @wp.func
+    def spin(w: V3, r: vec):
+        return wp.cross(vec(w[0], w[1], w[2]), r)  # pyright: ignore[reportCallIssue]
+
+    return turn, spin
+
+
+@functools.cache
+def make_place(t: Types, kinds: tuple[str, ...]):
+    """``place(c, q, time) -> (phi, n, u)``: the signed distance [m] of the
+    point ``q`` from collider ``c`` where it is at ``time`` [s], its outward
+    normal there and the velocity [m/s] of the solid at the surface point
+    q - phi n (module docstring). Only the shapes in ``kinds`` are compiled,
+    the rotation only with :data:`mpm.colliders.TURNING` among them."""
+    S, vec, Data = t.scalar, t.vec, make_collider_data(t)
+    V3 = wp.types.vector(3, S)
+    sdf = make_sdf(t, kinds)
+    motion = make_motion(t)
+
+    if TURNING not in kinds:
+        @wp.func
+        def place(c: Data, q: vec, time: S):  # pyright: ignore[reportRedeclaration]
+            shift, u = motion(c, time)
+            phi, n = sdf(c, q - shift)
+            return phi, n, u
+
+        return place
+
+    turn, spin = make_turn(t)
+
+    @wp.func
+    def place(c: Data, q: vec, time: S):
+        shift, u = motion(c, time)
+        elapsed = wp.min(wp.max(time, c.window[0]), c.window[1]) - c.window[0]
+        w = V3()
+        if time >= c.window[0] and time < c.window[1]:
+            w = c.omega
+        angle = elapsed * c.omega
+        pivot = c.pivot + shift
+        phi, n_rest = sdf(c, c.pivot + turn(q - pivot, -angle))
+        n = turn(n_rest, angle)
+        return phi, n, u + spin(w, q - phi * n - pivot)
+
+    return place
