@@ -20,9 +20,9 @@ unpacks everything to /tmp/gpu-site, and ``session`` runs with
 PYTHONPATH=/tmp/gpu-site:
 
 - full (the default): the machine (nvidia-smi, versions), ``pytest
-  tests/mpm --device cuda -m 'not slow'`` on 16 workers, then the tables
+  tests/mpm`` on CUDA (the tests not marked slow) on 16 workers, then the tables
   ``gpu-profile`` (per kernel) and ``large`` (1M and 10M particles, the
-  CUDA graph) with --no-recording (no rerun-sdk there), each step under
+  CUDA graph) without recordings (no rerun-sdk there), each step under
   its own time limit so that the whole stays inside one call's 10 minutes;
 - ``--quick``: the two tables only.
 
@@ -159,20 +159,29 @@ def session(out: Path, quick: bool, site: Path, py: str = sys.executable, steps=
     return failed
 
 
+VERBS = ("pack", "keep", "unpack", "session")
+
+
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pipelines.bench.gpu_kit", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="verb", required=True)
-    a = sub.add_parser("pack", help="here: .gpu/a and .gpu/b")
-    a.add_argument("--dir", type=Path, default=Path(".gpu"))
-    a = sub.add_parser("keep", help="there, first call: copy .gpu/a to /tmp/gpu-kit")
-    a.add_argument("--dir", type=Path, default=Path(".gpu"))
-    a = sub.add_parser("unpack", help="there, second call: /tmp/gpu-site from the halves")
-    a.add_argument("--dir", type=Path, default=Path(".gpu"))
-    a = sub.add_parser("session", help="there: the CUDA tests and the GPU tables")
-    a.add_argument("--out", type=Path, required=True)
-    a.add_argument("--quick", action="store_true", help="the two tables only")
+    from ..config.arguments import Parser, output_dir
+
+    p = Parser(prog="python -m pipelines.bench.gpu_kit", description=__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("verb", choices=VERBS, help="pack (here), keep (there, first call), unpack (there, second "
+                   "call), session (there)")
+    p.add_argument("--dir", type=Path, default=Path(".gpu"), help="the halves' folder (default: .gpu)")
+    p.add_argument("--out", type=Path, default=None, help="session: the folder of its log and tables")
+    p.add_argument("--quick", action="store_true", help="session: the two tables only")
     args = p.parse_args(argv)
+    if args.verb == "pack":
+        if problem := output_dir("--dir", args.dir):
+            p.error(problem)
+    elif args.verb in ("keep", "unpack") and not args.dir.is_dir():
+        p.error(f"--dir: {args.dir} is not a directory; accepted: the folder pack wrote (.gpu)")
+    if args.out is not None and (problem := output_dir("--out", args.out)):
+        p.error(problem)
+    if args.verb == "session" and args.out is None:
+        p.error("--out: missing for session; accepted: a folder to write the session's log and tables into")
     if args.verb == "pack":
         for f in pack(args.dir):
             print(f"{f}  {f.stat().st_size / 2**20:.1f} MiB")
@@ -183,6 +192,7 @@ def main(argv=None) -> int:
     if args.verb == "unpack":
         print(unpack(KIT, args.dir, SITE))
         return 0
+    assert args.out is not None  # refused above
     return min(session(args.out, args.quick, SITE), 125)
 
 

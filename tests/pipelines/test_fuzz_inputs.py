@@ -180,7 +180,8 @@ def test_every_config_key_refuses_bad_values_in_one_line(base):
 MAINS = {"pipelines.replay": "pipelines.replay", "pipelines.export": "pipelines.export.command",
          "pipelines.report": "pipelines.report",
          "pipelines.material_point": "pipelines.material_point", "pipelines.bench": "pipelines.bench.__main__",
-         "pipelines.granular": "pipelines.report.sections.granular", "pipelines.cfl_bound": "pipelines.cfl_bound"}
+         "pipelines.granular": "pipelines.report.sections.granular", "pipelines.cfl_bound": "pipelines.cfl_bound",
+         "pipelines.bench.gpu_kit": "pipelines.bench.gpu_kit"}
 
 
 def tool_main(module: str):
@@ -248,7 +249,7 @@ TOOLS = {
         "--steps": ["--steps 0", "--steps abc"], "--cold": ["--cold=1"], "--json": ["--json {dir}", "--json {file}"],
         "--paper": ["--paper=1"], "--scaling": ["--scaling=1"], "--only": ["--only abc", "--only speed,abc"],
         "--large": ["--large=1"], "--sweep": ["--sweep=1"], "--no-recording": ["--no-recording=1"],
-        "--device": ["--device tpu"],
+        "--device": ["--device tpu"], "--profile-sizes": ["--profile-sizes 1K", "--profile-sizes 4"],
         "--genesis-python": ["--genesis-python {missing}", "--genesis-python {dir}", "--genesis-python {file}"],
         **{f"--no-{t}": [f"--no-{t}=1"] for t in (
             "peers", "schemes", "updates", "kernels", "materials", "integrators", "fused", "sync", "stages", "profile",
@@ -259,6 +260,9 @@ TOOLS = {
         "--nu": ["--nu nan", "--nu 0.5", "--nu abc"],
     }),
     "pipelines.granular": ([], {}),
+    "pipelines.bench.gpu_kit": (["unpack"], {
+        "--dir": ["--dir {missing}", "--dir {file}"], "--out": ["--out {file}"], "--quick": ["--quick=1"],
+    }),
 }
 POSITIONAL = {  # bad positional arguments
     "pipelines.replay": ["{file}", "{missing}", "{dir}", "{run}/recording.timings.rrd"],
@@ -268,6 +272,7 @@ POSITIONAL = {  # bad positional arguments
     "pipelines.bench": ["no_such_case"],
     "pipelines.granular": ["{file}", "{missing}", "{dir}"],
     "pipelines.cfl_bound": ["extra", "scene=nope", "scene=water_bunny", "scene.resolution=abc"],
+    "pipelines.bench.gpu_kit": ["nope", "session"],
 }
 
 
