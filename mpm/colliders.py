@@ -69,6 +69,10 @@ KINDS = ("half_space", "wedge", "box", "sphere", "cylinder", "cup", "bowl", "mes
 TURNING = "turning"
 """the key the kernels add to the shapes present when a collider turns
 (mpm.collider_device.kinds_of): only then is the rotation compiled"""
+RIGID = "rigid"
+"""the key the kernels add where a scene has rigid bodies (mpm.rigid): the
+rotation is compiled with each record's current pose, and each collider's
+angular impulse about its centre is summed"""
 BOUNDARIES = ("sticky", "slip", "separate")
 """what a node inside a collider does (Collider.boundary; module docstring)"""
 INSIDE_DEPTH = 1.0
