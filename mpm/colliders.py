@@ -53,7 +53,9 @@ rotation. Shapes (every one 2D and 3D except the mesh):
 
 ``inside: true`` turns any shape into a container (the solid is everything
 outside it). The kernels compile only the shapes a scene has
-(mpm.collider_device).
+(mpm.collider_device). A rigid body (mpm.rigid) is a box, sphere or
+cylinder collider that its body moves: its record is rewritten from the
+body's pose every step (mpm.rigid_coupling).
 """
 
 from dataclasses import dataclass

@@ -5,7 +5,9 @@ and rigid colliders (their rules: mpm.grid, mpm.colliders).
 inside the grid update (:meth:`update_grid`), as a pass of their own after
 contact or the implicit solve (:meth:`apply`), and as the implicit solve's
 constraints (:meth:`constrain`). Only what the scene holds is compiled: no
-regions, no colliders, no separate pass unless needed.
+regions, no colliders, no separate pass unless needed. The scene's rigid
+bodies (mpm.rigid) are colliders after its own, placed at their pose before
+the grid update (``rigid``, mpm.rigid_coupling.Coupler).
 """
 
 from __future__ import annotations

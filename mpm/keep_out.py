@@ -10,7 +10,8 @@ the step's end) is put back on its surface, x <- x - phi n, and loses the
 part of its velocity into the solid relative to the solid's velocity u
 (all of it relative to a sticky collider). The impulse m (v' - v) joins the
 conditions' (``boundary_impulse``, and a collider's ``collider_impulse``, as
-on every kernel grid). A body in
+on every kernel grid; where the scene has rigid bodies, also its angular
+impulse about the collider's centre, r x m (v' - v), mpm.rigid_coupling). A body in
 contact leans on the grid rule and keeps its particles outside, so this
 acts only on those the rule missed. Under the node rule (earlier versions)
 nothing is compiled.
