@@ -204,6 +204,8 @@ class Coupler:
         spins = [b.spin(scene.dim) for b in scene.rigid_bodies]
         speeds = [tuple(b.velocity or ()) + (0.0,) * (3 - len(b.velocity or ())) for b in scene.rigid_bodies]
         self.state.body_qd.assign(np.array([tuple(v) + tuple(w) for v, w in zip(speeds, spins)], np.float32))  # pyright: ignore[reportOptionalMemberAccess]
+        # the state's arrays, named here so that a checkpoint (mpm.checkpoint) holds them
+        self.body_q, self.body_qd = self.state.body_q, self.state.body_qd
         self.place_kernel, self.push_kernel = make_place_bodies(t), make_push_bodies(t)
 
     def kernels(self) -> list:
