@@ -190,8 +190,9 @@ class Coupler:
     couple them to the material (module docstring): :meth:`place` before the
     grid update (mpm.conditions.Conditions.update_grid), :meth:`push` after
     G2P (mpm.transfer.Transfers.interpolate); ``conditions`` holds the
-    packed records and the angular impulses, ``control`` the step's clock. ``newton``: the Newton model;
-    ``state``: its state (``body_q``, ``body_qd``; ``body_f`` the wrench the
+    packed records and the angular impulses, ``control`` the step's clock.
+    ``newton``: the Newton model; ``state``: its state (``body_q``,
+    ``body_qd``, also named here for checkpoints; ``body_f`` the wrench the
     material applied over the last step)."""
 
     def __init__(self, model, conditions, control):
