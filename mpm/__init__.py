@@ -14,6 +14,7 @@ from .checkpoint import CheckpointError
 from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
 from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
+from .rigid import RigidBody
 from .integrators import INTEGRATORS, Explicit, Implicit
 from .kernels import COMPACT, CUBIC, KERNELS, LINEAR, QUADRATIC, Kernel, register_kernel
 from .loads import LOAD_KINDS, Load
@@ -37,7 +38,8 @@ __all__ = [
     # scenes
     "Scene", "Body", "Box", "Sphere", "Cylinder", "Bowl", "Compound", "MeshShape", "Rotated", "rotation_matrix",
     "KinematicRegion", "ContactPair",
-    "Collider", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES", "CONTACT_TYPES",
+    "Collider", "RigidBody", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES",
+    "CONTACT_TYPES",
     "CONTACT_NORMALS",
     # materials
     "Material", "MATERIALS", "FixedCorotated", "NeoHookean", "Fluid", "Viscous", "Plastic", "Snow", "Sand",

@@ -10,10 +10,11 @@ import functools
 import numpy as np
 import warp as wp
 
-from .collider_motion import make_place
+from .collider_motion import make_centre, make_place
 from .collider_shapes import make_collider_data
-from .colliders import BOUNDARIES, KINDS, TURNING, Collider
+from .colliders import BOUNDARIES, KINDS, RIGID, TURNING, Collider
 from .launch import warp_kernel
+from .rigid import solids
 from .surface import APART, CONTACT, make_profile_type, make_surface
 from .types import Types
 
@@ -90,23 +91,48 @@ def make_add_impulse(t: Types):
 
 
 @functools.cache
+def make_add_torque(t: Types):
+    """``add_torque(torque, k, r, J)``: the angular impulse r x J [N m s] of
+    the impulse J applied at r from collider k's centre into its three
+    entries of ``torque`` (2D: about z, the third)."""
+    S = t.scalar
+
+    @wp.func
+    def add_torque(torque: wp.array(dtype=wp.float64), k: int, r: t.vec, J: t.vec):
+        if wp.static(t.dim == 2):
+            tz = r[0] * J[1] - r[1] * J[0]
+            if tz != S(0.0):
+                wp.atomic_add(torque, 3 * k + 2, wp.float64(tz))
+        else:
+            L = wp.cross(r, J)
+            for a in range(3):
+                if L[a] != S(0.0):  # pyright: ignore[reportIndexIssue]
+                    wp.atomic_add(torque, 3 * k + a, wp.float64(L[a]))  # pyright: ignore[reportIndexIssue]
+
+    return add_torque
+
+
+@functools.cache
 def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradients: bool = False):
-    """``collide(v, q, m, V, G, time, colliders, profile, impulse) -> v``:
+    """``collide(v, q, m, V, G, time, colliders, profile, impulse, torque) -> v``:
     every collider's boundary condition on a node at ``q`` with velocity
     ``v``, mass ``m``, body volume fraction ``V`` and velocity gradient ``G``
     (:func:`make_reach`, mpm.colliders): the change the rule makes to the
     velocity in contact is the node's, and its momentum goes to the
-    collider's row of ``impulse``."""
+    collider's row of ``impulse``; where the scene has rigid bodies
+    (:data:`RIGID` among ``kinds``), its angular impulse about the
+    collider's centre, r x J with r from the centre to the node, to
+    ``torque`` (:func:`make_add_torque`)."""
     S, vec, Data = t.scalar, t.vec, make_collider_data(t)
     place = make_place(t, kinds)
     respond = make_respond(t)
     reach = make_reach(t, rule, gradients)
-    add_impulse = make_add_impulse(t)
+    add_impulse, add_torque, centre = make_add_impulse(t), make_add_torque(t), make_centre(t)
     Profile = make_profile_type(t)
 
     @wp.func
     def collide(v: vec, q: vec, m: S, V: S, G: t.mat, time: S, colliders: wp.array(dtype=Data), profile: Profile,
-                impulse: wp.array(dtype=wp.float64)):
+                impulse: wp.array(dtype=wp.float64), torque: wp.array(dtype=wp.float64)):
         for k in range(colliders.shape[0]):
             c = colliders[k]
             phi, n, u = place(c, q, time)
@@ -115,6 +141,8 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
                 dv = respond(vs, u, n, c) - vs
                 v = v + dv
                 add_impulse(impulse, k, m * dv)
+                if wp.static(RIGID in kinds):
+                    add_torque(torque, k, q - centre(c, time), m * dv)
         return v
 
     return collide
@@ -221,11 +249,17 @@ def make_inside_count(t: Types, kinds: tuple[str, ...]):
     return inside_count
 
 
-def kinds_of(colliders: list[Collider]) -> tuple[str, ...]:
-    """The shapes present, in KINDS order, and TURNING last where a collider
-    turns (the kernels' specialisation key)."""
+def kinds_of(colliders: list[Collider], rigid: bool = False) -> tuple[str, ...]:
+    """The shapes present, in KINDS order, TURNING where a collider turns and
+    RIGID last where the scene has rigid bodies (``rigid``; their shapes
+    among ``colliders``): the kernels' specialisation key."""
     return (tuple(k for k in KINDS if any(c.type == k for c in colliders))
-            + ((TURNING,) if any(c.turns for c in colliders) else ()))
+            + ((TURNING,) if any(c.turns for c in colliders) or rigid else ()) + ((RIGID,) if rigid else ()))
+
+
+def scene_kinds(scene) -> tuple[str, ...]:
+    """:func:`kinds_of` the scene's colliders and rigid bodies (mpm.rigid.solids)."""
+    return kinds_of(solids(scene), bool(getattr(scene, "rigid_bodies", None)))
 
 
 def build_meshes(colliders: list[Collider], device) -> dict:

@@ -16,6 +16,17 @@ q_s = q - phi n, is the rigid motion's
 outside the window like the translation. Only the shapes ``kinds`` that
 name :data:`mpm.colliders.TURNING` compile the rotation; the others place a
 collider by its translation alone, as before turning existed.
+
+A rigid body (mpm.rigid, ``kinds`` naming :data:`mpm.colliders.RIGID`) is
+a collider whose record mpm.rigid_coupling rewrites every step from the
+body's pose: the window starts at the step's time, ``u`` and ``omega`` are
+the body's velocities, and two more fields give the pose then, the pivot's
+displacement ``origin`` and the rotation ``frame`` from rest, so that
+
+    q_rest = R(-frame) R(-theta) (q - p - origin - s(t)) + p,
+
+and the normal is the rest normal turned by R(theta) R(frame). A plain
+collider in such a scene has both at zero, and is placed as above.
 """
 
 import functools
@@ -23,7 +34,7 @@ import functools
 import warp as wp
 
 from .collider_shapes import make_collider_data, make_sdf
-from .colliders import TURNING
+from .colliders import RIGID, TURNING
 from .types import Types
 
 
@@ -104,6 +115,22 @@ def make_place(t: Types, kinds: tuple[str, ...]):
 
     turn, spin = make_turn(t)
 
+    if RIGID in kinds:
+        @wp.func
+        def place(c: Data, q: vec, time: S):  # pyright: ignore[reportRedeclaration]
+            shift, u = motion(c, time)
+            elapsed = wp.min(wp.max(time, c.window[0]), c.window[1]) - c.window[0]
+            w = V3()
+            if time >= c.window[0] and time < c.window[1]:
+                w = c.omega
+            angle = elapsed * c.omega
+            pivot = c.pivot + c.origin + shift
+            phi, n_rest = sdf(c, c.pivot + turn(turn(q - pivot, -angle), -c.frame))
+            n = turn(turn(n_rest, c.frame), angle)
+            return phi, n, u + spin(w, q - phi * n - pivot)
+
+        return place
+
     @wp.func
     def place(c: Data, q: vec, time: S):
         shift, u = motion(c, time)
@@ -118,3 +145,18 @@ def make_place(t: Types, kinds: tuple[str, ...]):
         return phi, n, u + spin(w, q - phi * n - pivot)
 
     return place
+
+
+@functools.cache
+def make_centre(t: Types):
+    """``centre(c, time)``: where collider ``c``'s pivot is at ``time`` [m]
+    (a rigid body's: its centre of mass)."""
+    S, Data = t.scalar, make_collider_data(t)
+    motion = make_motion(t)
+
+    @wp.func
+    def centre(c: Data, time: S):
+        shift, u = motion(c, time)
+        return c.pivot + c.origin + shift
+
+    return centre

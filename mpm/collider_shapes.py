@@ -33,6 +33,8 @@ def make_collider_data(t: Types):
         omega: wp.types.vector(3, t.scalar)  # angular velocity while moving [rad/s] (2D: about z)
         pivot: t.vec  # the point it turns about, at rest [m]
         mesh: wp.uint64  # wp.Mesh id (mesh colliders)
+        origin: t.vec  # rigid bodies: the pivot's displacement from rest at the window's start [m] (else 0)
+        frame: wp.types.vector(3, t.scalar)  # rigid bodies: the rotation vector from rest then [rad] (else 0)
 
     return ColliderData
 

@@ -53,7 +53,9 @@ rotation. Shapes (every one 2D and 3D except the mesh):
 
 ``inside: true`` turns any shape into a container (the solid is everything
 outside it). The kernels compile only the shapes a scene has
-(mpm.collider_device).
+(mpm.collider_device). A rigid body (mpm.rigid) is a box, sphere or
+cylinder collider that its body moves: its record is rewritten from the
+body's pose every step (mpm.rigid_coupling).
 """
 
 from dataclasses import dataclass
@@ -69,6 +71,10 @@ KINDS = ("half_space", "wedge", "box", "sphere", "cylinder", "cup", "bowl", "mes
 TURNING = "turning"
 """the key the kernels add to the shapes present when a collider turns
 (mpm.collider_device.kinds_of): only then is the rotation compiled"""
+RIGID = "rigid"
+"""the key the kernels add where a scene has rigid bodies (mpm.rigid): the
+rotation is compiled with each record's current pose, and each collider's
+angular impulse about its centre is summed"""
 BOUNDARIES = ("sticky", "slip", "separate")
 """what a node inside a collider does (Collider.boundary; module docstring)"""
 INSIDE_DEPTH = 1.0

@@ -5,7 +5,9 @@ and rigid colliders (their rules: mpm.grid, mpm.colliders).
 inside the grid update (:meth:`update_grid`), as a pass of their own after
 contact or the implicit solve (:meth:`apply`), and as the implicit solve's
 constraints (:meth:`constrain`). Only what the scene holds is compiled: no
-regions, no colliders, no separate pass unless needed.
+regions, no colliders, no separate pass unless needed. The scene's rigid
+bodies (mpm.rigid) are colliders after its own, placed at their pose before
+the grid update (``rigid``, mpm.rigid_coupling.Coupler).
 """
 
 from __future__ import annotations
@@ -13,9 +15,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .collider_device import build_meshes, kinds_of, make_inside_count
+from .collider_device import build_meshes, make_inside_count, scene_kinds
 from .collider_shapes import pack
 from .colliders import INSIDE_DEPTH
+from .rigid import solids
+from .rigid_coupling import Coupler
 from .grid import make_boundary, make_boundary_data, make_constraints, make_grid_update, region_types
 from .scene import WALL_TYPES
 from .surface import pack_profile, reach
@@ -28,7 +32,7 @@ def needs_gradients(scene) -> bool:
     (summed in P2G): the surface rule with a collider that holds a body's
     surface tangentially (friction, or sticky), mpm.surface."""
     return scene.boundary_rule == "surface" and any(c.friction > 0 or c.boundary == "sticky"
-                                                     for c in scene.colliders)
+                                                     for c in solids(scene))
 
 
 class Conditions:
@@ -44,7 +48,8 @@ class Conditions:
         t, scene = model.types, model.scene
         self.model, self.launch, self.control = model, launch, control
         self.regions = len(scene.regions) > 0
-        self.collider_kinds = kinds_of(scene.colliders)
+        self.solids = solids(scene)  # the colliders, then the rigid bodies' shapes (mpm.rigid)
+        self.collider_kinds = scene_kinds(scene)
         rule, self.gradients = scene.boundary_rule, needs_gradients(scene)
         self.band = (scene.wall_cells - 0.5) * model.dx  # [m] the node rule's walls act on nodes this close
         # [m] walls act on nodes closer than this to the domain's face (a node the kernel's reach from a face)
@@ -57,19 +62,22 @@ class Conditions:
         self.boundary = (make_boundary(t, self.regions, self.collider_kinds, batched, **rules)
                          if separate else None)
         self.constraints = (make_constraints(t, self.regions, self.collider_kinds,
-                                             any(c.friction > 0 for c in scene.colliders), **rules)
+                                             any(c.friction > 0 for c in self.solids), **rules)
                             if implicit else None)
-        self.inside = make_inside_count(t, self.collider_kinds) if scene.colliders else None
+        self.inside = make_inside_count(t, self.collider_kinds) if self.solids else None
         # particles put back out of the solids in G2P (mpm.keep_out)
-        self.keep_out = rule == "surface" and bool(scene.colliders or self.closed[0].any() or self.closed[1].any())
+        self.keep_out = rule == "surface" and bool(self.solids or self.closed[0].any() or self.closed[1].any())
         self.collider_speed = max([c.speed(scene.domain) for c in scene.colliders], default=0.0)  # [m/s]
         with wp.ScopedDevice(model.device):
-            self._meshes = build_meshes(scene.colliders, model.device)  # kept alive for their ids
+            self._meshes = build_meshes(self.solids, model.device)  # kept alive for their ids
             self.data = self._pack()
-            self._inside_counts = wp.zeros(max(len(scene.colliders), 1), dtype=wp.int32)
+            self._inside_counts = wp.zeros(max(len(self.solids), 1), dtype=wp.int32)
+        # the rigid bodies: placed before the grid update, advanced after G2P (mpm.rigid_coupling)
+        self.rigid = Coupler(model, self, control) if scene.rigid_bodies else None
 
     def kernels(self) -> list:
-        return [k for k in (self.grid_update, self.boundary, self.constraints, self.inside) if k is not None]
+        return ([k for k in (self.grid_update, self.boundary, self.constraints, self.inside) if k is not None]
+                + (self.rigid.kernels() if self.rigid is not None else []))
 
     def _pack(self):
         """Walls and kinematic regions (velocity, velocity gradient, centre,
@@ -96,7 +104,9 @@ class Conditions:
         tables = [wp.array(np.array([r[k] for r in rows], dtype=dtype), dtype=T)
                   for k, T in enumerate(region_types(t))]
         data.region_u, data.region_gradient, data.region_center, data.region_window = tables
-        data.colliders = pack(m.scene.colliders, t, self._meshes, m.device)
+        data.colliders = pack(self.solids, t, self._meshes, m.device)
+        # per collider 3: the angular impulse about its centre (summed only with rigid bodies, mpm.rigid_coupling)
+        data.collider_torque = wp.zeros(3 * max(len(self.solids), 1), dtype=wp.float64, device=m.device)
         return data
 
     def speed(self) -> float:
@@ -111,7 +121,10 @@ class Conditions:
     # ------------------------------------------------------------ passes
     def update_grid(self, grid, layout, const, status) -> None:
         """Grid momentum to velocity, gravity over the device's step, and
-        (unless separate) the conditions at the nodes' current positions."""
+        (unless separate) the conditions at the nodes' current positions;
+        first the rigid bodies' colliders placed at their pose (mpm.rigid_coupling)."""
+        if self.rigid is not None:
+            self.rigid.place()
         self.launch(self.grid_update, layout.n_nodes, [
             grid.lattice, const.gravity, const.grid_offsets, self.control, self.data, status])
 
@@ -140,7 +153,7 @@ class Conditions:
         wp.launch(self.inside, m.n_particles, device=m.device, inputs=[
             x, m.types.scalar(time), m.types.scalar(INSIDE_DEPTH * m.dx), self.data.colliders,
             self._inside_counts])
-        return self._inside_counts.numpy()[:len(m.scene.colliders)].astype(np.int64)
+        return self._inside_counts.numpy()[:len(self.solids)].astype(np.int64)
 
 
 class Removals:

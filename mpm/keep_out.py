@@ -10,7 +10,8 @@ the step's end) is put back on its surface, x <- x - phi n, and loses the
 part of its velocity into the solid relative to the solid's velocity u
 (all of it relative to a sticky collider). The impulse m (v' - v) joins the
 conditions' (``boundary_impulse``, and a collider's ``collider_impulse``, as
-on every kernel grid). A body in
+on every kernel grid; where the scene has rigid bodies, also its angular
+impulse about the collider's centre, r x m (v' - v), mpm.rigid_coupling). A body in
 contact leans on the grid rule and keeps its particles outside, so this
 acts only on those the rule missed. Under the node rule (earlier versions)
 nothing is compiled.
@@ -20,8 +21,9 @@ import functools
 
 import warp as wp
 
-from .collider_device import STICKY, make_add_impulse
-from .collider_motion import make_place
+from .collider_device import STICKY, make_add_impulse, make_add_torque
+from .collider_motion import make_centre, make_place
+from .colliders import RIGID
 from .grid import make_boundary_data
 from .scene import WALL_TYPES
 from .stepping.status import StepStatus
@@ -41,7 +43,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
     f64 = wp.float64
     Data = make_boundary_data(t)
     place = make_place(t, kinds)
-    add_impulse = make_add_impulse(t)
+    add_impulse, add_torque, centre = make_add_impulse(t), make_add_torque(t), make_centre(t)
 
     @wp.func
     def put_back(x: vec, v: vec, phi: S, n: vec, u: vec, sticky: bool):
@@ -71,7 +73,10 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
                 if phi < S(0.0):
                     v_in = v
                     x, v = put_back(x, v, phi, n, u, c.boundary == STICKY)
-                    add_impulse(status.collider_impulse, k, (m * S(n_grids)) * (v - v_in))
+                    Jk = (m * S(n_grids)) * (v - v_in)
+                    add_impulse(status.collider_impulse, k, Jk)
+                    if wp.static(RIGID in kinds):
+                        add_torque(data.collider_torque, k, x - centre(c, time), Jk)
         J = (m * S(n_grids)) * (v - v0)
         for d in range(wp.static(t.dim)):
             if J[d] != S(0.0):

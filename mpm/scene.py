@@ -12,6 +12,7 @@ from typing import Protocol, Sequence, Union
 import numpy as np
 
 from .colliders import Collider
+from .rigid import RigidBody
 from .materials import Material
 
 CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
@@ -369,6 +370,8 @@ class Scene:
     """kinematic boundary regions (anchors, prescribed rotation and translation)"""
     colliders: list[Collider] = field(default_factory=list)
     """rigid colliders other than the walls (mpm.colliders)"""
+    rigid_bodies: list[RigidBody] = field(default_factory=list)
+    """rigid bodies the material pushes back, advanced by Newton (mpm.rigid; default none)"""
     loads: list = field(default_factory=list)
     """external loads: point loads, tractions, body forces (mpm.loads.Load)"""
     particle_volume: str = "shape"

@@ -42,6 +42,8 @@ from .memory import array_bytes
 from .model import Model, State
 from .precision import compensates, for_policy
 from .params import instance_problem, violations
+from .rigid import solids
+from .rigid_coupling import refusal
 from .schemes import AULMPM, EMPM, TLMPM, scene_kind
 from .stepping.status import StepBuffer, StepReport
 from .stencil import fuse
@@ -144,6 +146,9 @@ def check_solver_inputs(model, scheme, options) -> None:
     if scene.contact == "shared" and scheme is not None and not isinstance(scheme, EMPM):
         raise ValueError("scheme: contact 'shared' (one grid for all bodies) needs the Eulerian scheme; "
                          "accepted: mpm.EMPM()")
+    refused = refusal(scene, options or SolverOptions())
+    if refused:
+        raise ValueError(refused)
     if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
             scene.solution, "has_body_force", False)):
         raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "
@@ -209,14 +214,14 @@ class Solver:
         self.grid = GridArrays(t, dev, regions=len(scene.regions) > 0, flip=opt.transfer == "flip", layout=self.layout,
                                gradients=needs_gradients(scene))  # the conditions read the velocity gradients
         self.buffer = StepBuffer(nb, t.dim, len(diagnostic_names(t.dim)), dev, n_loads=model.n_loads,
-                                 n_colliders=len(scene.colliders))
+                                 n_colliders=len(solids(scene)))
         self.contact = (Contact(model, self.launch, implicit, self.buffer.control, batched, lagrangian=not eulerian)
                         if nb > 1 and scene.contact in ("frictionless", "friction") else None)
         # the conditions act in the grid update, or after contact or the implicit solve
         self.conditions = Conditions(model, self.launch, self.buffer.control, implicit=implicit, lattice=eulerian,
                                      separate=self.contact is not None or implicit, batched=batched)
         # node positions only where a condition can reach a node (walls alone: near a face, mpm.stepping.criterion)
-        self.free_flight = not (eulerian or self.conditions.regions or scene.colliders or self.contact or implicit)
+        self.free_flight = not (eulerian or self.conditions.regions or solids(scene) or self.contact or implicit)
         projections = {b.material.project for b in scene.bodies}
         fused = opt.fuse if opt.fuse is not None else (k.moment is not None or opt.compensate) and len(projections) == 1
         self.fused = bool(fused and eulerian and not implicit)
@@ -229,7 +234,7 @@ class Solver:
             track_energy=bool(opt.track_energy), track_J=bool(opt.track_J), removal=self.conditions.open,
             bound_reach=self.free_flight, project=next(iter(projections)) if self.g2p_commits else None,
             batched=batched, flip=opt.flip, compensate=bool(opt.compensate), gradients=self.grid.gradients,
-            boundary=self.conditions.data, keep_out=self.conditions.keep_out)
+            boundary=self.conditions.data, keep_out=self.conditions.keep_out, rigid=self.conditions.rigid)
         per_particle_K = k.moment is None and opt.transfer not in AFFINE_FREE  # K_p cached per particle
         self.references = References(model, self.launch, self.layout, self.grid, self.buffer.control,
                                      affine=str(scheme.affine), gradients=opt.transfer != "mls" or k.gradient_affine,

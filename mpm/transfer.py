@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .collider_device import kinds_of
+from .collider_device import scene_kinds
 from .g2p import make_g2p
 from .loads import Loads
 from .p2g import make_p2g
@@ -64,15 +64,17 @@ class Transfers:
     ``bound_reach``: G2P bounds |F^sn|_inf (walls-only Lagrangian scenes);
     ``removal``: particles leave at open faces; ``marks``: count dJ >=
     epsilon; ``epsilon``: the criterion's threshold; ``compensate``: G2P keeps
-    x and F as compensated sums (mpm.g2p; the state's ``xc`` and ``Fc``)."""
+    x and F as compensated sums (mpm.g2p; the state's ``xc`` and ``Fc``);
+    ``rigid``: the scene's rigid bodies, which take the step's impulse after G2P."""
 
     def __init__(self, model, launch, buffer, transfer: str, *, lagrangian: bool, fused: bool, commit: bool,
                  with_stress: bool, regions: bool, forcing, record_dJ: bool, marks: bool, epsilon: float,
                  track_energy: bool, track_J: bool, removal: bool, bound_reach: bool, project=None,
                  batched: bool = False, flip: float = 0.0, compensate: bool = False, gradients: bool = False,
-                 boundary=None, keep_out: bool = False):
+                 boundary=None, keep_out: bool = False, rigid=None):
         t, k = model.types, model.kernel
         self.model, self.launch, self.buffer = model, launch, buffer
+        self.rigid = rigid  # the rigid bodies, advanced after G2P (mpm.rigid_coupling.Coupler; None: none)
         self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
         self.forcing = forcing
         body_force = forcing is not None or model.loads is not None
@@ -88,7 +90,7 @@ class Transfers:
                             track_energy=track_energy, track_inversion=track_J, removal=removal, fused=fused,
                             bound_reach=bound_reach, commit=commit, project=project, batched=batched,
                             loads=model.loads is not None, compensate=compensate, keep_out=keep_out,
-                            colliders=kinds_of(model.scene.colliders) if keep_out else ())
+                            colliders=scene_kinds(model.scene) if keep_out else ())
         self.boundary = boundary  # the walls and colliders, for keep_out (mpm.grid)
         margin = k.margin * model.dx
         open_code = WALL_TYPES.index("open")
@@ -139,3 +141,5 @@ class Transfers:
             self.inside_lo, self.inside_hi, state.x, state.v, state.C, state.Fsn, state.F0s, state.dJ, b.status,
             m.mass, const.gravity, m.volume, self.open_lo, self.open_hi, m.body_params, self.body_force,
             state.xc, state.Fc, self.boundary])
+        if self.rigid is not None:  # the rigid bodies take the step's impulse (mpm.rigid_coupling)
+            self.rigid.push(b.status)

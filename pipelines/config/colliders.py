@@ -5,7 +5,7 @@ type's geometry, and the :class:`mpm.Collider` it builds."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, List, Optional
+from typing import Any, ClassVar, List, Optional, cast
 
 import numpy as np
 
@@ -48,6 +48,17 @@ def _angular(key: str, value, ctx: Context):
         return number(key, value, float)
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [rad/s] in 3D")
+    return vector(key, value, 3)
+
+
+def _rotation(key: str, value, ctx: Context):
+    """A number (about z) in 2D, a rotation vector of 3 numbers in 3D [rad]."""
+    if ctx.dim == 2:
+        if isinstance(value, (list, tuple)):
+            raise ConfigError(key, f"{value!r}; accepted: a number [rad] (about z) in 2D")
+        return number(key, value, float)
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [rad] in 3D")
     return vector(key, value, 3)
 
 
@@ -211,3 +222,28 @@ COLLIDERS = Family("collider", "type", {c.__dataclass_fields__["type"].default: 
 ColliderConfig = COLLIDERS.flat("ColliderConfig", __name__, """A rigid collider (mpm.colliders): every key
 of every type (null where the type does not use it); the types and their keys are the dataclasses of
 :data:`COLLIDERS`.""")
+
+
+@dataclass
+class RigidBodyConfig:
+    """A rigid body the material pushes back, advanced by Newton (mpm.rigid):
+    its ``shape`` a box, sphere or (3D) cylinder collider at rest (its centre
+    the body's initial centre of mass; its boundary and friction what the
+    material meets), a ``density`` or a ``mass``, and its initial motion."""
+
+    name: str = setting("", "a name for reports")
+    shape: ColliderConfig = setting(ColliderConfig(), "its shape, boundary and friction: a box, sphere or (3D) "
+                                                      "cylinder collider at rest", family=COLLIDERS)
+    density: Optional[float] = setting(None, "[kg/m^3]; null: from mass", gt=0.0)
+    mass: Optional[float] = setting(None, "[kg] (2D: per metre of depth); null: from density", gt=0.0)
+    orientation: Optional[Any] = setting(None, "initial rotation about its centre [rad]: a number (2D) or a "
+                                               "rotation vector (3D)", parse=_rotation)
+    velocity: Optional[List[float]] = setting(None, "initial velocity of its centre [m/s]", size="dim")
+    angular_velocity: Optional[Any] = setting(None, "initial angular velocity [rad/s]: a number (about z) in 2D, "
+                                                    "a list of 3 in 3D", parse=_angular)
+
+    def build(self, key: str, ctx: Context) -> mpm.RigidBody:
+        shape = cast(Any, self.shape).build(f"{key}.shape", ctx)
+        return mpm.RigidBody(shape, density=self.density, mass=self.mass, orientation=self.orientation,
+                             velocity=None if self.velocity is None else tuple(self.velocity),
+                             angular_velocity=self.angular_velocity, name=self.name)

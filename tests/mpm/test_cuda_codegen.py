@@ -181,6 +181,7 @@ class Case:
     colliders: tuple[str, ...] = ()  # kinds
     friction: bool = False
     turning: bool = False  # the first collider turns (mpm.collider_motion: the kinds take TURNING)
+    rigid: bool = False  # rigid bodies coupled through Newton (mpm.rigid_coupling: the kinds take RIGID)
     open_walls: bool = False
     fuse: bool | None = None
     record_dJ: bool = False
@@ -232,6 +233,13 @@ def scene(case: Case, dim: int) -> mpm.Scene:
                                        velocity=(0.1,) + (0.0,) * (dim - 1))]
     colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0, case.turning and i == 0)
                  for i, k in enumerate(case.colliders)]
+    rigid = []
+    if case.rigid:
+        at = (lambda *c: tuple(c[:dim]))  # noqa: E731
+        rigid = [mpm.RigidBody(Collider.box(at(0.3, 0.8, 0.5), at(0.05, 0.05, 0.05)), density=500.0),
+                 mpm.RigidBody(Collider.sphere(at(0.7, 0.8, 0.5), 0.05, friction=0.3), density=500.0)]
+        if dim == 3:
+            rigid.append(mpm.RigidBody(Collider.cylinder((0.5, 0.8, 0.3), 0.05, 0.05, axis=0), mass=0.1))
     loads = []
     if case.loads:
         c, f = (centres[0],) + (0.5,) * (dim - 1), (0.0, -1.0, 0.0)[:dim]
@@ -242,7 +250,7 @@ def scene(case: Case, dim: int) -> mpm.Scene:
                      gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact,
                      contact_friction=case.contact_friction, contact_normal=case.normal, regions=regions,
                      colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads,
-                     boundary_rule=case.rule)
+                     boundary_rule=case.rule, rigid_bodies=rigid)
 
 
 def scheme(case: Case):
@@ -338,7 +346,8 @@ def cases(dim: int) -> list[Case]:
                 Case(scheme="tlmpm", colliders=every, friction=friction, implicit=True)]
     out += [Case(colliders=(k,)) for k in every]
     # a turning collider among them (the rotation compiled: the kinds end with TURNING)
-    out += [Case(colliders=every, friction=True, turning=True),
+    out += [Case(colliders=every, friction=True, turning=True), Case(colliders=every, friction=True, rigid=True),
+            Case(rigid=True), Case(batched=True, rigid=True),
             Case(scheme="tlmpm", colliders=every, friction=True, implicit=True, turning=True)]
     # the node rule of earlier versions (walls and colliders on the nodes inside them)
     out += [Case(rule="nodes", colliders=every, friction=True), Case(rule="nodes", materials=two, colliders=every),

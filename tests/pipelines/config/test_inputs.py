@@ -467,3 +467,19 @@ def test_a_turning_collider_reaches_the_solver():
     cup = spec_for(["scene=viscous_cup", "scene.colliders.0.angular_velocity=[0.0,2.0,0.0]",
                     "scene.colliders.0.pivot=[0.5,0.3,0.5]"]).scene.colliders[0]
     assert tuple(cup.angular_velocity) == (0.0, 2.0, 0.0) and tuple(cup.pivot) == (0.5, 0.3, 0.5)
+
+
+def test_a_rigid_body_is_read_and_its_bad_keys_refused():
+    """scene.rigid_bodies: a box of the floating_box_2d scene becomes an
+    mpm.RigidBody; a negative density, a cup shape and a body outside the
+    domain are refused in one line naming the key."""
+    from helpers import spec_for
+
+    body = spec_for(["scene=floating_box_2d"]).scene.rigid_bodies[0]
+    assert type(body).__name__ == "RigidBody" and body.density == 500.0 and body.shape.boundary == "separate"
+    assert refused(["scene=floating_box_2d", "scene.rigid_bodies.0.density=-1"]).key == "scene.rigid_bodies[0].density"
+    for overrides, key in ((["scene.rigid_bodies.0.shape={type: cup, center: [0.2,0.2], radius: 0.05, depth: 0.05, "
+                             "thickness: 0.01}"], "rigid_bodies[0].shape"),
+                           (["scene.rigid_bodies.0.shape.center=[0.9,0.2]"], "rigid_bodies[0].shape.center")):
+        text = refusal(replace_inline_mappings(["scene=floating_box_2d"] + overrides))
+        assert key in text.split(": ")[0] and "; accepted: " in text and "\n" not in text, text
