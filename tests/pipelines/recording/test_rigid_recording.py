@@ -60,6 +60,7 @@ def test_the_body_is_recorded_at_its_newton_pose(floating):
         drawn = _collider_shifts(rec, int(step))["rigid/box"](rest)
         np.testing.assert_allclose(drawn, (rest - CENTRE) @ R[:2, :2].T + q[0, :2], atol=1e-6)
     assert seen[steps[-1]][1][0, 1] < CENTRE[1] - 0.005  # it fell: the check sees it move
+    assert layout.declared(out / "recording.rrd")["flip"]["rigid"] == layout.FLIP_2D  # drawn y up in 2D
 
 
 def test_the_body_series_and_final_state(floating):
@@ -109,10 +110,52 @@ def test_the_body_is_drawn_and_exported_where_it_is(floating, tmp_path):
         points = read_vtp(tmp_path / "vtk" / name)[1][:, :2]
         centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
         np.testing.assert_allclose(centre, seen[step][1][0, :2], atol=1e-6)
+    from pxr import Gf, Usd, UsdGeom
+
+    assert command.main([str(out), "--format", "usd", "--out", str(tmp_path / "usd")]) == 0
+    stage = Usd.Stage.Open(str(tmp_path / "usd" / "stage.usdc"))
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/colliders/rigid_box")).GetOrderedXformOps()[0]
+    codes = op.GetTimeSamples()
+    assert len(codes) == len(seen)
+    for code, step in zip(codes, sorted(seen)):
+        centre = list(op.Get(code).Transform(Gf.Vec3d(*CENTRE, 0.0)))[:2]
+        np.testing.assert_allclose(centre, seen[step][1][0, :2], atol=1e-6)
     r = subprocess.run([sys.executable, "-m", "pipelines.replay", str(out / "recording.rrd"), "--frames",
                         str(tmp_path / "frames")], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     assert len(list((tmp_path / "frames").glob("frame_*.png"))) == len(seen)
+
+
+def test_a_3d_body_is_recorded_at_its_pose(tmp_path):
+    """A spinning box above the colliding spheres (3D): its transform on the last frame, its rotation
+    series and metrics.json's final state agree; the series' units are the 3D ones."""
+    centre = np.array([0.5, 0.8, 0.3])
+    m = execute(spec_for(["scene=colliding_spheres", "scene.resolution=16", "run.steps=20", "log.every=10",
+                          "log.progress=false", "+scene.rigid_bodies=[{name: cube, shape: {type: box, center: "
+                          "[0.5, 0.8, 0.3], half_size: [0.08, 0.05, 0.06]}, density: 500, angular_velocity: "
+                          "[1.0, 2.0, 0.5], velocity: [0.1, 0, 0]}]"]), tmp_path)
+    rec = recordings.read(tmp_path / "recording.rrd")
+    final = m["rigid_bodies"]["cube"]
+    R, b = rec.collider_turn["rigid/cube"][1][-1], rec.collider_shift["rigid/cube"][1][-1]
+    np.testing.assert_allclose(R, rotation(np.array(final["quaternion"])), atol=1e-6)
+    np.testing.assert_allclose(R @ centre + b, final["position"], atol=1e-6)
+    assert final["velocity"][0] == pytest.approx(0.1) and len(final["angular_velocity"]) == 3
+    for k, axis in enumerate("xyz"):
+        assert rec.scalars[f"rigid/cube/rotation_{axis}"][1][-1] == final["rotation"][k]
+        assert rec.scalars[f"rigid/cube/angular_velocity_{axis}"][1][-1] == final["angular_velocity"][k]
+    assert float(np.linalg.norm(final["rotation"])) > 0.02  # it turned
+    assert [layout.unit(f"rigid/cube/{q}_z", 3) for q in ("force", "torque", "angular_velocity", "rotation")] == [
+        "N", "N m", "rad/s", "rad"]
+
+
+def test_a_scene_without_rigid_bodies_records_none(tmp_path):
+    """No /rigid entity, no rigid series, no flip of /rigid, no rigid_bodies in metrics.json (its
+    recording is otherwise the one it was before rigid bodies were recorded)."""
+    m = execute(spec_for(["scene.resolution=16", "run.steps=10", "log.every=5", "log.progress=false"]), tmp_path)
+    rec = recordings.read(tmp_path / "recording.rrd")
+    assert "rigid_bodies" not in m and not any(k.startswith("rigid") for k in rec.scalars)
+    assert not any(k.startswith("rigid") for k in (rec.colliders or {}))
+    assert "rigid" not in layout.declared(tmp_path / "recording.rrd")["flip"]
 
 
 @pytest.mark.slow
