@@ -192,7 +192,8 @@ def _legend(ax, rec, more: list, bodies: bool = True) -> None:
     handles = [Line2D([], [], ls="", marker="o", color=PALETTE[i % len(PALETTE)] / 255.0, label=name)
                for i, name in enumerate(body_names(rec))] if bodies else []
     handles += more
-    handles += [Patch(facecolor=COLLIDER_FACE, edgecolor=COLLIDER_EDGE, label=f"collider {name}")
+    handles += [Patch(facecolor=COLLIDER_FACE, edgecolor=COLLIDER_EDGE,
+                      label=f"rigid body {name[6:]}" if name.startswith("rigid/") else f"collider {name}")
                 for name in (rec.colliders or {})]
     if handles:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)

@@ -53,9 +53,22 @@ SAME_AS = {"dt_fresh": "dt"}
 WORDS = {"dt": "time step", "dt_fresh": "time step allowed now", "config_updates": "configuration updates"}
 
 
+# unit of a rigid body's series rigid/<name>/<quantity>[_axis] (2D: per metre of depth)
+_RIGID_UNITS = {
+    "position": ("m", "m"), "velocity": ("m/s", "m/s"), "angular_velocity": ("rad/s", "rad/s"),
+    "angle": ("rad", "rad"), "rotation": ("rad", "rad"), "force": ("N", "N/m"), "torque": ("N m", "N m/m"),
+}
+
+
 def unit(name: str, dim: int) -> str:
     """The unit of scalar ``name`` ("" when unknown)."""
     name = name.rsplit("/", 1)[-1] if name.startswith("/") else name
+    if name.startswith("rigid/"):
+        quantity = name.rsplit("/", 1)[-1]
+        for key in (quantity, quantity[:-2] if quantity[-2:] in ("_x", "_y", "_z") else quantity):
+            if key in _RIGID_UNITS:
+                return _RIGID_UNITS[key][0 if dim == 3 else 1]
+        return ""
     for key in (name, name.split("/")[0], name.rstrip("_xyz").rstrip("_"),
                 name.split("/")[0].rstrip("_xyz").rstrip("_")):
         if key in _UNITS:
@@ -72,14 +85,15 @@ def label(name: str, dim: int) -> str:
         f"{words} ({u})" if u else words
 
 
-def view_coordinates(rec: rr.RecordingStream, dim: int, channels: bool = False) -> None:
+def view_coordinates(rec: rr.RecordingStream, dim: int, channels: bool = False, rigid: bool = False) -> None:
     """Declare the scene's up axis (static): y up in both 2D and 3D
-    (``channels``: the /channels entities too, log.channels)."""
+    (``channels``: the /channels entities too, log.channels; ``rigid``: the
+    /rigid entities too, a scene's rigid bodies)."""
     if dim == 3:
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
         rec.send_property("view", rr.AnyValues(up="+y", coordinates="RIGHT_HAND_Y_UP"))
     else:
-        spatial = SPATIAL_2D + (("channels",) if channels else ())
+        spatial = SPATIAL_2D + (("channels",) if channels else ()) + (("rigid",) if rigid else ())
         for path in spatial:
             rec.log(path, rr.Transform3D(scale=FLIP_2D), static=True)
         rec.send_property("view", rr.AnyValues(
@@ -148,7 +162,7 @@ def series_views(groups: dict, dim: int, extents: dict | None = None, same: tupl
 
 
 def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents: dict | None = None,
-              title: str = "particles", same: tuple = ()):
+              title: str = "particles", same: tuple = (), rigid: bool = False):
     """The particle view (domain, floor and colliders drawn, y up; named
     ``title``, which says what the colours mean) with its colour key
     beside the domain, next to the colour legend, the time series (a tab
@@ -156,13 +170,14 @@ def blueprint(dim: int, domain, wall: float, groups: dict, channels=(), extents:
     the particle view, hidden (the user shows one in the viewer's blueprint
     panel); ``extents``: the series' (min, max), for the plots' y ranges
     (:func:`series_views`); ``same``: series left out, equal to their
-    :data:`SAME_AS` at every step (one curve would hide the other)."""
+    :data:`SAME_AS` at every step (one curve would hide the other);
+    ``rigid``: the rigid bodies (/rigid) drawn too."""
     from .colour_key import extent
 
     L = np.asarray(domain, float)
     hidden = [f"/channels/{c}" for c in channels]
     contents = ["/particles", "/particles/key/**", "/domain", "/colliders/**", "/regions/**"] + [
-        p for c in hidden for p in (c, f"{c}/key/**")]
+        p for c in hidden for p in (c, f"{c}/key/**")] + (["/rigid/**"] if rigid else [])
     overrides: dict[EntityPathLike, rrb.EntityBehavior] | None = {
         path: rrb.EntityBehavior(visible=False) for path in hidden} or None
     if dim == 2:

@@ -35,6 +35,8 @@ class Recording:
     properties: dict[str, list]  # "config:overrides" -> [values], "provenance:git_commit" -> [value]
     update_steps: np.ndarray  # steps with a configuration-update event
     colliders: dict | None = None  # name -> (vertices, triangles) in 3D, or a list of (n, 2) polylines in 2D
+    # (a rigid body's shape at rest among them, named rigid/<name>, with its pose per frame in collider_shift
+    # and collider_turn)
     collider_shift: dict | None = None  # name -> (steps, translations) of a moving collider
     timings: dict = field(default_factory=dict)  # name -> (steps, values) [ms], from the timings file
     run: dict = field(default_factory=dict)  # "started", "host", "command" -> [value], from the timings file
@@ -233,14 +235,23 @@ def _timings(path: Path) -> tuple[dict, dict]:
 
 def _colliders(data) -> tuple[dict, dict, dict]:
     """The colliders' static geometry, the translations of moving ones and
-    the rotations of turning ones (Rerun keeps a mat3x3 column by column)."""
+    the rotations of turning ones (Rerun keeps a mat3x3 column by column);
+    the rigid bodies' (/rigid/<name>) with them, named ``rigid/<name>``."""
+    geo, shifts, turns = _solids(data, "/colliders/", "")
+    for out, more in zip((geo, shifts, turns), _solids(data, "/rigid/", "rigid/")):
+        out.update(more)
+    return geo, shifts, turns
+
+
+def _solids(data, root: str, prefix: str) -> tuple[dict, dict, dict]:
+    """:func:`_colliders` of the entities under ``root``, their names after ``prefix``."""
     meshes: dict = {}
     strips: dict = {}
-    static = data.reader(index=None, contents="/colliders/**").to_pandas()
+    static = data.reader(index=None, contents=root + "**").to_pandas()
     for c in static.columns:
-        if not c.startswith("/colliders/"):
+        if not c.startswith(root):
             continue
-        name, kind = c[len("/colliders/"):].split(":")[0], c.split(":")[-1]
+        name, kind = prefix + c[len(root):].split(":")[0], c.split(":")[-1]
         values = static[c].dropna()
         if not len(values):
             continue
@@ -252,16 +263,18 @@ def _colliders(data) -> tuple[dict, dict, dict]:
     geo = {name: (m["vertex_positions"].astype(np.float64), m["triangle_indices"].astype(np.int64))
            for name, m in meshes.items() if len(m) == 2}
     geo.update(strips)
-    moving = data.reader(index="step", contents="/colliders/**").to_pandas()
     shifts, turns = {}, {}
+    if not geo:
+        return geo, shifts, turns
+    moving = data.reader(index="step", contents=root + "**").to_pandas()
     for c in moving.columns:
-        if c.startswith("/colliders/") and c.endswith(":translation"):
+        if c.startswith(root) and c.endswith(":translation"):
             rows = moving[["step", c]].dropna()
-            shifts[c[len("/colliders/"):].split(":")[0]] = (
+            shifts[prefix + c[len(root):].split(":")[0]] = (
                 rows["step"].to_numpy(), np.stack([_flat(v) for v in rows[c]]))
-        if c.startswith("/colliders/") and c.endswith(":mat3x3"):
+        if c.startswith(root) and c.endswith(":mat3x3"):
             rows = moving[["step", c]].dropna()
-            turns[c[len("/colliders/"):].split(":")[0]] = (
+            turns[prefix + c[len(root):].split(":")[0]] = (
                 rows["step"].to_numpy(), np.stack([_flat(v).reshape(3, 3).T for v in rows[c]]))
     return geo, shifts, turns
 

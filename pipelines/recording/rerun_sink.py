@@ -38,6 +38,9 @@ Layout of the recording (timelines ``step`` and ``sim_time``):
   /legend             what the colours mean in words: map, field, range (static)
   /domain             the domain box and the inner wall faces (static)
   /colliders/<name>   each collider's surface (3D) or outline (2D)
+  /rigid/<name>       each rigid body's shape at rest (static), placed at
+                      its pose at every particle frame (Transform3D:
+                      translation and mat3x3, as a turning collider)
   /regions/<name>     each kinematic region's selection outlined where its
                       particles are, at every particle frame (LineStrips;
                       solid magenta while it acts, faint before and after:
@@ -106,6 +109,7 @@ class RerunSink(Sink):
         self._buffer: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._timings: dict[str, tuple[list, list, list]] = defaultdict(lambda: ([], [], []))
         self._moving = []
+        self._rigid: list[str] = []  # the rigid bodies' entities (RunMeta.rigid_bodies)
         self._regions = []  # pipelines.recording.regions.Region, drawn with each particle frame
         self._color = "body"
         self._ranges: dict = {}  # coloured field -> ((low, high), where it comes from); None: the run's, at close
@@ -143,7 +147,8 @@ class RerunSink(Sink):
         later = [f for f, r in self._ranges.items() if r is None]
         self._values = FrameValues(later) if later else None
         self._field_notes = dict(meta.field_notes or {})
-        layout.view_coordinates(rec, meta.dim, channels=bool(self._channels))
+        self._rigid = [f"rigid/{name}" for name, _ in meta.rigid_bodies]
+        layout.view_coordinates(rec, meta.dim, channels=bool(self._channels), rigid=bool(self._rigid))
         rec.send_property("bodies", rr.AnyValues(names=list(meta.body_names)))
         rec.log("particles", self._points.from_fields(radii=meta.particle_radius),
                 rr.AnyValues(body_index=self._body.astype(np.int32)), static=True)
@@ -156,11 +161,13 @@ class RerunSink(Sink):
         self._key()
         self._log_domain(meta)
         self._log_colliders(meta)
+        for path, (_, shape) in zip(self._rigid, meta.rigid_bodies):
+            self._log_shape(path, shape, meta)
         for reg in self._regions:  # a region that never moves nor lets go: static
             if reg.still:
                 self._log_region(reg, 0.0, static=True)
         self._layout = (meta.dim, meta.domain, meta.wall_cells * meta.dx, meta.scalar_groups, list(self._channels))
-        rec.send_blueprint(layout.blueprint(*self._layout, title=self._title()))
+        rec.send_blueprint(layout.blueprint(*self._layout, title=self._title(), rigid=bool(self._rigid)))
 
     def _log_colliders(self, meta: RunMeta) -> None:
         """Each collider's surface (3D) or outline (2D) at its initial place,
@@ -170,16 +177,20 @@ class RerunSink(Sink):
         self._moving = []
         for i, c in enumerate(meta.colliders):
             path = f"colliders/{c.name or c.type + str(i)}"
-            color = (150, 150, 160)
-            if meta.dim == 3:
-                v, f = surfaces.surface_3d(c, np.zeros(3), meta.domain)
-                self.rec.log(path, rr.Mesh3D(vertex_positions=v, triangle_indices=f,
-                                             albedo_factor=(150, 150, 160, 110)), static=True)
-            else:
-                self.rec.log(path, rr.LineStrips2D(surfaces.outline_2d(c, np.zeros(2), meta.domain),
-                                                   colors=[color]), static=True)
+            self._log_shape(path, c, meta)
             if c.velocity is not None or c.turns:
                 self._moving.append((path, c, meta.dim))
+
+    def _log_shape(self, path: str, c, meta: RunMeta) -> None:
+        """A collider's (or rigid body's) surface (3D) or outline (2D) at its initial place, static."""
+        color = (150, 150, 160)
+        if meta.dim == 3:
+            v, f = surfaces.surface_3d(c, np.zeros(3), meta.domain)
+            self.rec.log(path, rr.Mesh3D(vertex_positions=v, triangle_indices=f,
+                                         albedo_factor=(150, 150, 160, 110)), static=True)
+        else:
+            self.rec.log(path, rr.LineStrips2D(surfaces.outline_2d(c, np.zeros(2), meta.domain),
+                                               colors=[color]), static=True)
 
     def _log_region(self, reg, t: float, static: bool = False) -> None:
         """A kinematic region's outline where its particles are at ``t`` [s]."""
@@ -297,14 +308,14 @@ class RerunSink(Sink):
         self._key()
 
     # ---------------------------------------------------------------- per step
-    def particles(self, step, t, x, dJ, fields=None, index=None):
+    def particles(self, step, t, x, dJ, fields=None, index=None, rigid=None):
         """One frame; the arrays must not change afterwards (the writer
         thread reads them later)."""
         if self._frames is None:
-            self._write_particles(step, t, x, dJ, fields, index)
+            self._write_particles(step, t, x, dJ, fields, index, rigid)
             return
         self._check_writer()
-        self._frames.put((step, t, x, dJ, fields, index))
+        self._frames.put((step, t, x, dJ, fields, index, rigid))
 
     def _write_frames(self) -> None:
         """The writer thread: frames in order until None."""
@@ -331,9 +342,11 @@ class RerunSink(Sink):
             self._writer.join()
         self._writer = None
 
-    def _write_particles(self, step, t, x, dJ, fields=None, index=None):
+    def _write_particles(self, step, t, x, dJ, fields=None, index=None, rigid: list | None = None):
         self.rec.set_time("step", sequence=step)
         self.rec.set_time("sim_time", duration=t)
+        for path, (R, b) in zip(self._rigid, rigid if rigid is not None else []):  # (rotation, translation)
+            self.rec.log(path, rr.Transform3D(translation=np.asarray(b, float), mat3x3=np.asarray(R, float)))
         for path, c, dim in self._moving:
             if not c.turns:
                 self.rec.log(path, rr.Transform3D(translation=[*np.asarray(c.offset(t), float), 0.0][:3]))
@@ -433,7 +446,8 @@ class RerunSink(Sink):
                 self._colour_frames()
             if self._layout is not None:  # the colour range in the title, the legends' room above the data
                 self.rec.send_blueprint(layout.blueprint(*self._layout, extents=self._extents, title=self._title(),
-                                                         same=tuple(n for n, same in self._same.items() if same)))
+                                                         same=tuple(n for n, same in self._same.items() if same),
+                                                         rigid=bool(self._rigid)))
         finally:
             try:  # leaving the streams (last entered first) flushes and finalises the files
                 self.clock.__exit__(None, None, None)

@@ -45,6 +45,9 @@ class RunMeta:
     # /channels/<field> coloured by the field, hidden in the blueprint (:func:`channel_ranges`)
     channels: dict = field(default_factory=dict)
     field_notes: dict = field(default_factory=dict)  # field -> what to know when reading it (the legend)
+    # the rigid bodies (mpm.rigid): (name, its shape at rest, a Collider), each drawn under /rigid/<name> and
+    # placed at its pose at every particle frame (:meth:`Sink.particles`' ``rigid``)
+    rigid_bodies: list = field(default_factory=list)
 
 
 class Sink:
@@ -54,8 +57,11 @@ class Sink:
         pass
 
     def particles(self, step: int, t: float, x: np.ndarray, dJ: np.ndarray | None,
-                  fields: dict[str, np.ndarray] | None = None, index: np.ndarray | None = None) -> None:
-        """Particles of a logged frame; ``index``: their numbers, when some were removed."""
+                  fields: dict[str, np.ndarray] | None = None, index: np.ndarray | None = None,
+                  rigid: list | None = None) -> None:
+        """Particles of a logged frame; ``index``: their numbers, when some were removed; ``rigid``: per
+        rigid body of ``RunMeta.rigid_bodies``, its pose then as (rotation (3, 3), translation (3,)), which
+        takes a point of its shape at rest to its place (x -> R x + b)."""
 
     def scalars(self, step: int, t: float, values: dict[str, float]) -> None:
         pass

@@ -1,7 +1,11 @@
 """The events that open a run's recording: what the scheme and the integrator
-do, in words, with their parameters; and the views of its scalars."""
+do, in words, with their parameters; the views of its scalars; and the run's static
+description for its recording (RunMeta)."""
 
 from __future__ import annotations
+
+from . import rigid_track, run_metrics
+from ..recording.sinks import RunMeta
 
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
 
@@ -24,6 +28,15 @@ def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bo
     if implicit:
         groups["implicit solve"] = IMPLICIT_SCALARS
     return groups
+
+
+def rigid_groups(dim: int, names: list[str]) -> dict:
+    """Per rigid body (pipelines.run.rigid_track), the time-series view of its series (one plot per unit)."""
+    axes = "xyz"[:dim]
+    turn = ["angle", "angular_velocity", "torque"] if dim == 2 else [
+        f"{q}_{a}" for q in ("rotation", "angular_velocity", "torque") for a in axes]
+    return {f"rigid {n}": [f"rigid/{n}/{q}_{a}" for q in ("position", "velocity", "force") for a in axes]
+            + [f"rigid/{n}/{q}" for q in turn] for n in names}
 
 
 def opening_events(scheme, integrator=None, dt: float | None = None) -> list[tuple[str, dict]]:
@@ -54,3 +67,24 @@ def opening_events(scheme, integrator=None, dt: float | None = None) -> list[tup
         events.append((f"implicit: backward Euler, {kind}; CG to {i.cg_tol:g} in at most {i.cg_max} iterations; "
                        f"{step}", {k: v for k, v in vars(i).items() if isinstance(v, (int, float, str))}))
     return events
+
+
+def run_meta(run) -> RunMeta:
+    """The static description of the run of a Recorder ``run`` (pipelines.run.recorder) for its recording."""
+    spec, scene, model = run.spec, run.spec.scene, run.model
+    ppc = [b.ppc or scene.ppc for b in scene.bodies]
+    groups = scalar_groups(
+        scene.dim, (run.marked_names if run.scheme.tracks_marks() else [])
+        + (run.stretch_names if run.scheme.name != "empm" else []),
+        run.solution is not None or spec.run.reference is not None, run.implicit)
+    groups.update(rigid_groups(scene.dim, rigid_track.names(scene)))
+    return RunMeta(
+        name=f"{spec.scene_name} / {run.scheme.name} / {spec.kernel.name} ({spec.transfer})",
+        dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
+        body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
+        particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
+        color=spec.log.color, color_range=run_metrics.color_range(spec),
+        channels=run_metrics.channel_ranges(spec.log), field_notes=run_metrics.field_notes(run.scheme.name),
+        properties={k: v for k, v in run.properties.items() if k != "run"},
+        run_properties={"run": run.properties["run"]}, colliders=list(scene.colliders), scalar_groups=groups,
+        rigid_bodies=[(n, b.shape) for n, b in zip(rigid_track.names(scene), scene.rigid_bodies)])

@@ -25,6 +25,7 @@ from . import announce, run_metrics
 from .progress import Progress
 from .collider_track import ColliderForces
 from .load_track import LoadTrack
+from .rigid_track import RigidTrack
 from .run_metrics import ClosedForm, Drift, median, particle_fields, peak_rss_mb
 from ..config.validate import RunSpec
 from ..recording.sinks import RunMeta, Sink
@@ -56,6 +57,7 @@ class Recorder(mpm.Observer):
         self.inside_max = None  # per collider: the most particles seen inside it
         self.loads: LoadTrack | None = None  # the external loads' track
         self.forces: ColliderForces | None = None  # the colliders' forces
+        self.rigid: RigidTrack | None = None  # the rigid bodies' states and forces
         self.solution = None
         self.error_last: dict | None = None
         self._error_step = -1
@@ -118,23 +120,7 @@ class Recorder(mpm.Observer):
         self.built = True
 
     def meta(self) -> RunMeta:
-        scene, model = self.spec.scene, self.model
-        ppc = [b.ppc or scene.ppc for b in scene.bodies]
-        return RunMeta(
-            name=f"{self.spec.scene_name} / {self.scheme.name} / {self.spec.kernel.name} "
-                 f"({self.spec.transfer})",
-            dim=scene.dim, domain=model.domain, wall_cells=scene.wall_cells, dx=model.dx,
-            body_names=[b.name for b in scene.bodies], particle_body=model.body.numpy(),
-            particle_radius=0.5 * scene.particle_dx / max(ppc) ** (1.0 / scene.dim),
-            color=self.spec.log.color, color_range=run_metrics.color_range(self.spec),
-            channels=run_metrics.channel_ranges(self.spec.log),
-            field_notes=run_metrics.field_notes(self.scheme.name),
-            properties={k: v for k, v in self.properties.items() if k != "run"},
-            run_properties={"run": self.properties["run"]}, colliders=list(scene.colliders),
-            scalar_groups=announce.scalar_groups(
-                scene.dim, (self.marked_names if self.scheme.tracks_marks() else [])
-                + (self.stretch_names if self.scheme.name != "empm" else []),
-                self.solution is not None or self.spec.run.reference is not None, self.implicit))
+        return announce.run_meta(self)
 
     # ------------------------------------------------------------ the driver's reports
     def on_start(self, driver: mpm.Driver) -> None:
@@ -163,6 +149,8 @@ class Recorder(mpm.Observer):
         self.loads = LoadTrack(self.model, self.X0) if self.model.loads is not None else None
         self.forces = (ColliderForces(self.collider_names(), self.model.dim, self.model.kernel.n_grids)
                        if self.spec.scene.colliders else None)
+        coupler = self.solver.conditions.rigid
+        self.rigid = RigidTrack(self.spec.scene, coupler, self.model.kernel.n_grids) if coupler is not None else None
         self.progress = Progress(*self.spec.end, self.spec.log.progress)
         self.metrics["status"], self.metrics["reason"] = "running", ""
 
@@ -185,6 +173,8 @@ class Recorder(mpm.Observer):
         row = self.loads.add(report) if self.loads is not None else {}  # the step's start: load, load point
         if self.forces is not None:  # the colliders' forces over the step
             row.update(self.forces.add(report))
+        if self.rigid is not None:  # the rigid bodies' coupling forces over the step
+            row.update(self.rigid.forces(report))
         if row and log.scalars:
             self.sink.scalars(max(report.step - 1, 0), report.time - report.dt, row)
         self.sink.timings(self.step, self.t, {"step_time_ms": self.step_ms[-1], **(
@@ -311,7 +301,13 @@ class Recorder(mpm.Observer):
         if index is not None:
             x, dJ = x[index], (dJ[index] if dJ is not None else None)
             fields = {k: v[index] for k, v in fields.items()}
-        self.sink.particles(self.step, self.t, x, dJ, fields, index)
+        if self.rigid is None:
+            self.sink.particles(self.step, self.t, x, dJ, fields, index)
+            return
+        poses, row = self.rigid.frame(self.rigid.state())  # the rigid bodies' state at the frame
+        if log.scalars:
+            self.sink.scalars(self.step, self.t, row)
+        self.sink.particles(self.step, self.t, x, dJ, fields, index, rigid=poses)
 
     def frame_due(self, last: bool) -> bool:
         """Whether this step's particles are logged: every ``log.every`` steps,
@@ -478,6 +474,8 @@ class Recorder(mpm.Observer):
             m["loads"] = self.loads.summary(self.state.x.numpy().astype(np.float64), self.t)
         if self.forces is not None:
             m["collider_forces"] = self.forces.summary()
+        if self.rigid is not None:  # the rigid bodies' final state
+            m["rigid_bodies"] = self.rigid.summary(self.rigid.state())
         pieces = self.solver.fracture.fragments()  # exact at the end
         m["fragments"] = {"total": int(pieces.sum()), **{n: int(c) for n, c in zip(names, pieces)}}
         run_metrics.save_final_state(self.out_dir / "final_state.npz", self.model, self.state, self.X0, self.step,
