@@ -17,7 +17,7 @@ import warp as wp
 from helpers import EXAMPLES, load_example as load, run_example as script
 
 SCRIPTS = ("drop_ball", "slope_push", "stiffness_study", "incline", "rolling", "plane_shift", "resting", "hertz",
-           "piston")
+           "piston", "rigid_incline")
 
 
 def test_drop_ball_falls_freely_under_the_driver(device):

@@ -1,0 +1,164 @@
+"""A rigid block sliding or held, or a rigid disk rolling, on an anchored
+elastic slab down a plane tilted by gravity, coupled through Newton, against
+the closed forms, at one or several resolutions (2D).
+
+    python examples/rigid_incline.py [--case slide] [--resolutions 32,64] [--angle 30] [--friction 0.3]
+        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--device cpu]
+
+The slab (0.8 x 0.1 m, fixed-corotated E = 2e6 Pa, nu = 0.3, rho = 1000
+kg/m^3, its bottom strip held still by a kinematic region, as in
+examples/rolling.py) has its top at y = 0.25 m in a box 1 m long; gravity
+(g = 9.81 m/s^2) is tilted by ``--angle`` theta towards +x. Onto it a
+rigid body (mpm.RigidBody, density 1000 kg/m^3, advanced by Newton) is
+dropped from DROP = 5 mm above (a block started flush with the slab's top,
+which lies on a grid line, stays caught there, even frictionless): a box
+0.1 x 0.05 m (``--case slide`` or ``--case hold``) or a disk of radius
+0.05 m (``--case roll``), its boundary "separate" with Coulomb friction mu
+against the material. Closed forms (mpm.inclines): a block slides at
+g (sin theta - mu cos theta) and is held where tan theta <= mu; a solid
+disk rolls without slip at (2/3) g sin theta while mu >= (1/3) tan theta.
+Defaults per case: slide 30 deg, mu 0.3; hold 20 deg, mu 0.5; roll 20 deg,
+mu 0.5.
+
+Per resolution (cells across 1 m) it prints the acceleration along the
+plane read from the rigid body's own Newton state (twice the t^2
+coefficient of a parabola fitted to its centre's x from SETTLE to the end),
+its error against the closed form (for a held block: the travel over the
+same span, in cells), the slip of the disk's contact point (the integral of
+v + omega x R over the span, in cells), the steps and the wall-clock time.
+A bad argument ends it with one line (``error: --option: value; accepted:
+...``) and exit code 2.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+wp.config.log_level = wp.LOG_ERROR  # no start-up banner or module-load lines
+
+import mpm  # noqa: E402
+from mpm.colliders import Collider  # noqa: E402
+from mpm.inclines import rolling, sliding  # noqa: E402
+from _args import Parser, bounded, choice, device, integer_list  # noqa: E402 (this folder)
+
+G = 9.81  # [m/s^2]
+TOP = 0.25  # the slab's top [m]
+HALF = (0.05, 0.025)  # the block's half sizes [m]
+R = 0.05  # the disk's radius [m]
+DROP = 0.005  # the body starts this far above the slab [m] (see the module docstring)
+SETTLE = 0.1  # the fit starts here [s]: the body settles onto the slab first
+SAMPLE = 0.0025  # the body's state is sampled every this many seconds [s]
+CASES = {"slide": (30.0, 0.3), "hold": (20.0, 0.5), "roll": (20.0, 0.5)}
+"""case: (default angle [deg], default mu)"""
+
+
+class Track(mpm.Observer):
+    """The rigid body's centre [m], velocity [m/s] and spin omega_z [rad/s]
+    from Newton's state (the solver's rigid coupler) every SAMPLE seconds."""
+
+    def __init__(self):
+        self.t, self.c, self.v, self.w = [], [], [], []
+
+    def wants(self, driver):
+        return math.inf, (len(self.t) + 1) * SAMPLE
+
+    def on_step(self, driver, report):
+        if driver.time + 1e-12 < (len(self.t) + 1) * SAMPLE:
+            return
+        p = driver.solver.conditions.rigid.poses()
+        self.t.append(driver.time)
+        self.c.append(p["position"][0][:2])
+        self.v.append(p["velocity"][0][:2])
+        self.w.append(float(p["angular_velocity"][0][2]))
+
+
+@dataclass
+class Run:
+    """One run's figures."""
+
+    case: str
+    resolution: int
+    acceleration: float  # [m/s^2]
+    expected: float  # [m/s^2]
+    travel: float  # [m] along the plane from SETTLE to the end
+    slip: float  # [m] the disk's contact point along the plane over the same span (block: the travel)
+    steps: int
+    seconds: float  # wall-clock [s], compilation included
+
+    @property
+    def error(self) -> float:
+        return self.acceleration / self.expected - 1.0 if self.expected else math.nan
+
+
+def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3) -> mpm.Scene:
+    """The scene of the module docstring."""
+    th = math.radians(angle)
+    if case == "roll":
+        shape = Collider.sphere((0.2, TOP + DROP + R), R, boundary="separate", friction=friction)
+    else:
+        shape = Collider.box((0.2, TOP + DROP + HALF[1]), HALF, boundary="separate", friction=friction)
+    slab = mpm.Body(mpm.Box((0.5, TOP - 0.05), (0.4, 0.05)), mpm.FixedCorotated(E=2.0e6, nu=0.3), name="slab")
+    held = mpm.Box((0.5, TOP - 0.09), (0.4, 0.011))
+    return mpm.Scene(
+        dim=2, domain=(1.0, 0.625), resolution=resolution, ppc=4, bodies=[slab],
+        regions=[mpm.KinematicRegion(body=0, select=held, velocity=(0.0, 0.0))],
+        gravity=(G * math.sin(th), -G * math.cos(th)), walls=("slip",) * 4,
+        rigid_bodies=[mpm.RigidBody(shape, density=1000.0, name=case)])
+
+
+def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
+        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu") -> Run:
+    """Run the scene for ``duration`` [s] and measure it (module docstring)."""
+    wall = time.perf_counter()
+    model, state = mpm.build(scene(case, resolution, angle, friction), mpm.KERNELS[kernel], "float32", device)
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
+    track = Track()
+    driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
+    if driver.run().status != "completed":
+        raise RuntimeError(f"the run stopped: {driver.outcome.reason}")
+    t, c, v, w = np.array(track.t), np.array(track.c), np.array(track.v), np.array(track.w)
+    fit = t >= SETTLE
+    a = 2.0 * np.polyfit(t[fit], c[fit, 0], 2)[0]
+    travel = float(c[fit, 0][-1] - c[fit, 0][0])
+    rate = v[:, 0] + (w * R if case == "roll" else 0.0)  # the contact point's velocity along the plane
+    slip = float(np.sum(0.5 * (rate[1:] + rate[:-1])[fit[1:]] * np.diff(t)[fit[1:]]))
+    expected = rolling(angle, G, friction, "disk") if case == "roll" else sliding(angle, G, friction)
+    return Run(case, resolution, float(a), expected, travel, slip, driver.step, time.perf_counter() - wall)
+
+
+def main(argv=None) -> int:
+    parser = Parser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    parser.add_argument("--case", type=choice(tuple(CASES)), default="slide", help=", ".join(CASES))
+    parser.add_argument("--resolutions", type=integer_list(16, 256), default=[32, 64],
+                        help="comma-separated cells across 1 m")
+    parser.add_argument("--angle", type=bounded(1.0, 60.0, "deg"), default=None,
+                        help="the incline [deg] (default: the case's)")
+    parser.add_argument("--friction", type=bounded(0.0, 2.0, "-"), default=None,
+                        help="Coulomb mu (default: the case's)")
+    parser.add_argument("--duration", type=bounded(0.2, 2.0, "s"), default=0.4, help="simulated time [s]")
+    parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="empm", help=", ".join(mpm.SCHEMES))
+    parser.add_argument("--kernel", type=choice(mpm.KERNELS), default="quadratic", help=", ".join(mpm.KERNELS))
+    parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
+    args = parser.parse_args(argv)
+    angle = CASES[args.case][0] if args.angle is None else args.angle
+    mu = CASES[args.case][1] if args.friction is None else args.friction
+    body = "disk" if args.case == "roll" else "block"
+    print(f"a rigid {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, "
+          f"theta {angle:g} deg, mu {mu:g}, {args.duration:g} s")
+    print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'travel [cells]':>14} "
+          f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}")
+    for res in args.resolutions:
+        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device)
+        error = f"{100 * r.error:>+7.2f}%" if r.expected else f"{'-':>8}"
+        print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} "
+              f"{r.slip * res:>12.3f} {r.steps:>6} {r.seconds:>8.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
