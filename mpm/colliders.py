@@ -106,6 +106,16 @@ def rotation_of(angle, dim: int) -> np.ndarray:
     return np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * K @ K
 
 
+def as_vector3(value, dim: int) -> np.ndarray:
+    """A rotation given as in a scene (2D: one number about z; 3D: a vector;
+    None: none) as a 3-vector."""
+    if value is None:
+        return np.zeros(3)
+    if dim == 2:
+        return np.array([0.0, 0.0, float(value)])
+    return np.asarray(value, float)
+
+
 def axis_vector(axis, dim: int) -> tuple[float, ...]:
     """A coordinate axis (0, 1, 2) or a direction vector, as a unit vector."""
     if isinstance(axis, (int, np.integer)):
@@ -269,11 +279,7 @@ class Collider:
 
     def omega(self, dim: int) -> np.ndarray:
         """The angular velocity [rad/s] as a 3-vector (2D: about z; zero when not turning)."""
-        if self.angular_velocity is None:
-            return np.zeros(3)
-        if dim == 2:
-            return np.array([0.0, 0.0, float(self.angular_velocity)])  # pyright: ignore[reportArgumentType]
-        return np.asarray(self.angular_velocity, float)
+        return as_vector3(self.angular_velocity, dim)
 
     def rest_pivot(self, dim: int) -> tuple[float, ...]:
         """The point it turns about, at rest [m] (``pivot`` or its default)."""

@@ -24,7 +24,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .colliders import Collider
+from .colliders import Collider, as_vector3
 
 SHAPES = ("box", "sphere", "cylinder")
 """the shapes a rigid body may take (cylinder: 3D only)"""
@@ -73,19 +73,11 @@ class RigidBody:
 
     def turned(self, dim: int) -> np.ndarray:
         """The initial orientation as a rotation vector (3 numbers; 2D about z)."""
-        if self.orientation is None:
-            return np.zeros(3)
-        if dim == 2:
-            return np.array([0.0, 0.0, float(self.orientation)])  # pyright: ignore[reportArgumentType]
-        return np.asarray(self.orientation, float)
+        return as_vector3(self.orientation, dim)
 
     def spin(self, dim: int) -> np.ndarray:
         """The initial angular velocity as a 3-vector [rad/s]."""
-        if self.angular_velocity is None:
-            return np.zeros(3)
-        if dim == 2:
-            return np.array([0.0, 0.0, float(self.angular_velocity)])  # pyright: ignore[reportArgumentType]
-        return np.asarray(self.angular_velocity, float)
+        return as_vector3(self.angular_velocity, dim)
 
     def problems(self, dim: int, domain: Sequence[float]) -> list[tuple[str, str]]:
         """(field, message) for a shape, mass or motion that cannot be used."""

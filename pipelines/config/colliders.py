@@ -40,26 +40,23 @@ def _axis(key: str, value, ctx: Context):
     return number(key, value, int, {"keyed": True, "ge": 0, "le": ctx.dim - 1})
 
 
-def _angular(key: str, value, ctx: Context):
-    """A number about z in 2D, three numbers in 3D [rad/s]."""
-    if ctx.dim == 2:
-        if isinstance(value, (list, tuple)):
-            raise ConfigError(key, f"{value!r}; accepted: a number [rad/s] (about z) in 2D")
-        return number(key, value, float)
-    if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [rad/s] in 3D")
-    return vector(key, value, 3)
+def _about(unit: str):
+    """A reader of a rotation in ``unit``: a number about z in 2D, three numbers in 3D."""
+
+    def read(key: str, value, ctx: Context):
+        if ctx.dim == 2:
+            if isinstance(value, (list, tuple)):
+                raise ConfigError(key, f"{value!r}; accepted: a number [{unit}] (about z) in 2D")
+            return number(key, value, float)
+        if not isinstance(value, (list, tuple)) or len(value) != 3:
+            raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [{unit}] in 3D")
+        return vector(key, value, 3)
+
+    return read
 
 
-def _rotation(key: str, value, ctx: Context):
-    """A number (about z) in 2D, a rotation vector of 3 numbers in 3D [rad]."""
-    if ctx.dim == 2:
-        if isinstance(value, (list, tuple)):
-            raise ConfigError(key, f"{value!r}; accepted: a number [rad] (about z) in 2D")
-        return number(key, value, float)
-    if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise ConfigError(key, f"{value!r}; accepted: a list of 3 numbers [rad] in 3D")
-    return vector(key, value, 3)
+_angular = _about("rad/s")  # an angular velocity
+_rotation = _about("rad")  # an orientation as a rotation vector
 
 
 def _center(doc: str = "centre [m]"):
