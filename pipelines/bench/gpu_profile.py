@@ -34,7 +34,7 @@ import warp as wp
 from mpm.launch import Launches, kernel_name
 
 from .runs import QUIET, spec_for
-from .scale import LARGE, LARGE_CASE, _driver
+from .scale import LARGE, LARGE_CASE, _driver, advance
 
 COPY_MB = {"cuda": 512, "cpu": 64}  # the copy-bandwidth probe's array [MB]
 
@@ -182,14 +182,8 @@ def gpu_profile(sizes=tuple(LARGE), steps: int = 10, rounds: int = 3, overrides=
             with Traffic(device) as traffic:
                 if cuda:
                     wp.timing_begin(cuda_filter=wp.TIMING_KERNEL | wp.TIMING_MEMCPY | wp.TIMING_MEMSET)
-                first = driver.step
-                t0 = time.perf_counter()
-                while driver.step < first + steps:
-                    driver.advance()
-                wp.synchronize_device(device)
-                wall = time.perf_counter() - t0
+                n, wall = advance(driver, steps, device)
                 times = _device_times(wp.timing_end(), traffic.names) if cuda else dict(traffic.ms)
-            n = driver.step - first
             if best is None or wall / n < best[0]:
                 best = (wall / n, {k: v / n for k, v in times.items()}, traffic, n)
         assert best is not None  # rounds >= 1

@@ -113,13 +113,7 @@ def bench_large(steps: int = 50, rounds: int = 3, sizes: dict | None = None,
         best = None
         for _ in range(rounds):
             with Counter() as r:
-                first = driver.step
-                t0 = time.perf_counter()
-                while driver.step < first + steps:
-                    driver.advance()
-                wp.synchronize_device(device)
-                dt = time.perf_counter() - t0
-            n = driver.step - first
+                n, dt = advance(driver, steps, device)
             if best is None or dt / n < best[0]:
                 best = (dt / n, r.reads / n)
         assert best is not None  # rounds >= 1
@@ -163,6 +157,18 @@ STAGES = {
     "two balls, one shared grid": [TWO_BALLS, "scene.contact=shared"],
     "two balls, frictionless contact": [TWO_BALLS, "scene.contact=frictionless"],
 }
+
+
+def advance(driver, steps: int, device: str | None = None) -> tuple[int, float]:
+    """``driver`` advanced by ``steps`` steps or more (whole batches), and
+    the device synchronised where ``device`` is given: (steps taken, seconds)."""
+    first = driver.step
+    t0 = time.perf_counter()
+    while driver.step < first + steps:
+        driver.advance()
+    if device is not None:
+        wp.synchronize_device(device)
+    return driver.step - first, time.perf_counter() - t0
 
 
 def _driver(spec, sync_every: int | None = None, track_energy: bool | None = None):
@@ -240,11 +246,8 @@ def launches_per_step(spec, steps: int = 5, sync_every: int | None = None) -> tu
     """Warp kernel launches, array copies and fills, and device-to-host reads
     per step of the driver (no logging, no detection)."""
     driver = _driver(spec, sync_every)
-    first = driver.step
     with _Counted(spec.run.device) as c, Counter() as r:
-        while driver.step < first + steps:
-            driver.advance()
-    n = driver.step - first
+        n, _ = advance(driver, steps)
     return c.launches / n, c.memory / n, r.reads / n
 
 
@@ -264,13 +267,10 @@ def profile(steps: int = 20, rounds: int = 3, cases: dict | None = None) -> list
         best = None
         for _ in range(rounds):
             with _Counted(spec.run.device) as c:
-                t0 = time.perf_counter()
-                first = driver.step
-                while driver.step < first + steps:
-                    driver.advance()
-                total = 1e3 * (time.perf_counter() - t0) / (driver.step - first)
+                n, seconds = advance(driver, steps)
+                total = 1e3 * seconds / n
             if best is None or total < best[0]:
-                best = (total, {k: v / (driver.step - first) for k, v in c.ms.items()})
+                best = (total, {k: v / n for k, v in c.ms.items()})
         assert best is not None  # rounds >= 1
         total, ms = best
         for name, t in sorted(ms.items(), key=lambda kv: -kv[1]):
