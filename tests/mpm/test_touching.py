@@ -80,6 +80,27 @@ def test_a_block_slides_alike_wherever_the_plane_lies_between_nodes(device):
     assert np.ptp(x[t >= ex.LOADED]) > 0.1
 
 
+def test_a_block_loaded_slowly_is_held_on_a_rough_plane_wherever_it_lies_between_nodes(device):
+    """The held block of the test above (20 deg, mu = 0.5 > tan 20 deg =
+    0.36, 64 cells, EMPM) with its weight rising from 0 over 0.2 s: friction
+    can hold it at every instant, so it must not slip. Its travel along the
+    plane is its elastic shear plus its slip; the same block on a sticky
+    plane (its base held) travels by the shear alone, so the slip is the
+    difference: under 0.05 cell at every shift (measured 0.007-0.012;
+    the shear itself 0.033-0.040). The node rule with the plane on a node
+    row slips (measured 0.13 cell): its nodes act one row late."""
+    ex = load("plane_shift")
+
+    def slip(shift, rule="surface"):
+        held, sticky = (ex.run(shift, 20.0, mu, duration=0.3, ramp=0.2, rule=rule, device=device)
+                        for mu in (0.5, None))
+        return 64 * ((held.x[-1][0] - held.x[0][0]) - (sticky.x[-1][0] - sticky.x[0][0]))
+
+    for shift in (0.0, 0.25, 0.5):
+        assert abs(slip(shift)) < 0.05, shift
+    assert slip(0.0, rule="nodes") > 0.05
+
+
 @pytest.mark.parametrize("scheme", ["empm", "tlmpm"])
 def test_a_block_rests_on_a_wall_a_collider_and_a_stiffer_body(scheme, device):
     """A block under its weight (32 cells) on the floor wall, on a collider
