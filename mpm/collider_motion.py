@@ -114,22 +114,7 @@ def make_place(t: Types, kinds: tuple[str, ...]):
         return place
 
     turn, spin = make_turn(t)
-
-    if RIGID in kinds:
-        @wp.func
-        def place(c: Data, q: vec, time: S):  # pyright: ignore[reportRedeclaration]
-            shift, u = motion(c, time)
-            elapsed = wp.min(wp.max(time, c.window[0]), c.window[1]) - c.window[0]
-            w = V3()
-            if time >= c.window[0] and time < c.window[1]:
-                w = c.omega
-            angle = elapsed * c.omega
-            pivot = c.pivot + c.origin + shift
-            phi, n_rest = sdf(c, c.pivot + turn(turn(q - pivot, -angle), -c.frame))
-            n = turn(turn(n_rest, c.frame), angle)
-            return phi, n, u + spin(w, q - phi * n - pivot)
-
-        return place
+    rigid = RIGID in kinds  # a rigid body's pose (origin, frame) on top of the window's motion
 
     @wp.func
     def place(c: Data, q: vec, time: S):
@@ -140,8 +125,15 @@ def make_place(t: Types, kinds: tuple[str, ...]):
             w = c.omega
         angle = elapsed * c.omega
         pivot = c.pivot + shift
-        phi, n_rest = sdf(c, c.pivot + turn(q - pivot, -angle))
-        n = turn(n_rest, angle)
+        if wp.static(rigid):
+            pivot = c.pivot + c.origin + shift
+        local = turn(q - pivot, -angle)
+        if wp.static(rigid):
+            local = turn(local, -c.frame)
+        phi, n = sdf(c, c.pivot + local)
+        if wp.static(rigid):
+            n = turn(n, c.frame)
+        n = turn(n, angle)
         return phi, n, u + spin(w, q - phi * n - pivot)
 
     return place
