@@ -54,6 +54,18 @@ def _signed_volume(pts: np.ndarray, tris: np.ndarray, origin: np.ndarray) -> flo
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
+def solid_properties(pts: np.ndarray, tris: np.ndarray) -> tuple[float, np.ndarray]:
+    """(volume [m^3], centroid [m]) of the solid a closed triangle mesh
+    encloses: the tetrahedra (o, a, b, c) of its triangles with a point o
+    summed with their signed volumes, V = sum V_t, centroid =
+    sum V_t (o + a + b + c) / 4 / V (either orientation of the triangles)."""
+    o = pts.mean(axis=0)
+    a, b, c = (pts[tris[:, k]] for k in range(3))
+    v = np.einsum("ij,ij->i", a - o, np.cross(b - o, c - o)) / 6.0
+    volume = float(v.sum())
+    return abs(volume), (v[:, None] * (o + a + b + c)).sum(axis=0) / (4.0 * volume)
+
+
 def _read(path: str) -> tuple[np.ndarray, np.ndarray]:
     if not path.lower().endswith((".usd", ".usda", ".usdc")):
         import trimesh

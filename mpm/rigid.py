@@ -1,9 +1,11 @@
 """Rigid bodies that the material pushes back: their description and checks.
 
 A :class:`RigidBody` is a solid of one of the shapes box, sphere or
-(3D) cylinder, given as a :class:`mpm.colliders.Collider` at rest (its
-``center`` the body's initial centre of mass, its ``boundary`` and
-``friction`` the rule the material meets on its surface, as a collider's),
+(3D) cylinder or closed triangle mesh, given as a
+:class:`mpm.colliders.Collider` at rest (its ``center`` the body's initial
+centre of mass, a mesh's the centroid of the solid it encloses; its
+``boundary`` and ``friction`` the rule the material meets on its surface,
+as a collider's),
 with a ``density`` [kg/m^3] or a ``mass`` [kg] (2D: per metre of depth,
 the shape taken one metre deep, as the material's masses are), an initial
 ``orientation``, ``velocity`` and ``angular_velocity``. ``Scene.rigid_bodies``
@@ -19,28 +21,29 @@ planar: forces in the plane and torques about z keep them there.
 from __future__ import annotations
 
 import importlib.util
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
 
 from .colliders import Collider, as_vector3
 
-SHAPES = ("box", "sphere", "cylinder")
-"""the shapes a rigid body may take (cylinder: 3D only)"""
+SHAPES = ("box", "sphere", "cylinder", "mesh")
+"""the shapes a rigid body may take (cylinder and mesh: 3D only)"""
+SHAPES_2D = ("box", "sphere")
 
 
 @dataclass(frozen=True)
 class RigidBody:
     """One rigid body (module docstring): ``shape`` a Collider of type box,
-    sphere or cylinder at rest (no velocity or angular_velocity of its
+    sphere, cylinder or mesh at rest (no velocity or angular_velocity of its
     own), ``density`` or ``mass`` (one of them), the initial
     ``orientation`` (2D: an angle [rad] about z; 3D: a rotation vector
     [rad]) about its centre, ``velocity`` [m/s] and ``angular_velocity``
     [rad/s] (2D: a number about z; 3D: a vector)."""
 
     shape: Collider
-    """its shape, boundary and friction (a box, sphere or, in 3D, cylinder Collider)"""
+    """its shape, boundary and friction (a box, sphere or, in 3D, cylinder or mesh Collider)"""
     density: float | None = None
     """[kg/m^3] (None: from ``mass``)"""
     mass: float | None = None
@@ -61,15 +64,34 @@ class RigidBody:
             return float(np.prod(2.0 * np.asarray(c.half_size, float)))
         if c.type == "sphere":
             return np.pi * c.radius**2 if dim == 2 else 4.0 / 3.0 * np.pi * c.radius**3
+        if c.type == "mesh":
+            return self._solid()[0]
         return np.pi * c.radius**2 * 2.0 * c.half_height
+
+    def _solid(self) -> tuple[float, np.ndarray]:
+        """A mesh body's (volume [m^3], centroid [m]) (mpm.meshes.solid_properties)."""
+        from .meshes import solid_properties
+
+        assert self.shape.mesh is not None  # problems() checks
+        return solid_properties(*self.shape.mesh.geometry)
 
     def total_mass(self, dim: int) -> float:
         """[kg] ``mass``, or ``density`` times the volume."""
         return float(self.mass) if self.mass is not None else float(self.density or 0.0) * self.volume(dim)
 
     def center(self) -> np.ndarray:
-        """Its initial centre of mass [m] (the shape's centre)."""
+        """Its initial centre of mass [m] (the shape's centre; a mesh's centroid)."""
+        if self.shape.type == "mesh":
+            return self._solid()[1]
         return np.asarray(self.shape.center, float)
+
+    def solid(self) -> Collider:
+        """Its shape as the collider the material meets, turning about the
+        centre of mass (a mesh's centroid: its ``pivot``; the other shapes'
+        centre already is)."""
+        if self.shape.type == "mesh":
+            return replace(self.shape, pivot=tuple(float(x) for x in self.center()))
+        return self.shape
 
     def turned(self, dim: int) -> np.ndarray:
         """The initial orientation as a rotation vector (3 numbers; 2D about z)."""
@@ -82,28 +104,32 @@ class RigidBody:
     def problems(self, dim: int, domain: Sequence[float]) -> list[tuple[str, str]]:
         """(field, message) for a shape, mass or motion that cannot be used."""
         c = self.shape
-        if not isinstance(c, Collider) or c.type not in SHAPES or (c.type == "cylinder" and dim == 2):
-            kinds = ", ".join(SHAPES if dim == 3 else SHAPES[:2])
+        if not isinstance(c, Collider) or c.type not in (SHAPES if dim == 3 else SHAPES_2D):
+            kinds = ", ".join(SHAPES if dim == 3 else SHAPES_2D)
             return [("shape", f"{getattr(c, 'type', c)!r}; accepted in {dim}D: {kinds}")]
         out = [("shape." + k, m) for k, m in c.problems(dim)]
-        if c.velocity is not None or c.angular_velocity is not None or c.inside:
-            out.append(("shape", "a moving or inside-out shape; accepted: the body at rest (velocity, "
-                                 "angular_velocity on the rigid body), inside false"))
+        if c.velocity is not None or c.angular_velocity is not None or c.inside or c.pivot is not None:
+            out.append(("shape", "a moving, turning or inside-out shape; accepted: the body at rest (velocity, "
+                                 "angular_velocity on the rigid body; no pivot: it turns about its centre "
+                                 "of mass), inside false"))
         if (self.density is None) == (self.mass is None):
             out.append(("density", "give one of density [kg/m^3] or mass [kg]; accepted: exactly one"))
         for key in ("density", "mass"):
             value = getattr(self, key)
             if value is not None and not (np.isfinite(value) and value > 0.0):
                 out.append((key, f"{value}; accepted: a finite number > 0"))
-        sizes = [c.radius] if c.type != "box" else list(c.half_size or ())
-        if c.type == "cylinder":
-            sizes.append(c.half_height)
-        if not all(np.isfinite(s) and s > 0.0 for s in sizes):
-            out.append(("shape", f"{c.type} of size {sizes}; accepted: sizes > 0 [m]"))
-        if c.center is not None and len(c.center) == dim and not all(
-                0.0 <= x <= L for x, L in zip(c.center, domain)):
-            out.append(("shape.center", f"{list(c.center)} lies outside the domain; accepted: a point in "
-                                        + " x ".join(f"[0, {L:g}]" for L in domain) + " [m]"))
+        if c.type != "mesh":
+            sizes = [c.radius] if c.type != "box" else list(c.half_size or ())
+            if c.type == "cylinder":
+                sizes.append(c.half_height)
+            if not all(np.isfinite(s) and s > 0.0 for s in sizes):
+                out.append(("shape", f"{c.type} of size {sizes}; accepted: sizes > 0 [m]"))
+        shape_ok = not any(k.startswith("shape") for k, _ in out)
+        centre = c.center if c.type != "mesh" else (self.center() if shape_ok else None)
+        if centre is not None and len(centre) == dim and not all(0.0 <= x <= L for x, L in zip(centre, domain)):
+            key = "shape.center" if c.type != "mesh" else "shape.center (the mesh's centroid)"
+            out.append((key, f"{[float(x) for x in centre]} lies outside the domain; accepted: a point in "
+                             + " x ".join(f"[0, {L:g}]" for L in domain) + " [m]"))
         scalar = "a number [rad, rad/s] in 2D" if dim == 2 else "3 numbers [rad, rad/s] in 3D"
         for key, accepted, shape in (("velocity", f"{dim} finite numbers [m/s]", (dim,)),
                                      ("orientation", scalar, () if dim == 2 else (3,)),
@@ -137,4 +163,4 @@ def solids(scene) -> list[Collider]:
     """The scene's colliders, then each rigid body's shape (the packed
     records on the device in this order: rigid body b is collider
     ``len(scene.colliders) + b``)."""
-    return list(scene.colliders) + [b.shape for b in getattr(scene, "rigid_bodies", None) or []]
+    return list(scene.colliders) + [b.solid() for b in getattr(scene, "rigid_bodies", None) or []]

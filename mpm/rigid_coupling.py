@@ -2,9 +2,9 @@
 through Newton, a stage of the step only where a scene has any.
 
 :class:`Coupler` builds a Newton model of the bodies (one free body each,
-its mass and inertia from a box, sphere or cylinder shape of the body's
-density; 2D: the shape one metre deep, a sphere a disc, a cylinder along z)
-and holds its state (``body_q``: the pose, ``body_qd``: the velocity of the
+its origin the centre of mass, its mass and inertia from a box, sphere,
+cylinder or mesh shape of the body's density; 2D: the shape one metre deep,
+a sphere a disc, a cylinder along z) and holds its state (``body_q``: the pose, ``body_qd``: the velocity of the
 centre of mass and the angular velocity, world frame). Each step, on the
 device and with no read-back:
 
@@ -89,6 +89,11 @@ def newton_model(scene, device):
             builder.add_shape_cylinder(body, radius=c.radius, half_height=0.5, cfg=cfg)  # a disc, along z
         elif c.type == "sphere":
             builder.add_shape_sphere(body, radius=c.radius, cfg=cfg)
+        elif c.type == "mesh":  # its vertices about the body's origin, the centroid (mpm.rigid.RigidBody.center)
+            assert c.mesh is not None  # mpm.rigid.RigidBody.problems checks
+            pts, tris = c.mesh.geometry
+            mesh = newton.Mesh((pts - np.asarray(centre)).astype(np.float32), tris.reshape(-1))
+            builder.add_shape_mesh(body, mesh=mesh, cfg=cfg)
         else:
             from .colliders import axis_vector
 

@@ -224,13 +224,13 @@ of every type (null where the type does not use it); the types and their keys ar
 @dataclass
 class RigidBodyConfig:
     """A rigid body the material pushes back, advanced by Newton (mpm.rigid):
-    its ``shape`` a box, sphere or (3D) cylinder collider at rest (its centre
-    the body's initial centre of mass; its boundary and friction what the
+    its ``shape`` a box, sphere or (3D) cylinder or mesh collider at rest (its
+    centre the body's initial centre of mass, a mesh's the centroid of its solid; its boundary and friction what the
     material meets), a ``density`` or a ``mass``, and its initial motion."""
 
     name: str = setting("", "a name for reports")
     shape: ColliderConfig = setting(ColliderConfig(), "its shape, boundary and friction: a box, sphere or (3D) "
-                                                      "cylinder collider at rest", family=COLLIDERS)
+                                                      "cylinder or mesh collider at rest", family=COLLIDERS)
     density: Optional[float] = setting(None, "[kg/m^3]; null: from mass", gt=0.0)
     mass: Optional[float] = setting(None, "[kg] (2D: per metre of depth); null: from density", gt=0.0)
     orientation: Optional[Any] = setting(None, "initial rotation about its centre [rad]: a number (2D) or a "
