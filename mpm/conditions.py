@@ -124,7 +124,7 @@ class Conditions:
         (unless separate) the conditions at the nodes' current positions;
         first the rigid bodies' colliders placed at their pose (mpm.rigid_coupling)."""
         if self.rigid is not None:
-            self.rigid.place()
+            self.rigid.place(status)
         self.launch(self.grid_update, layout.n_nodes, [
             grid.lattice, const.gravity, const.grid_offsets, self.control, self.data, status])
 

@@ -93,6 +93,25 @@ class RigidBody:
             return replace(self.shape, pivot=tuple(float(x) for x in self.center()))
         return self.shape
 
+    def reach(self, dim: int) -> float:
+        """[m] how far its surface reaches from its centre of mass (a box's
+        half diagonal, a sphere's radius, a cylinder's rim, a mesh's farthest
+        vertex)."""
+        c = self.shape
+        if c.type == "box":
+            return float(np.linalg.norm(np.asarray(c.half_size, float)))
+        if c.type == "sphere":
+            return float(c.radius)
+        if c.type == "cylinder":
+            return float(np.hypot(c.radius, c.half_height))
+        assert c.mesh is not None  # problems() checks
+        return float(np.linalg.norm(c.mesh.geometry[0] - self.center(), axis=1).max())
+
+    def surface_speed(self, dim: int) -> float:
+        """[m/s] the fastest its surface moves at the start: |v| + |omega| reach."""
+        v = np.asarray(self.velocity if self.velocity is not None else 0.0, float)
+        return float(np.linalg.norm(v) + np.linalg.norm(self.spin(dim)) * self.reach(dim))
+
     def turned(self, dim: int) -> np.ndarray:
         """The initial orientation as a rotation vector (3 numbers; 2D about z)."""
         return as_vector3(self.orientation, dim)

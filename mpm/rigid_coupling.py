@@ -11,8 +11,10 @@ device and with no read-back:
 * :meth:`Coupler.place`, at the step's start: each body's collider record
   (rigid body b is collider ``len(scene.colliders) + b``) takes the pose and
   the velocities of the Newton state at the step's time ``control.t``
-  (mpm.collider_motion places it at any time of the step from them), and
-  the angular impulses are zeroed;
+  (mpm.collider_motion places it at any time of the step from them), the
+  angular impulses are zeroed, and the fastest point of each body's
+  surface, |v| + |omega| reach, enters the step's largest speed
+  (``status.max_v2``) that the step rule reads for the next step;
 * the grid rule (mpm.collider_device) and the keep-out (mpm.keep_out) then
   sum the impulse J they give the material at each body's surface
   (``status.collider_impulse``, all grids) and its angular impulse about
@@ -112,10 +114,15 @@ def make_place_bodies(t: Types):
 
     @warp_kernel
     def place_bodies(body_q: wp.array(dtype=wp.transform), body_qd: wp.array(dtype=wp.spatial_vector),
-                     control: StepControl, first: int, colliders: wp.array(dtype=Data)):
+                     control: StepControl, first: int, colliders: wp.array(dtype=Data),
+                     reach: wp.array(dtype=wp.float64), max_v2: wp.array(dtype=wp.float64)):
         b = wp.tid()
         if control.skip[0] != wp.float64(0.0):
             return
+        # the fastest point of its surface, |v| + |omega| reach, for the step rule (as a particle's speed)
+        fastest = wp.float64(wp.length(wp.spatial_top(body_qd[b]))) + wp.float64(
+            wp.length(wp.spatial_bottom(body_qd[b]))) * reach[b]
+        wp.atomic_max(max_v2, 0, fastest * fastest)
         k = first + b  # pyright: ignore[reportOperatorIssue]
         c = colliders[k]
         x = wp.transform_get_translation(body_q[b])
@@ -213,16 +220,26 @@ class Coupler:
         # the state's arrays, named here so that a checkpoint (mpm.checkpoint) holds them
         self.body_q, self.body_qd = self.state.body_q, self.state.body_qd
         self.place_kernel, self.push_kernel = make_place_bodies(t), make_push_bodies(t)
+        self.reach = wp.array([b.reach(scene.dim) for b in scene.rigid_bodies], dtype=wp.float64,
+                              device=model.device)  # [m] each body's surface from its centre of mass
 
     def kernels(self) -> list:
         return [self.place_kernel, self.push_kernel]
 
-    def place(self) -> None:
-        """The bodies' collider records from their state at the step's start; the angular impulses zeroed."""
+    def place(self, status) -> None:
+        """The bodies' collider records from their state at the step's start; the angular impulses zeroed;
+        the fastest point of their surfaces in the step's largest speed (``status.max_v2``, which the
+        step rule reads as it reads the particles')."""
         data = self.conditions.data
         data.collider_torque.zero_()
         wp.launch(self.place_kernel, self.n, device=self.model.device, inputs=[
-            self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders])
+            self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders, self.reach,
+            status.max_v2])
+
+    def speed(self) -> float:
+        """[m/s] the fastest point of the bodies' surfaces at the start (mpm.rigid.RigidBody.surface_speed)."""
+        scene = self.model.scene
+        return max(b.surface_speed(scene.dim) for b in scene.rigid_bodies)
 
     def push(self, status) -> None:
         """The bodies advanced over the step with minus the material's impulse

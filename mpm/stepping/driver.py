@@ -293,7 +293,8 @@ class Driver:
                 problem = (t.message, t.criterion, t.body, {"value": t.value, "limit": t.limit})
         if problem is None:
             s.buffer.set(kinetic_last=kinetic, potential_last=potential)
-            self.device_policy.start(self.v0, self.detector)
+            rigid = s.conditions.rigid  # the rigid bodies' surfaces move as fast as particles would
+            self.device_policy.start(max(self.v0, rigid.speed() if rigid is not None else 0.0), self.detector)
             v = s.buffer.read()
             s.buffer.set(halt=0.0, skip=0.0)  # the host holds the state (a collapse at the start included)
             self._chosen(v)

@@ -63,7 +63,8 @@ def _fields(table: str) -> tuple[Field, ...]:
 
 
 FIELDS = _fields("""
-max_v2            step  0     largest |v_p|^2 of the new state [m^2/s^2]
+max_v2            step  0     largest |v_p|^2 of the new state [m^2/s^2] (and of the rigid bodies'
+                              surfaces at the step's start, mpm.rigid_coupling)
 nonfinite         step  0     particles with a non-finite position, velocity or F^sn
 outside           step  0     particles that left the domain interior
 boundary_work     step  0     positive work of the boundary conditions on the grid, all grids [J]
@@ -231,7 +232,7 @@ class StepReport:
     the configuration updates it triggered."""
 
     max_speed: float
-    """the fastest particle of the new state [m/s]"""
+    """the fastest particle of the new state [m/s] (or rigid body's surface at the step's start)"""
     nonfinite: int
     """particles with a non-finite position, velocity or F^sn"""
     outside: int

@@ -133,8 +133,8 @@ def test_momentum_is_kept_when_a_ball_strikes_a_block(scheme, kernel):
     """A rigid disc (density 2000) strikes an elastic block head-on in
     float64, no gravity, no wall reached: the momentum of the body and the
     material together stays what it was, to 1e-6 of its scale (the body's
-    state is float32: measured 2.2e-7 over 500 steps with EMPM and the
-    quadratic kernel; 0.6-2.1e-7 over 400 with the others, the compact
+    state is float32: measured 1.2e-7 over 500 steps with EMPM and the
+    quadratic kernel; 0.9-1.7e-7 with the others, the compact
     kernel's two grids included), the body slows down and pushes the block,
     and the energy (kinetic of both, and the block's elastic) never grows."""
     ball = mpm.RigidBody(Collider.sphere((0.3, 0.5), 0.06, boundary="separate"), density=2000.0,
@@ -179,8 +179,8 @@ def test_angular_momentum_is_kept_when_a_box_strikes_a_block_off_centre(friction
     (the torque of the material's impulse about its centre of mass), and the
     angular momentum about the origin of body and material together (the
     material's APIC one about its centre of mass plus c x P; the body's
-    I omega + x x m v) is kept to 1e-5 of its value (measured 4.8e-7
-    frictionless, 1.4e-6 at mu = 0.5, over 500 steps: the keep-out's lever is taken at the end of the step,
+    I omega + x x m v) is kept to 1e-5 of its value (measured 1.3e-6
+    frictionless, 1.0e-6 at mu = 0.5, over 500 steps: the keep-out's lever is taken at the end of the step,
     and the body's state is float32); a torque of the wrong sign or lever
     is off by 2 I omega, ten times more."""
     box = mpm.RigidBody(Collider.box((0.3, 0.56), (0.05, 0.03), boundary="separate", friction=friction),
@@ -217,8 +217,8 @@ def test_3d_ball_striking_a_block_keeps_momentum_and_angular_momentum():
     """3D, float64, no gravity: a rigid ball (r = 0.05 m, density 2000,
     2 m/s, mu = 0.3) strikes an elastic block off centre and is set
     spinning by friction (the 3D torque r x J); the momentum of the two
-    together is kept to 1e-6 (measured 9e-8) and the angular momentum about
-    the origin to 1e-4 (measured 2.0e-5 at 24 cells, where the ball is 1.2
+    together is kept to 1e-6 (measured 1.4e-7) and the angular momentum about
+    the origin to 1e-4 (measured 2.1e-5 at 24 cells, where the ball is 1.2
     cells across and the keep-out, whose lever is taken at the step's end
     and whose shift of a particle's position changes its moment uncounted,
     does much of the work)."""
