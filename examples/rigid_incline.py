@@ -3,7 +3,7 @@ elastic slab down a plane tilted by gravity, coupled through Newton, against
 the closed forms, at one or several resolutions (2D).
 
     python examples/rigid_incline.py [--case slide] [--resolutions 32,64] [--angle 30] [--friction 0.3]
-        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--device cpu]
+        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--integrator explicit] [--device cpu]
 
 The slab (0.8 x 0.1 m, fixed-corotated E = 2e6 Pa, nu = 0.3, rho = 1000
 kg/m^3, its bottom strip held still by a kinematic region, as in
@@ -25,7 +25,9 @@ plane read from the rigid body's own Newton state (twice the t^2
 coefficient of a parabola fitted to its centre's x from SETTLE to the end),
 its error against the closed form (for a held block: the travel over the
 same span, in cells), the slip of the disk's contact point (the integral of
-v + omega x R over the span, in cells), the steps and the wall-clock time.
+v + omega x R over the span, in cells), the steps and the wall-clock time
+(``--integrator implicit``: also the Newton iterations and solves per step;
+the body's velocity is held during each solve, mpm.rigid_coupling).
 A bad argument ends it with one line (``error: --option: value; accepted:
 ...``) and exit code 2.
 """
@@ -59,15 +61,20 @@ CASES = {"slide": (30.0, 0.3), "hold": (20.0, 0.5), "roll": (20.0, 0.5)}
 
 class Track(mpm.Observer):
     """The rigid body's centre [m], velocity [m/s] and spin omega_z [rad/s]
-    from Newton's state (the solver's rigid coupler) every SAMPLE seconds."""
+    from Newton's state (the solver's rigid coupler) every SAMPLE seconds;
+    under the implicit integrator, the Newton iterations and solves summed."""
 
     def __init__(self):
         self.t, self.c, self.v, self.w = [], [], [], []
+        self.newton = self.solves = 0
 
     def wants(self, driver):
         return math.inf, (len(self.t) + 1) * SAMPLE
 
     def on_step(self, driver, report):
+        if report.newton is not None:
+            self.newton += report.newton.newton
+            self.solves += 1 + report.newton.rounds
         if driver.time + 1e-12 < (len(self.t) + 1) * SAMPLE:
             return
         p = driver.solver.conditions.rigid.poses()
@@ -89,6 +96,8 @@ class Run:
     slip: float  # [m] the disk's contact point along the plane over the same span (block: the travel)
     steps: int
     seconds: float  # wall-clock [s], compilation included
+    newton: float = 0.0  # implicit: Newton iterations per step
+    solves: float = 0.0  # implicit: solves per step (1 + the rounds of friction and one-sided constraints)
 
     @property
     def error(self) -> float:
@@ -112,11 +121,12 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
 
 
 def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
-        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu") -> Run:
+        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu",
+        integrator: str = "explicit") -> Run:
     """Run the scene for ``duration`` [s] and measure it (module docstring)."""
     wall = time.perf_counter()
     model, state = mpm.build(scene(case, resolution, angle, friction), mpm.KERNELS[kernel], "float32", device)
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track()
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
     if driver.run().status != "completed":
@@ -128,7 +138,9 @@ def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction
     rate = v[:, 0] + (w * R if case == "roll" else 0.0)  # the contact point's velocity along the plane
     slip = float(np.sum(0.5 * (rate[1:] + rate[:-1])[fit[1:]] * np.diff(t)[fit[1:]]))
     expected = rolling(angle, G, friction, "disk") if case == "roll" else sliding(angle, G, friction)
-    return Run(case, resolution, float(a), expected, travel, slip, driver.step, time.perf_counter() - wall)
+    steps = driver.step
+    return Run(case, resolution, float(a), expected, travel, slip, steps, time.perf_counter() - wall,
+               track.newton / steps, track.solves / steps)
 
 
 def main(argv=None) -> int:
@@ -143,20 +155,24 @@ def main(argv=None) -> int:
     parser.add_argument("--duration", type=bounded(0.2, 2.0, "s"), default=0.4, help="simulated time [s]")
     parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="empm", help=", ".join(mpm.SCHEMES))
     parser.add_argument("--kernel", type=choice(mpm.KERNELS), default="quadratic", help=", ".join(mpm.KERNELS))
+    parser.add_argument("--integrator", type=choice(mpm.INTEGRATORS), default="explicit",
+                        help=", ".join(mpm.INTEGRATORS))
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     args = parser.parse_args(argv)
     angle = CASES[args.case][0] if args.angle is None else args.angle
     mu = CASES[args.case][1] if args.friction is None else args.friction
     body = "disk" if args.case == "roll" else "block"
-    print(f"a rigid {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, "
+    print(f"a rigid {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, {args.integrator}, "
           f"theta {angle:g} deg, mu {mu:g}, {args.duration:g} s")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'travel [cells]':>14} "
-          f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}")
+          f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}"
+          + (f" {'newton/step':>11} {'solves/step':>11}" if args.integrator == "implicit" else ""))
     for res in args.resolutions:
-        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device)
+        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device, args.integrator)
         error = f"{100 * r.error:>+7.2f}%" if r.expected else f"{'-':>8}"
         print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} "
-              f"{r.slip * res:>12.3f} {r.steps:>6} {r.seconds:>8.1f}")
+              f"{r.slip * res:>12.3f} {r.steps:>6} {r.seconds:>8.1f}"
+              + (f" {r.newton:>11.2f} {r.solves:>11.2f}" if args.integrator == "implicit" else ""))
     return 0
 
 
