@@ -191,18 +191,20 @@ def test_momentum_is_kept_when_a_ball_strikes_a_block(scheme, kernel):
     assert (m @ state.v.numpy())[0] > 0.1 * P0[0]
 
 
-@pytest.mark.parametrize("kernel", ["quadratic", "compact"])
-def test_momentum_is_kept_when_a_ball_strikes_a_block_under_the_implicit_integrator(kernel):
+@pytest.mark.parametrize("scheme, kernel", [("empm", "quadratic"), ("empm", "compact"), ("tlmpm", "cubic"),
+                                            ("aulmpm", "linear")])
+def test_momentum_is_kept_when_a_ball_strikes_a_block_under_the_implicit_integrator(scheme, kernel):
     """The strike of :func:`test_momentum_is_kept_when_a_ball_strikes_a_block`
-    under the implicit integrator (EMPM, float64, steps of 5.2 ms, the ball
+    under the implicit integrator (float64, steps of 5.2 ms, the ball
     0.5 cells a step): the disc is held at its velocity of the step's start
     during each solve, the solve's constraint reactions on the material are
     its impulse, and it answers after the solve (mpm.rigid_coupling). The
     momentum of body and material together stays what it was, to 1e-6 of
     its scale: what the body does not see is the Newton residual left on the
     free directions (newton_tol 1e-8 here: below the body state's float32
-    rounding; measured 4.6e-8 with both kernels, the compact kernel's two
-    grids included; at the default 1e-4, 1.5-1.7e-6) and the float32 state.
+    rounding; measured 4.6e-8 with EMPM and the quadratic or the compact
+    kernel, two grids, 2.2e-8 TLMPM cubic, 2.9e-8 A-ULMPM linear; EMPM at the
+    default 1e-4, 1.5-1.7e-6) and the float32 state.
     The body slows down and pushes the block, and the energy (kinetic of
     both, and the block's elastic) never grows."""
     ball = mpm.RigidBody(Collider.sphere((0.3, 0.5), 0.06, boundary="separate"), density=2000.0,
@@ -211,7 +213,7 @@ def test_momentum_is_kept_when_a_ball_strikes_a_block_under_the_implicit_integra
     scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=48, bodies=[block], gravity=(0.0, 0.0),
                       rigid_bodies=[ball])
     model, state = mpm.build(scene, mpm.KERNELS[kernel], "float64")
-    solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(integrator=mpm.Implicit(newton_tol=1e-8)))
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.Implicit(newton_tol=1e-8)))
     solver.prepare(state)
     coupler = solver.conditions.rigid
     m = model.mass.numpy()
