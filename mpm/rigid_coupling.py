@@ -31,11 +31,13 @@ at the step's start, the body answers after the step (every scheme and
 kernel). Under the implicit integrator (mpm.implicit) the body is one of
 the solve's colliders, held at that pose and velocity during the whole
 solve (its normal constraints and, mpm.implicit.rough, Coulomb friction act
-with the surface velocity v + omega x r of the step's start); the
-reactions of the solution at the nodes it constrains, m (v - v*) on the
-fixed directions, a sliding node's friction load, and the keep-out's, are
-its impulse J and angular impulse (q - c) x J about its centre c (q the
-node, mpm.implicit.system ``make_boundary_work``), and the body answers
+with the surface velocity v + omega x r of the step's start; it holds the
+nodes in contact only, not the deeper ones, mpm.collider_device
+``make_constrain``); the reactions of the solution at the nodes it holds
+(the residual m (v - v*) + dt sum S g on their fixed directions), a sliding
+node's friction load, the boundary pass after the solve and the keep-out
+are its impulse J and angular impulse (q - c) x J about its centre c (q
+the node, mpm.implicit.system ``make_boundary_work``), and the body answers
 after the solve as under the explicit one. The Newton solve's residual on
 the free directions (its tolerance) is momentum the body does not see. 2D
 bodies stay in the plane: the forces have no z component, the torques only
