@@ -64,9 +64,9 @@ Decided once, a node the solution moved into a plate stayed free, the
 body's surface entered the solid unopposed and its stress was never paid
 for: a cylinder pressed by separating plates at 2 ms steps stored 72 %
 more energy than the plates' work. All kinds of rounds together make at
-most ROUNDS solves per step (RIGID_ROUNDS with rigid bodies); a step still changing after them is counted
-(``NewtonReport.unsettled``, the nodes and bins its last solve does not
-satisfy) and keeps its last solve.
+most ROUNDS solves per step (RIGID_ROUNDS with rigid bodies); a step still
+changing after them is counted (``NewtonReport.unsettled``, the nodes and
+bins its last solve does not satisfy) and keeps its last solve.
 
 A plastic model's return mapping has run in P2G: F^0s is the returned
 elastic state, so the energy is the elastic predictor's for the step.
