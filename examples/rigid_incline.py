@@ -3,7 +3,8 @@ elastic slab down a plane tilted by gravity, coupled through Newton, against
 the closed forms, at one or several resolutions (2D).
 
     python examples/rigid_incline.py [--case slide] [--resolutions 32,64] [--angle 30] [--friction 0.3]
-        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--device cpu]
+        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--integrator explicit] [--static]
+        [--device cpu]
 
 The slab (0.8 x 0.1 m, fixed-corotated E = 2e6 Pa, nu = 0.3, rho = 1000
 kg/m^3, its bottom strip held still by a kinematic region, as in
@@ -25,7 +26,11 @@ plane read from the rigid body's own Newton state (twice the t^2
 coefficient of a parabola fitted to its centre's x from SETTLE to the end),
 its error against the closed form (for a held block: the travel over the
 same span, in cells), the slip of the disk's contact point (the integral of
-v + omega x R over the span, in cells), the steps and the wall-clock time.
+v + omega x R over the span, in cells), the steps and the wall-clock time
+(``--integrator implicit``: also the Newton iterations and solves per step;
+the body's velocity is held during each solve, mpm.rigid_coupling).
+``--static`` makes the body a static collider where it starts (no rigid
+body; nothing to measure but the cost, the baseline of the coupling's).
 A bad argument ends it with one line (``error: --option: value; accepted:
 ...``) and exit code 2.
 """
@@ -59,18 +64,26 @@ CASES = {"slide": (30.0, 0.3), "hold": (20.0, 0.5), "roll": (20.0, 0.5)}
 
 class Track(mpm.Observer):
     """The rigid body's centre [m], velocity [m/s] and spin omega_z [rad/s]
-    from Newton's state (the solver's rigid coupler) every SAMPLE seconds."""
+    from Newton's state (the solver's rigid coupler) every SAMPLE seconds;
+    under the implicit integrator, the Newton iterations and solves summed."""
 
     def __init__(self):
         self.t, self.c, self.v, self.w = [], [], [], []
+        self.newton = self.solves = 0
 
     def wants(self, driver):
         return math.inf, (len(self.t) + 1) * SAMPLE
 
     def on_step(self, driver, report):
+        if report.newton is not None:
+            self.newton += report.newton.newton
+            self.solves += 1 + report.newton.rounds
         if driver.time + 1e-12 < (len(self.t) + 1) * SAMPLE:
             return
-        p = driver.solver.conditions.rigid.poses()
+        rigid = driver.solver.conditions.rigid
+        if rigid is None:  # (--static: no body to follow)
+            return
+        p = rigid.poses()
         self.t.append(driver.time)
         self.c.append(p["position"][0][:2])
         self.v.append(p["velocity"][0][:2])
@@ -89,14 +102,17 @@ class Run:
     slip: float  # [m] the disk's contact point along the plane over the same span (block: the travel)
     steps: int
     seconds: float  # wall-clock [s], compilation included
+    newton: float = 0.0  # implicit: Newton iterations per step
+    solves: float = 0.0  # implicit: solves per step (1 + the rounds of friction and one-sided constraints)
 
     @property
     def error(self) -> float:
         return self.acceleration / self.expected - 1.0 if self.expected else math.nan
 
 
-def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3) -> mpm.Scene:
-    """The scene of the module docstring."""
+def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
+          static: bool = False) -> mpm.Scene:
+    """The scene of the module docstring (``static``: the body a static collider)."""
     th = math.radians(angle)
     if case == "roll":
         shape = Collider.sphere((0.2, TOP + DROP + R), R, boundary="separate", friction=friction)
@@ -108,19 +124,27 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
         dim=2, domain=(1.0, 0.625), resolution=resolution, ppc=4, bodies=[slab],
         regions=[mpm.KinematicRegion(body=0, select=held, velocity=(0.0, 0.0))],
         gravity=(G * math.sin(th), -G * math.cos(th)), walls=("slip",) * 4,
-        rigid_bodies=[mpm.RigidBody(shape, density=1000.0, name=case)])
+        colliders=[shape] if static else [],
+        rigid_bodies=[] if static else [mpm.RigidBody(shape, density=1000.0, name=case)])
 
 
 def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
-        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu") -> Run:
-    """Run the scene for ``duration`` [s] and measure it (module docstring)."""
+        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu",
+        integrator: str = "explicit", static: bool = False) -> Run:
+    """Run the scene for ``duration`` [s] and measure it (module docstring;
+    ``static``: the cost only, the figures of the motion nan)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(case, resolution, angle, friction), mpm.KERNELS[kernel], "float32", device)
-    solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
+    model, state = mpm.build(scene(case, resolution, angle, friction, static), mpm.KERNELS[kernel], "float32",
+                             device)
+    solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track()
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
     if driver.run().status != "completed":
         raise RuntimeError(f"the run stopped: {driver.outcome.reason}")
+    steps = driver.step
+    if static:
+        return Run(case, resolution, math.nan, math.nan, math.nan, math.nan, steps, time.perf_counter() - wall,
+                   track.newton / steps, track.solves / steps)
     t, c, v, w = np.array(track.t), np.array(track.c), np.array(track.v), np.array(track.w)
     fit = t >= SETTLE
     a = 2.0 * np.polyfit(t[fit], c[fit, 0], 2)[0]
@@ -128,7 +152,8 @@ def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction
     rate = v[:, 0] + (w * R if case == "roll" else 0.0)  # the contact point's velocity along the plane
     slip = float(np.sum(0.5 * (rate[1:] + rate[:-1])[fit[1:]] * np.diff(t)[fit[1:]]))
     expected = rolling(angle, G, friction, "disk") if case == "roll" else sliding(angle, G, friction)
-    return Run(case, resolution, float(a), expected, travel, slip, driver.step, time.perf_counter() - wall)
+    return Run(case, resolution, float(a), expected, travel, slip, steps, time.perf_counter() - wall,
+               track.newton / steps, track.solves / steps)
 
 
 def main(argv=None) -> int:
@@ -143,20 +168,29 @@ def main(argv=None) -> int:
     parser.add_argument("--duration", type=bounded(0.2, 2.0, "s"), default=0.4, help="simulated time [s]")
     parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="empm", help=", ".join(mpm.SCHEMES))
     parser.add_argument("--kernel", type=choice(mpm.KERNELS), default="quadratic", help=", ".join(mpm.KERNELS))
+    parser.add_argument("--integrator", type=choice(mpm.INTEGRATORS), default="explicit",
+                        help=", ".join(mpm.INTEGRATORS))
+    parser.add_argument("--static", action="store_true",
+                        help="the body a static collider where it starts: the cost's baseline")
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     args = parser.parse_args(argv)
     angle = CASES[args.case][0] if args.angle is None else args.angle
     mu = CASES[args.case][1] if args.friction is None else args.friction
     body = "disk" if args.case == "roll" else "block"
-    print(f"a rigid {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, "
+    body = f"static {body} collider" if args.static else f"rigid {body}"
+    print(f"a {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, {args.integrator}, "
           f"theta {angle:g} deg, mu {mu:g}, {args.duration:g} s")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'travel [cells]':>14} "
-          f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}")
+          f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}"
+          + (f" {'newton/step':>11} {'solves/step':>11}" if args.integrator == "implicit" else ""))
     for res in args.resolutions:
-        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device)
-        error = f"{100 * r.error:>+7.2f}%" if r.expected else f"{'-':>8}"
-        print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} "
-              f"{r.slip * res:>12.3f} {r.steps:>6} {r.seconds:>8.1f}")
+        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device, args.integrator,
+                args.static)
+        error = f"{100 * r.error:>+7.2f}%" if r.expected and not args.static else f"{'-':>8}"
+        motion = (f"{'-':>10} {'-':>8} {error} {'-':>14} {'-':>12}" if args.static else
+                  f"{r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} {r.slip * res:>12.3f}")
+        print(f"{res:>5} {motion} {r.steps:>6} {r.seconds:>8.1f}"
+              + (f" {r.newton:>11.2f} {r.solves:>11.2f}" if args.integrator == "implicit" else ""))
     return 0
 
 

@@ -62,7 +62,8 @@ class Conditions:
         self.boundary = (make_boundary(t, self.regions, self.collider_kinds, batched, **rules)
                          if separate else None)
         self.constraints = (make_constraints(t, self.regions, self.collider_kinds,
-                                             any(c.friction > 0 for c in self.solids), **rules)
+                                             any(c.friction > 0 for c in self.solids), **rules,
+                                             first=len(scene.colliders) if scene.rigid_bodies else 0)
                             if implicit else None)
         self.inside = make_inside_count(t, self.collider_kinds) if self.solids else None
         # particles put back out of the solids in G2P (mpm.keep_out)

@@ -169,7 +169,8 @@ def make_node_state(t: Types, rule: str, gradients: bool):
 
 @functools.cache
 def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = (),
-                     with_friction: bool = False, rule: str = "surface", gradients: bool = False):
+                     with_friction: bool = False, rule: str = "surface", gradients: bool = False,
+                     first: int = 0):
     """The boundary conditions as constraints of the implicit solve
     (mpm.implicit): on every node with mass, from the predicted velocity v*,
     the constrained velocity and the orthogonal projector Pi onto the
@@ -180,12 +181,13 @@ def make_constraints(t: Types, with_regions: bool, colliders: tuple[str, ...] = 
     per node the friction coefficient, velocity and normal of its frictional
     collider (mu = 0: none) and the extrapolation from the node to the
     surface, for the friction inside the solve (mpm.implicit.rough). Nodes
-    without mass get Pi = 0 (not part of the system)."""
+    without mass get Pi = 0 (not part of the system). ``first``: the index
+    of the first rigid body's collider (mpm.collider_device ``make_constrain``)."""
     S = t.scalar
     mat = t.mat
     dim = t.dim
     kinematic = make_kinematic(t)
-    constrain = make_constrain(t, colliders, rule, gradients)
+    constrain = make_constrain(t, colliders, rule, gradients, first)
     walls = make_wall_constraints(t, rule)
     node_state = make_node_state(t, rule, gradients)
     Data = make_boundary_data(t)

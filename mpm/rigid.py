@@ -11,11 +11,13 @@ the shape taken one metre deep, as the material's masses are), an initial
 ``orientation``, ``velocity`` and ``angular_velocity``. ``Scene.rigid_bodies``
 lists them (default none). On the device each body is a collider placed at
 its current pose, whose surface moves at v + omega x r; the impulse the grid
-rule and the keep-out give the material at its surface is summed as a force
-and a torque about its centre of mass, and Newton (the ``newton`` package,
-imported only when a scene has rigid bodies) advances the body with minus
-that, plus gravity, over the same step (mpm.rigid_coupling). 2D bodies are
-planar: forces in the plane and torques about z keep them there.
+rule (under the implicit integrator: the solve's constraints, the body's
+velocity held during the solve) and the keep-out give the material at its
+surface is summed as a force and a torque about its centre of mass, and
+Newton (the ``newton`` package, imported only when a scene has rigid
+bodies) advances the body with minus that, plus gravity, over the same step
+(mpm.rigid_coupling). 2D bodies are planar: forces in the plane and torques
+about z keep them there.
 """
 
 from __future__ import annotations

@@ -29,12 +29,22 @@ device and with no read-back:
   two together is kept (to the body state's float32 rounding).
 
 The coupling is staggered: the material sees the body move at its velocity
-at the step's start, the body answers after the step (explicit, every scheme
-and kernel). The implicit integrator is refused with rigid bodies (there the
-body's velocity would have to stay fixed during the solve and the solve's
-constraint reactions be summed as torques too: not done). 2D bodies stay in
-the plane: the forces have no z component, the torques only a z one, and
-the out-of-plane components of the state are zeroed after each step.
+at the step's start, the body answers after the step (every scheme and
+kernel). Under the implicit integrator (mpm.implicit) the body is one of
+the solve's colliders, held at that pose and velocity during the whole
+solve (its normal constraints and, mpm.implicit.rough, Coulomb friction act
+with the surface velocity v + omega x r of the step's start; it holds the
+nodes in contact only, not the deeper ones, mpm.collider_device
+``make_constrain``); the reactions of the solution at the nodes it holds
+(the residual m (v - v*) + dt sum S g on their fixed directions), a sliding
+node's friction load, the boundary pass after the solve and the keep-out
+are its impulse J and angular impulse (q - c) x J about its centre c (q
+the node, mpm.implicit.system ``make_boundary_work``), and the body answers
+after the solve as under the explicit one. The Newton solve's residual on
+the free directions (its tolerance) is momentum the body does not see. 2D
+bodies stay in the plane: the forces have no z component, the torques only
+a z one, and the out-of-plane components of the state are zeroed after
+each step.
 """
 
 
@@ -47,16 +57,6 @@ from .collider_shapes import make_collider_data
 from .launch import warp_kernel
 from .stepping.status import StepControl
 from .types import Types
-
-
-def refusal(scene, options) -> str | None:
-    """Why ``options`` cannot step ``scene``'s rigid bodies (one line), or None."""
-    from .integrators import Implicit
-
-    if getattr(scene, "rigid_bodies", None) and isinstance(options.integrator, Implicit):
-        return ("options.integrator: rigid bodies are coupled under the explicit integrator only; "
-                "accepted: mpm.Explicit(), or no rigid bodies")
-    return None
 
 
 def quaternion(rotation: np.ndarray) -> tuple[float, float, float, float]:

@@ -43,7 +43,6 @@ from .model import Model, State
 from .precision import compensates, for_policy
 from .params import instance_problem, violations
 from .rigid import solids
-from .rigid_coupling import refusal
 from .schemes import AULMPM, EMPM, TLMPM, scene_kind
 from .stepping.status import StepBuffer, StepReport
 from .stencil import fuse
@@ -146,9 +145,6 @@ def check_solver_inputs(model, scheme, options) -> None:
     if scene.contact == "shared" and scheme is not None and not isinstance(scheme, EMPM):
         raise ValueError("scheme: contact 'shared' (one grid for all bodies) needs the Eulerian scheme; "
                          "accepted: mpm.EMPM()")
-    refused = refusal(scene, options or SolverOptions())
-    if refused:
-        raise ValueError(refused)
     if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
             scene.solution, "has_body_force", False)):
         raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "

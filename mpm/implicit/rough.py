@@ -37,7 +37,8 @@ import functools
 
 import warp as wp
 
-from ..collider_device import make_add_impulse
+from ..collider_device import make_add_reaction
+from ..collider_shapes import make_collider_data
 from ..grid import make_work
 from ..launch import warp_kernel
 from ..stepping.status import StepStatus
@@ -47,13 +48,15 @@ NONE, STICK, SLIP = -1, 1, 2  # a node's state against a frictional collider (NO
 
 
 @functools.cache
-def make_rough(t: Types):
+def make_rough(t: Types, rigid: bool = False):
     """``hold``, ``classify``, ``work``: the kernels of collider friction
-    inside the implicit solve (module docstring)."""
+    inside the implicit solve (module docstring); ``rigid``: ``work`` sums
+    the loads' angular impulses too (mpm.collider_device ``make_add_reaction``)."""
     S = t.scalar
     vec, mat = t.vec, t.mat
     work_of = make_work(t)
-    add_impulse = make_add_impulse(t)
+    add_reaction = make_add_reaction(t, rigid)
+    Data = make_collider_data(t)
 
     @warp_kernel
     def hold(fresh: int, m: wp.array(dtype=S), mu: wp.array(dtype=S), u: wp.array(dtype=vec),
@@ -129,16 +132,19 @@ def make_rough(t: Types):
     @warp_kernel
     def work(m: wp.array(dtype=S), state: wp.array(dtype=wp.int32), load: wp.array(dtype=vec),
              held: wp.array(dtype=mat), contact_id: wp.array(dtype=wp.int32), v: wp.array(dtype=vec),
-             status: StepStatus):
+             q: wp.array(dtype=vec), time: S, colliders: wp.array(dtype=Data),
+             torque: wp.array(dtype=wp.float64), status: StepStatus):
         """A sliding node's load at the solution: its impulse m Pi L and
         work into ``status`` as the constraints' (mpm.grid ``make_work``),
-        and into its collider's row of ``collider_impulse``."""
+        and into its collider's row of ``collider_impulse`` (``rigid``: its
+        angular impulse about the collider's centre into ``torque``, the
+        node at ``q``)."""
         i = wp.tid()
         if m[i] <= S(0.0) or state[i] != SLIP:
             return
         dv = held[i] * load[i]
         work_of(m[i], v[i] - dv, v[i], status)
         if contact_id[i] >= 0:
-            add_impulse(status.collider_impulse, contact_id[i], m[i] * dv)
+            add_reaction(status.collider_impulse, torque, colliders, contact_id[i], q[i], time, m[i] * dv)
 
     return hold, classify, work

@@ -13,7 +13,8 @@ import functools
 
 import warp as wp
 
-from ..collider_device import make_add_impulse
+from ..collider_device import make_add_reaction
+from ..collider_shapes import make_collider_data
 from ..grid import make_work
 from ..kernels import Kernel
 from ..launch import warp_kernel
@@ -377,7 +378,7 @@ def make_cg_node_kernels(t: Types):
 
 
 @functools.cache
-def make_boundary_work(t: Types):
+def make_boundary_work(t: Types, rigid: bool = False):
     """Kernel: the impulse of the constraints on each node at the solution,
     J = m reaction (v - reaction: the velocity without it), into the step's
     ``status.boundary_impulse``, and its work, the positive part of J . v,
@@ -387,43 +388,52 @@ def make_boundary_work(t: Types):
     ``status.collider_impulse`` (a node stuck on a frictional collider:
     the whole reaction, normal and tangential; a sliding node's load adds
     its own, mpm.implicit.rough ``work``, and under the node rule the
-    friction after the solve its own, :func:`make_friction`)."""
+    friction after the solve its own, :func:`make_friction`); with
+    ``rigid``, its angular impulse about the collider's centre at ``time``
+    into ``torque`` too (the node at ``q``, mpm.collider_device
+    ``make_add_reaction``; mpm.rigid_coupling)."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
-    add_impulse = make_add_impulse(t)
+    add_reaction = make_add_reaction(t, rigid)
+    Data = make_collider_data(t)
 
     @warp_kernel
     def boundary_work(m: wp.array(dtype=S), reaction: wp.array(dtype=vec), v: wp.array(dtype=vec),
-                      contact_id: wp.array(dtype=wp.int32), status: StepStatus):
+                      contact_id: wp.array(dtype=wp.int32), q: wp.array(dtype=vec), time: S,
+                      colliders: wp.array(dtype=Data), torque: wp.array(dtype=wp.float64), status: StepStatus):
         i = wp.tid()
         if m[i] > S(0.0):
             work(m[i], v[i] - reaction[i], v[i], status)
             if contact_id.shape[0] > i:
                 if contact_id[i] >= 0:
-                    add_impulse(status.collider_impulse, contact_id[i], m[i] * reaction[i])
+                    add_reaction(status.collider_impulse, torque, colliders, contact_id[i], q[i], time,
+                                 m[i] * reaction[i])
 
     return boundary_work
 
 
 @functools.cache
-def make_friction(t: Types):
+def make_friction(t: Types, rigid: bool = False):
     """Kernel: Coulomb friction at the colliders after the solve, under the
     node rule (``Scene.boundary_rule`` "nodes", as earlier versions; the
     surface rule's is inside the solve, mpm.implicit.rough): the tangential
     velocity relative to the collider loses mu times the normal velocity
     the constraint removed (its reaction, while it pushes). Its impulse and
-    work go into ``status`` as the constraints' do (:func:`make_boundary_work`)."""
+    work go into ``status`` as the constraints' do (:func:`make_boundary_work`,
+    ``rigid`` its angular impulse too)."""
     S = t.scalar
     vec = t.vec
     work = make_work(t)
-    add_impulse = make_add_impulse(t)
+    add_reaction = make_add_reaction(t, rigid)
+    Data = make_collider_data(t)
 
     @warp_kernel
     def friction(m: wp.array(dtype=S), free: wp.array(dtype=t.mat), reaction: wp.array(dtype=vec),
                  mu: wp.array(dtype=S), u: wp.array(dtype=vec), normal: wp.array(dtype=vec),
                  shift: wp.array(dtype=vec), contact_id: wp.array(dtype=wp.int32), v: wp.array(dtype=vec),
-                 status: StepStatus):
+                 q: wp.array(dtype=vec), time: S, colliders: wp.array(dtype=Data),
+                 torque: wp.array(dtype=wp.float64), status: StepStatus):
         i = wp.tid()
         if m[i] <= S(0.0) or mu[i] <= S(0.0):
             return
@@ -437,7 +447,8 @@ def make_friction(t: Types):
             v_new = u[i] + (vr - vt) + vt * wp.max(S(0.0), S(1.0) - mu[i] * push / lt) - shift[i]
             work(m[i], v[i], v_new, status)
             if contact_id[i] >= 0:
-                add_impulse(status.collider_impulse, contact_id[i], m[i] * (v_new - v[i]))
+                add_reaction(status.collider_impulse, torque, colliders, contact_id[i], q[i], time,
+                             m[i] * (v_new - v[i]))
             v[i] = v_new
 
     return friction
