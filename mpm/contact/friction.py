@@ -64,6 +64,48 @@ RANK = 1.0e-6  # an eigenvalue of a singular stick block below this fraction of 
 
 
 @functools.cache
+def make_coulomb_round(t: Types):
+    """``coulomb_round(state, R_t, limit, u_t, L, tol) -> (state', L', moved)``:
+    one round of Coulomb's rule for a pair stuck (STICK) or sliding (SLIP)
+    after a solve, shared by the bins between bodies (here) and the nodes
+    at a collider (mpm.implicit.rough). ``R_t``: the tangential reaction;
+    ``limit``: mu times the normal reaction; ``u_t``: the slip; ``L``: the
+    sliding load. A stuck pair whose |R_t| exceeds the limit slides with
+    L' = limit R_t / |R_t|; a sliding pair whose slip the load turned round
+    (u_t . L > 0) sticks (L' = 0); a sliding pair's load takes the limit
+    against its slip (its old direction where it does not slip). ``moved``:
+    1 where the state changed or the load moved by more than ``tol`` of the
+    limit."""
+    S, vec = t.scalar, t.vec
+
+    @wp.func
+    def coulomb_round(state: int, Rt: vec, limit: S, ut: vec, L: vec, tol: S):
+        after = state
+        L_new = L
+        moved = int(0)
+        if state == STICK:
+            lt = wp.length(Rt)
+            if lt > limit:
+                after = SLIP
+                L_new = Rt * (limit / lt)
+                moved = 1
+        elif wp.dot(ut, L) > S(0.0):  # the load turned the slip round: the pair sticks
+            after = STICK
+            L_new = vec()
+            moved = 1
+        else:
+            lu = wp.length(ut)
+            L_new = L * (limit / wp.max(wp.length(L), S(1.0e-30)))
+            if lu > S(0.0):
+                L_new = ut * (-limit / lu)
+            if wp.length(L_new - L) > tol * limit:
+                moved = 1
+        return after, L_new, moved
+
+    return coulomb_round
+
+
+@functools.cache
 def make_friction_constraint(t: Types, normal: str = "difference"):
     """``frame``, ``sums``, ``project``, ``classify``, ``load``, ``work``:
     the kernels of friction inside the implicit solve (module docstring)."""
@@ -75,6 +117,7 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
     outward = make_outward(t, normal)
     occupancy = make_occupancy(t)
     remove = make_remove(t)
+    coulomb_round = make_coulomb_round(t)
 
     @wp.func
     def pseudo_solve(den: mat, num: vec):
@@ -211,28 +254,12 @@ def make_friction_constraint(t: Types, normal: str = "difference"):
             return
         if st == NONE:
             return
-        limit = mu[g] * lam_n
-        if st == STICK:
-            lam_t = lam - wp.dot(lam, n) * n
-            lt = wp.length(lam_t)
-            if lt > limit:
-                state[g] = SLIP
-                after[g] = lam_t * (limit / lt)
-                wp.atomic_add(changed, 0, 1)
-            return
-        u = rel[g] - wp.dot(rel[g], n) * n
-        if wp.dot(u, f) > S(0.0):  # the load turned the slip round: the bin sticks
-            state[g] = STICK
-            after[g] = vec()
-            wp.atomic_add(changed, 0, 1)
-            return
-        lu = wp.length(u)
-        f_new = f * (limit / wp.max(wp.length(f), S(1.0e-30)))
-        if lu > S(0.0):
-            f_new = u * (-limit / lu)
-        if wp.length(f_new - f) > tol * limit:
-            wp.atomic_add(changed, 0, 1)
+        st_new, f_new, moved = coulomb_round(st, lam - wp.dot(lam, n) * n, mu[g] * lam_n,
+                                             rel[g] - wp.dot(rel[g], n) * n, f, tol)
+        state[g] = st_new
         after[g] = f_new
+        if moved != 0:
+            wp.atomic_add(changed, 0, 1)
 
     @warp_kernel
     def load(cbin: wp.array(dtype=wp.int32), coef: wp.array(dtype=vec), bnormal: wp.array(dtype=vec),

@@ -39,12 +39,13 @@ import warp as wp
 
 from ..collider_device import make_add_reaction
 from ..collider_shapes import make_collider_data
+from ..contact.friction import STICK, SLIP, make_coulomb_round
 from ..grid import make_work
 from ..launch import warp_kernel
 from ..stepping.status import StepStatus
 from ..types import Types
 
-NONE, STICK, SLIP = -1, 1, 2  # a node's state against a frictional collider (NONE: not in frictional contact)
+NONE = -1  # a node not in frictional contact (STICK, SLIP: mpm.contact.friction's)
 
 
 @functools.cache
@@ -56,6 +57,7 @@ def make_rough(t: Types, rigid: bool = False):
     vec, mat = t.vec, t.mat
     work_of = make_work(t)
     add_reaction = make_add_reaction(t, rigid)
+    coulomb_round = make_coulomb_round(t)  # the same rule as between bodies
     Data = make_collider_data(t)
 
     @warp_kernel
@@ -107,27 +109,11 @@ def make_rough(t: Types, rigid: bool = False):
             return
         limit = mu[i] * wp.max(wp.dot(reaction[i], normal[i]), S(0.0))
         P = held[i]
-        if st == STICK:
-            Rt = P * reaction[i]
-            lt = wp.length(Rt)
-            if lt > limit:
-                state_after[i] = SLIP
-                load_after[i] = Rt * (limit / lt)
-                wp.atomic_add(changed, 0, 1)
-            return
-        ut = P * (v[i] + shift[i] - u[i])
-        if wp.dot(ut, L) > S(0.0):  # the load turned the slip round: the node sticks
-            state_after[i] = STICK
-            load_after[i] = vec()
-            wp.atomic_add(changed, 0, 1)
-            return
-        lu = wp.length(ut)
-        L_new = L * (limit / wp.max(wp.length(L), S(1.0e-30)))
-        if lu > S(0.0):
-            L_new = ut * (-limit / lu)
-        if wp.length(L_new - L) > tol * limit:
-            wp.atomic_add(changed, 0, 1)
+        st_new, L_new, moved = coulomb_round(st, P * reaction[i], limit, P * (v[i] + shift[i] - u[i]), L, tol)
+        state_after[i] = st_new
         load_after[i] = L_new
+        if moved != 0:
+            wp.atomic_add(changed, 0, 1)
 
     @warp_kernel
     def work(m: wp.array(dtype=S), state: wp.array(dtype=wp.int32), load: wp.array(dtype=vec),
