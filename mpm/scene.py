@@ -12,6 +12,7 @@ from typing import Protocol, Sequence, Union
 import numpy as np
 
 from .colliders import Collider
+from .joints import Joint
 from .rigid import RigidBody
 from .materials import Material
 
@@ -372,6 +373,8 @@ class Scene:
     """rigid colliders other than the walls (mpm.colliders)"""
     rigid_bodies: list[RigidBody] = field(default_factory=list)
     """rigid bodies the material pushes back, advanced by Newton (mpm.rigid; default none)"""
+    joints: list[Joint] = field(default_factory=list)
+    """joints holding rigid bodies to the world or to one another (mpm.joints; default none)"""
     loads: list = field(default_factory=list)
     """external loads: point loads, tractions, body forces (mpm.loads.Load)"""
     particle_volume: str = "shape"
