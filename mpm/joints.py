@@ -123,7 +123,8 @@ def scene_problems(scene) -> list[tuple[str, str]]:
             out.append((key, f"{type(j).__name__}; accepted: mpm.Joint"))
             continue
         if j.type not in kinds:
-            out.append((f"{key}.type", f"{j.type!r}; accepted in {dim}D: {', '.join(kinds)}"))
+            out.append((f"{key}.type", f"{j.type!r}; accepted: {', '.join(kinds)}"
+                                       + (" (in 2D; ball in 3D)" if dim == 2 else "")))
         child = _body(j.child, names)
         if child is None:
             out.append((f"{key}.child", f"{j.child!r} is no rigid body; accepted: {which}"))
