@@ -508,3 +508,4 @@ def test_a_joint_is_read_and_its_bad_keys_refused():
             ("scene.joints.0.axis=[0,0,1]", "scene.joints[0].axis", "null (about z in 2D)")):
         err = refused(base + [override])
         assert err.key == key and accepted in str(err), (override, str(err))
+    assert refused(base + ["run.graph=true"]).key == "run.graph"  # (the step is read back every step)
