@@ -32,8 +32,10 @@ back once per step, after G2P: one float64 copied to the host per step
 (``Coupler.reads`` counts them; 0 where the driver skips the step), then
 Newton steps by it; the steps of a batch otherwise run as before. That read
 cannot sit in a CUDA graph: the Driver does not capture one for a scene with
-joints (``graph=True`` is refused). Scenes without joints keep the
-device-only path (mpm.rigid_coupling).
+joints (``graph=True`` is refused). A scene whose rigid bodies meet the
+walls or one another (mpm.rigid_contact) takes the same path, with
+collision shapes and Newton's collision pipeline. Scenes without joints or
+rigid contact keep the device-only path (mpm.rigid_coupling).
 """
 
 from __future__ import annotations
@@ -192,6 +194,7 @@ def articulated_model(scene, device):
     import newton
     import warp as wp
 
+    from . import rigid_contact
     from .rigid_coupling import add_shape, quaternion
 
     dim = scene.dim
@@ -200,9 +203,16 @@ def articulated_model(scene, device):
     bodies = scene.rigid_bodies
     centres = [np.pad(b.center(), (0, 3 - dim)) for b in bodies]
     turns = [quaternion(b.turned(dim)) for b in bodies]
+    mode = getattr(scene, "rigid_contact", "none")
+    contact = None if mode == "none" else rigid_contact.shape_config(scene)
+    shapes = []
     for i, b in enumerate(bodies):
         link = builder.add_link(xform=wp.transform(tuple(centres[i]), wp.quat(*turns[i])), label=b.name or f"rigid{i}")
-        add_shape(builder, link, b, dim)
+        shapes.append(add_shape(builder, link, b, dim, contact))
+    if mode != "none":
+        rigid_contact.add_walls(builder, scene)
+    if mode == "walls":
+        rigid_contact.filter_bodies(builder, shapes)
 
     def frame(body: int, point: np.ndarray):
         """The frame at ``point`` aligned with the world, in ``body``'s frame at its initial pose (-1: the
@@ -267,7 +277,7 @@ def articulated_model(scene, device):
 
 
 class Articulation:
-    """A scene's rigid bodies and joints in Newton (module docstring):
+    """A scene's rigid bodies, joints and (mpm.rigid_contact) contact in Newton (module docstring):
     ``model``, ``state`` (``joint_q``, ``joint_qd``: the generalized state;
     ``body_q``, ``body_qd``: the bodies' poses and velocities from it;
     ``body_f``: the wrench on each body over the step, world frame, at its
@@ -284,7 +294,14 @@ class Articulation:
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
         self.solver = newton.solvers.SolverFeatherstone(self.model, angular_damping=0.0)
         self.control = self.model.control()
+        # contact (mpm.rigid_contact): Newton's collision pipeline, run at each step's start
+        self.pipeline = newton.CollisionPipeline(self.model) if getattr(scene, "rigid_contact", "none") != "none" \
+            else None
+        self.contacts = self.pipeline.contacts() if self.pipeline is not None else None
 
     def step(self, dt: float) -> None:
-        """Advance by ``dt`` [s] with the wrench in ``state.body_f`` and gravity (in place)."""
-        self.solver.step(self.state, self.state, self.control, None, dt)  # pyright: ignore[reportArgumentType]
+        """Advance by ``dt`` [s] with the wrench in ``state.body_f``, gravity and (mpm.rigid_contact) the
+        contacts found at the step's start (in place)."""
+        if self.pipeline is not None:
+            self.pipeline.collide(self.state, self.contacts)  # pyright: ignore[reportArgumentType]
+        self.solver.step(self.state, self.state, self.control, self.contacts, dt)  # pyright: ignore[reportArgumentType]

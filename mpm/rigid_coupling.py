@@ -67,27 +67,31 @@ def quaternion(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return (axis[0] * s, axis[1] * s, axis[2] * s, float(np.cos(0.5 * theta)))
 
 
-def add_shape(builder, body: int, b, dim: int) -> None:
+def add_shape(builder, body: int, b, dim: int, contact=None) -> int:
     """Rigid body ``b``'s shape on the Newton body ``body``, of the body's
-    density (its mass and inertia; no collision; module docstring)."""
+    density (its mass and inertia; module docstring); no collision, or that
+    of ``contact`` (a ShapeConfig, mpm.rigid_contact). Its shape index."""
     import newton
 
     c = b.shape
-    cfg = newton.ModelBuilder.ShapeConfig(density=b.total_mass(dim) / b.volume(dim), has_shape_collision=False,
-                                          has_particle_collision=False)
+    density = b.total_mass(dim) / b.volume(dim)
+    if contact is None:
+        cfg = newton.ModelBuilder.ShapeConfig(density=density, has_shape_collision=False, has_particle_collision=False)
+    else:
+        cfg = contact.copy()
+        cfg.density = density
     if c.type == "box":
         h = tuple(c.half_size) + (0.5,) * (3 - dim)  # (2D: one metre deep)
-        builder.add_shape_box(body, hx=h[0], hy=h[1], hz=h[2], cfg=cfg)
-    elif c.type == "sphere" and dim == 2:
-        builder.add_shape_cylinder(body, radius=c.radius, half_height=0.5, cfg=cfg)  # a disc, along z
-    elif c.type == "sphere":
-        builder.add_shape_sphere(body, radius=c.radius, cfg=cfg)
-    else:
-        from .colliders import axis_vector
+        return builder.add_shape_box(body, hx=h[0], hy=h[1], hz=h[2], cfg=cfg)
+    if c.type == "sphere" and dim == 2:
+        return builder.add_shape_cylinder(body, radius=c.radius, half_height=0.5, cfg=cfg)  # a disc, along z
+    if c.type == "sphere":
+        return builder.add_shape_sphere(body, radius=c.radius, cfg=cfg)
+    from .colliders import axis_vector
 
-        turn = wp.quat_between_vectors(wp.vec3(0.0, 0.0, 1.0), wp.vec3(*axis_vector(c.axis, 3)))
-        builder.add_shape_cylinder(body, xform=wp.transform((0.0, 0.0, 0.0), turn), radius=c.radius,
-                                   half_height=c.half_height, cfg=cfg)
+    turn = wp.quat_between_vectors(wp.vec3(0.0, 0.0, 1.0), wp.vec3(*axis_vector(c.axis, 3)))
+    return builder.add_shape_cylinder(body, xform=wp.transform((0.0, 0.0, 0.0), turn), radius=c.radius,
+                                      half_height=c.half_height, cfg=cfg)
 
 
 def newton_model(scene, device):
@@ -235,7 +239,8 @@ class Coupler:
     ``newton``: the Newton model; ``state``: its state (``body_q``,
     ``body_qd``, also named here for checkpoints; ``body_f`` the wrench the
     material applied over the last step). A scene with joints (mpm.joints)
-    has ``joints``, the :class:`mpm.joints.Articulation` that Newton's
+    or rigid contact (mpm.rigid_contact) has ``joints``, the
+    :class:`mpm.joints.Articulation` that Newton's
     Featherstone solver advances (its generalized state ``joint_q``,
     ``joint_qd`` named here too), and reads each step back once
     (``reads``); else ``joints`` is None and nothing is read."""
@@ -246,7 +251,7 @@ class Coupler:
         self.first = len(scene.colliders)
         self.n = len(scene.rigid_bodies)
         self.place_kernel = make_place_bodies(t)
-        if getattr(scene, "joints", None):
+        if getattr(scene, "joints", None) or getattr(scene, "rigid_contact", "none") != "none":
             from .joints import Articulation
 
             self.joints = Articulation(scene, model.device)

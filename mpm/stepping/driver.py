@@ -187,8 +187,8 @@ class Driver:
         if self.graph and not device.is_cuda:
             raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
         if self.graph and host_step:
-            raise ValueError("graph: a scene with joints reads each step back for Newton's solver (mpm.joints), "
-                             "which a CUDA graph cannot hold; accepted: false or null")
+            raise ValueError("graph: a scene with joints or rigid contact reads each step back for Newton's solver "
+                             "(mpm.joints), which a CUDA graph cannot hold; accepted: false or null")
         if self.detection.action != "off" and not opt.track_energy:
             raise ValueError("detection: the blow-up detection needs the step's energies "
                              "(SolverOptions(track_energy=True)), or Detection(action='off')")

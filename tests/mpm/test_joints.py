@@ -368,3 +368,107 @@ def test_joints_that_break_the_tree_or_the_motion_are_refused():
     with pytest.raises(SceneError, match=r"^rigid_bodies\[0\].angular_velocity: \(1.0, 0.0, 0.0\) is not along "
                                          r"joints\[0\].axis; accepted: a multiple of the axis"):
         mpm.build(scene, mpm.KERNELS["quadratic"])
+
+
+def _dropped(mode: str, dim: int = 2):
+    """Rigid bodies over the floor (walls' faces at 3 cells, 0.1875 m at 16 cells), a small block of
+    material in a far corner: 2D a disc (r = 0.05, density 2000) 0.11 m above the floor, a box
+    0.10 x 0.06 turned by 0.2 rad, a disc thrown at the left wall (-1.5 m/s); 3D a ball."""
+    if dim == 2:
+        bodies = [mpm.RigidBody(Collider.sphere((0.5, 0.3475), 0.05), density=2000.0, name="disc"),
+                  mpm.RigidBody(Collider.box((0.7, 0.35), (0.05, 0.03)), density=2000.0, orientation=0.2, name="box"),
+                  mpm.RigidBody(Collider.sphere((0.3, 0.3), 0.05), density=1000.0, velocity=(-1.5, 0.0),
+                                name="thrown")]
+    else:
+        bodies = [mpm.RigidBody(Collider.sphere((0.5, 0.36, 0.5), 0.05), density=2000.0, name="ball")]
+    return mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, bodies=[_block(dim, (0.75,) * dim)],
+                     gravity=(0.0, -G, 0.0)[:dim], walls=("slip",) * 2 * dim, rigid_bodies=bodies,
+                     rigid_contact=mode)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_body_dropped_on_the_floor_rests_on_it(dim):
+    """rigid_contact = walls: bodies dropped onto the floor (the closed
+    wall's face, 3 cells in: 0.1875 m) come to rest on it after 1 s at
+    dt = 0.5 ms, float32: each one's lowest point between the face and
+    m g / ke below it (the penalty's sag with one contact point holding it
+    all; measured: a disc 0.8 mm, of 1.5 mm allowed; a box, landing on a
+    corner, lies flat, 0.3 mm), its vertical speed below 1 mm/s and its
+    rate below 0.01 rad/s (the floor is frictionless, as the walls are: the
+    box, turned by its landing, slides on); the disc thrown at the left
+    wall at 1.5 m/s bounced off its face (it never went past it by more
+    than an undamped penalty spring would let it, v sqrt(m / ke): 13 mm;
+    measured 3.9 mm; and moved right after). Without contact (none, the default)
+    the same bodies fall through the floor."""
+    floor = 3.0 / 16.0
+    for mode in ("walls", "none"):
+        scene = _dropped(mode, dim)
+        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32")
+        solver = mpm.Solver(model, mpm.EMPM())
+        solver.prepare(state)
+        coupler = solver.conditions.rigid
+        xs = []
+        for _ in range(2000):
+            solver.advance(state, 5.0e-4)
+            xs.append(coupler.poses()["position"][:, 0])
+        p = coupler.poses()
+        sag = p["mass"] * G / scene.rigid_contact_stiffness
+        lowest = []
+        for i, b in enumerate(scene.rigid_bodies):
+            if b.shape.type == "box":  # its corners' lowest y
+                th = 2.0 * np.arctan2(p["quaternion"][i][2], p["quaternion"][i][3])
+                hx, hy = b.shape.half_size
+                lowest.append(p["position"][i][1] - abs(hx * np.sin(th)) - abs(hy * np.cos(th)))
+            else:
+                lowest.append(p["position"][i][1] - b.shape.radius)
+        lowest = np.array(lowest)
+        if mode == "none":
+            assert np.all(lowest < floor - 0.5), lowest
+            continue
+        assert np.all(lowest[:2] <= floor) and np.all(lowest >= floor - sag), (lowest - floor, sag)
+        # at rest on it: no vertical motion, no turning (the floor is frictionless: a body may slide along it)
+        assert np.abs(p["velocity"][:2, 1]).max() < 1e-3, p["velocity"]  # (the thrown one aside)
+        assert np.abs(p["angular_velocity"][:2]).max() < 1e-2, p["angular_velocity"]
+        if dim == 2:
+            x = np.array(xs)[:, 2]
+            # the left wall's face is at the floor's distance; an impact at v sinks at most v sqrt(m / ke) (one point)
+            assert x.min() >= floor + 0.05 - 1.5 * np.sqrt(p["mass"][2] / scene.rigid_contact_stiffness), x.min()
+            assert x[-1] > x.min() + 0.05  # it came back
+            assert abs(np.sin(2.0 * np.arctan2(p["quaternion"][1][2], p["quaternion"][1][3]))) < 1e-3  # lies flat
+
+
+def test_rigid_bodies_meet_one_another_with_contact_all():
+    """rigid_contact = all: a disc (r = 0.05) dropped onto another resting
+    on the floor, exactly above it, rests on it (centres 2 r apart, less
+    the penalty's sag m g / ke at most); with walls only it falls through
+    it onto the floor."""
+    floor = 3.0 / 16.0
+    for mode in ("all", "walls"):
+        low = mpm.RigidBody(Collider.sphere((0.5, floor + 0.05), 0.05), density=2000.0, name="low")
+        high = mpm.RigidBody(Collider.sphere((0.5, floor + 0.2), 0.05), density=1000.0, name="high")
+        scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, bodies=[_block(2, (0.75, 0.75))],
+                          gravity=(0.0, -G), rigid_bodies=[low, high], rigid_contact=mode)
+        model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float32")
+        solver = mpm.Solver(model, mpm.EMPM())
+        solver.prepare(state)
+        for _ in range(1200):
+            solver.advance(state, 5.0e-4)
+        p = solver.conditions.rigid.poses()
+        gap = p["position"][1][1] - p["position"][0][1]
+        sag = (p["mass"][0] + p["mass"][1]) * G / scene.rigid_contact_stiffness
+        if mode == "all":
+            assert 0.1 - sag <= gap <= 0.1, (gap, sag)
+            assert np.abs(p["velocity"][:, :2]).max() < 1e-3
+        else:
+            assert abs(gap) < 0.01, gap  # both on the floor, one through the other
+
+
+def test_bad_rigid_contact_is_refused_in_one_line():
+    finite = "accepted: a finite number"
+    for change, key in ((dict(rigid_contact="floor"), "rigid_contact: 'floor'; accepted: none, walls, all"),
+                        (dict(rigid_contact_stiffness=0.0), f"rigid_contact_stiffness: 0.0; {finite} > 0"),
+                        (dict(rigid_contact_damping=-1.0), f"rigid_contact_damping: -1.0; {finite} >= 0")):
+        scene = mpm.Scene(**(vars(_dropped("walls")) | change))
+        with pytest.raises(SceneError) as err:
+            mpm.build(scene, mpm.KERNELS["quadratic"])
+        assert str(err.value).startswith(key) and "\n" not in str(err.value), str(err.value)
