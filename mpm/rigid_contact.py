@@ -11,10 +11,11 @@ Newton's contact is a penalty one: each contact point pushes with
 ``rigid_contact_stiffness`` ke [N/m per point; 2D: per metre of depth] times
 its penetration and ``rigid_contact_damping`` kd [N s/m] times its closing
 speed, frictionless (walls are frictionless too). A body at rest on a
-floor sinks by m g / (n ke) with n its contact points (2D: 2 for a disc, 4
-for a box; a fraction of a millimetre at the defaults for a body of 10 kg
-per metre); the penalty is explicit, stable while dt sqrt(n ke / m) stays
-well below 2 (the defaults: dt below a few ms for 1 kg). A scene with
+floor sinks by m g / (n ke) with n its contact points (a fraction of a
+millimetre at the defaults for a body of 10 kg per metre); the penalty is
+explicit, stable while dt sqrt(n ke / m) and dt n kd / m stay well below 2
+(the defaults and one point: dt below about 2 ms for 1 kg; not checked
+before the run). A scene with
 contact is advanced as a scene with joints is (mpm.joints: Newton's
 Featherstone solver, the step read back once per step), after Newton's
 collision pipeline finds the contacts at the step's start.

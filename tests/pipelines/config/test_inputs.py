@@ -509,3 +509,18 @@ def test_a_joint_is_read_and_its_bad_keys_refused():
         err = refused(base + [override])
         assert err.key == key and accepted in str(err), (override, str(err))
     assert refused(base + ["run.graph=true"]).key == "run.graph"  # (the step is read back every step)
+
+
+
+def test_rigid_contact_is_read_and_its_bad_keys_refused():
+    """scene.rigid_contact and its penalty reach mpm.Scene; an unknown mode
+    and a stiffness that is not positive are refused in one line."""
+    from helpers import spec_for
+
+    s = spec_for(["scene=pendulum_jelly_2d", "scene.rigid_contact=all", "scene.rigid_contact_stiffness=2e5",
+                  "scene.rigid_contact_damping=50"]).scene
+    assert (s.rigid_contact, s.rigid_contact_stiffness, s.rigid_contact_damping) == ("all", 2e5, 50.0)
+    err = refused(["scene=pendulum_jelly_2d", "scene.rigid_contact=floor"])
+    assert err.key == "scene.rigid_contact" and "none, walls, all" in str(err)
+    assert refused(["scene=pendulum_jelly_2d", "scene.rigid_contact_stiffness=0"]).key == \
+        "scene.rigid_contact_stiffness"
