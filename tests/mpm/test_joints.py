@@ -223,6 +223,53 @@ def test_pendulum_striking_a_jelly_block_never_gains_energy(gravity):
     assert abs(r["omega"]) < 0.8 * r["omega_in"], (r["omega"], r["omega_in"])
 
 
+@pytest.mark.parametrize("kind", ["revolute", "ball"])
+def test_3d_hinged_ball_striking_a_block_never_gains_energy(kind):
+    """3D, float64, no gravity: a ball (r = 0.05 m, density 2000, mu = 0.3)
+    hinged 0.25 m from its centre (revolute about z, or a ball joint),
+    turning at 6 rad/s, strikes an elastic block off its centre line and is
+    set spinning: the energy (the ball's 1/2 m v^2 + 1/2 omega . I omega, the
+    material's kinetic and elastic) never rises above its start by more
+    than the float32 body state's rounding (3e-6 of it; measured 6.4e-7
+    revolute, 1.1e-6 ball, over 300 steps); the anchor stays within 1e-6 m
+    (measured 0.8e-7, 1.4e-7); the block took momentum along +x."""
+    anchor, length, th0 = np.array([0.5, 0.75, 0.5]), 0.25, 0.6
+    centre = anchor + length * np.array([-np.sin(th0), -np.cos(th0), 0.0])
+    bob = mpm.RigidBody(Collider.sphere(tuple(centre), 0.05, boundary="separate", friction=0.3), density=2000.0,
+                        angular_velocity=(0.0, 0.0, 6.0), name="bob")
+    block = mpm.Body(mpm.Box((0.61, 0.5, 0.53), (0.05, 0.05, 0.05)), FixedCorotated(E=2e5, nu=0.3, rho=1000.0))
+    joint = mpm.Joint("bob", tuple(anchor), type=kind, axis=(0.0, 0.0, 1.0) if kind == "revolute" else None)
+    scene = mpm.Scene(dim=3, domain=(1.0,) * 3, resolution=24, bodies=[block], gravity=(0.0, 0.0, 0.0),
+                      walls=("slip",) * 6, rigid_bodies=[bob], joints=[joint], ppc=8)
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64")
+    solver = mpm.Solver(model, mpm.EMPM())
+    solver.prepare(state)
+    coupler = solver.conditions.rigid
+    m = model.mass.numpy()
+    inertia = coupler.newton.body_inertia.numpy()[0].astype(np.float64)  # (a ball: the same in any frame)
+    pivot = anchor - centre
+
+    def body_energy():
+        p = coupler.poses()
+        v, w = p["velocity"][0], p["angular_velocity"][0]
+        return 0.5 * p["mass"][0] * v @ v + 0.5 * w @ inertia @ w
+
+    E0, rise, drift, report = None, -np.inf, 0.0, None
+    for _ in range(300):
+        v = state.v.numpy()
+        kinetic, e_body = 0.5 * np.sum(m * np.sum(v * v, axis=1)), body_energy()
+        report = solver.advance(state, solver.timestep.stable_dt(0.4, report))
+        E = kinetic + e_body + solver.step_energy()
+        E0 = E if E0 is None else E0
+        rise = max(rise, E - E0)
+        p = coupler.poses()
+        drift = max(drift, float(np.linalg.norm(p["position"][0] + quat_rotate(p["quaternion"][0], pivot) - anchor)))
+    assert E0 is not None
+    assert rise <= 3e-6 * E0, rise / E0
+    assert drift < 1e-6, drift
+    assert (m @ state.v.numpy())[0] > 0.5, m @ state.v.numpy()
+
+
 def double_pendulum(dt: float = 1.0e-3, duration: float = 1.0) -> dict:
     """A rod-like box (0.02 x 0.2 m, turned 0.5 rad) hinged to the world at
     its top, a disc (r = 0.03 m) hinged to its bottom end (a body-to-body
