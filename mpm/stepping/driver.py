@@ -184,11 +184,11 @@ class Driver:
         host_step = bool(getattr(rigid, "reads_step", False))  # joints: each step read back (mpm.joints)
         self.graph = bool(graph if graph is not None else opt.batched and device.is_cuda and not host_step) \
             and self.k > 1
-        if self.graph and not device.is_cuda:
-            raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
         if self.graph and host_step:
             raise ValueError("graph: a scene with joints or rigid contact reads each step back for Newton's solver "
                              "(mpm.joints), which a CUDA graph cannot hold; accepted: false or null")
+        if self.graph and not device.is_cuda:
+            raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
         if self.detection.action != "off" and not opt.track_energy:
             raise ValueError("detection: the blow-up detection needs the step's energies "
                              "(SolverOptions(track_energy=True)), or Detection(action='off')")

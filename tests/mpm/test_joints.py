@@ -356,6 +356,20 @@ def test_batched_steps_with_joints_move_the_bodies_as_single_steps_do():
             assert np.array_equal(a, b), k
 
 
+def test_a_cuda_graph_is_refused_with_joints():
+    """The step read back for Newton cannot sit in a CUDA graph: the Driver
+    refuses graph=True for a scene with joints, in one line, before the
+    device (so on the CPU too)."""
+    disc = mpm.RigidBody(Collider.sphere((0.5, 0.52), 0.05), density=800.0, name="disc")
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, gravity=(0.0, -G), bodies=[_block(2, (0.3, 0.3))],
+                      rigid_bodies=[disc], joints=[mpm.Joint("disc", (0.3, 0.52))])
+    model, state = mpm.build(scene, mpm.QUADRATIC, "float32", "cpu")
+    solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(batched=True))
+    with pytest.raises(ValueError, match=r"^graph: a scene with joints or rigid contact reads each step back .*; "
+                                         r"accepted: false or null$"):
+        mpm.Driver(solver, state, mpm.StepPolicy(steps=4), sync_every=2, graph=True)
+
+
 def _hinged(dim=2, **change):
     body = mpm.RigidBody(Collider.box((0.5, 0.5, 0.5)[:dim], (0.05,) * dim), density=500.0, name="box")
     keys = dict(child="box", anchor=(0.5, 0.6, 0.5)[:dim]) | change
