@@ -14,6 +14,8 @@ from .checkpoint import CheckpointError
 from .colliders import BOUNDARIES as COLLIDER_BOUNDARIES
 from .colliders import KINDS as COLLIDER_KINDS
 from .colliders import Collider
+from .joints import JOINT_TYPES, Joint
+from .rigid_contact import RIGID_CONTACTS
 from .rigid import RigidBody
 from .integrators import INTEGRATORS, Explicit, Implicit
 from .kernels import COMPACT, CUBIC, KERNELS, LINEAR, QUADRATIC, Kernel, register_kernel
@@ -38,7 +40,8 @@ __all__ = [
     # scenes
     "Scene", "Body", "Box", "Sphere", "Cylinder", "Bowl", "Compound", "MeshShape", "Rotated", "rotation_matrix",
     "KinematicRegion", "ContactPair",
-    "Collider", "RigidBody", "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES",
+    "Collider", "RigidBody", "Joint", "JOINT_TYPES", "RIGID_CONTACTS",
+    "COLLIDER_KINDS", "COLLIDER_BOUNDARIES", "Load", "LOAD_KINDS", "WALL_TYPES",
     "CONTACT_TYPES",
     "CONTACT_NORMALS",
     # materials

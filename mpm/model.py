@@ -19,6 +19,8 @@ from .loads import LoadError, LoadTable, resolve
 from .materials import Material
 from .params import instance_problem, refusal, violations
 from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
+from .joints import scene_problems as joint_problems
+from .rigid_contact import scene_problems as rigid_contact_problems
 from .rigid import scene_problems as rigid_problems
 from .stencil import stencil_cache
 from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
@@ -310,7 +312,7 @@ def check_scene(scene: Scene, kernel: Kernel) -> None:
     for i, c in enumerate(scene.colliders):
         for name, message in c.problems(d):
             raise SceneError(f"colliders[{i}].{name}", message)
-    for key, message in rigid_problems(scene):
+    for key, message in rigid_problems(scene) + joint_problems(scene) + rigid_contact_problems(scene):
         raise SceneError(key, message)
     if scene.loads and getattr(scene.solution, "has_body_force", False):
         raise SceneError("loads", "given with a manufactured solution, whose body force they would replace; "

@@ -69,39 +69,51 @@ def quaternion(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return (axis[0] * s, axis[1] * s, axis[2] * s, float(np.cos(0.5 * theta)))
 
 
+def add_shape(builder, body: int, b, dim: int, contact=None) -> int:
+    """Rigid body ``b``'s shape on the Newton body ``body``, of the body's
+    density (its mass and inertia; module docstring); no collision, or that
+    of ``contact`` (a ShapeConfig, mpm.rigid_contact). Its shape index."""
+    import newton
+
+    c = b.shape
+    density = b.total_mass(dim) / b.volume(dim)
+    if contact is None:
+        cfg = newton.ModelBuilder.ShapeConfig(density=density, has_shape_collision=False, has_particle_collision=False)
+    else:
+        cfg = contact.copy()
+        cfg.density = density
+    if c.type == "box":
+        h = tuple(c.half_size) + (0.5,) * (3 - dim)  # (2D: one metre deep)
+        return builder.add_shape_box(body, hx=h[0], hy=h[1], hz=h[2], cfg=cfg)
+    if c.type == "sphere" and dim == 2:
+        return builder.add_shape_cylinder(body, radius=c.radius, half_height=0.5, cfg=cfg)  # a disc, along z
+    if c.type == "sphere":
+        return builder.add_shape_sphere(body, radius=c.radius, cfg=cfg)
+    if c.type == "mesh":  # its vertices about the body's origin, the centroid (mpm.rigid.RigidBody.center)
+        assert c.mesh is not None  # mpm.rigid.RigidBody.problems checks
+        pts, tris = c.mesh.geometry
+        mesh = newton.Mesh((pts - b.center()).astype(np.float32), tris.reshape(-1))
+        return builder.add_shape_mesh(body, mesh=mesh, cfg=cfg)
+    from .colliders import axis_vector
+
+    turn = wp.quat_between_vectors(wp.vec3(0.0, 0.0, 1.0), wp.vec3(*axis_vector(c.axis, 3)))
+    return builder.add_shape_cylinder(body, xform=wp.transform((0.0, 0.0, 0.0), turn), radius=c.radius,
+                                      half_height=c.half_height, cfg=cfg)
+
+
 def newton_model(scene, device):
-    """The Newton model of ``scene``'s rigid bodies (module docstring), with
-    its gravity (2D: in the plane)."""
+    """The Newton model of ``scene``'s rigid bodies, each a free body
+    (module docstring), with its gravity (2D: in the plane)."""
     import newton
 
     dim = scene.dim
     gravity = tuple(scene.gravity) + (0.0,) * (3 - dim)
     builder = newton.ModelBuilder(gravity=gravity)
     for i, b in enumerate(scene.rigid_bodies):
-        c = b.shape
         centre = tuple(b.center()) + (0.0,) * (3 - dim)
         body = builder.add_body(xform=wp.transform(centre, wp.quat(*quaternion(b.turned(dim)))),
                                 label=b.name or f"rigid{i}")
-        cfg = newton.ModelBuilder.ShapeConfig(density=b.total_mass(dim) / b.volume(dim), has_shape_collision=False,
-                                              has_particle_collision=False)
-        if c.type == "box":
-            h = tuple(c.half_size) + (0.5,) * (3 - dim)  # (2D: one metre deep)
-            builder.add_shape_box(body, hx=h[0], hy=h[1], hz=h[2], cfg=cfg)
-        elif c.type == "sphere" and dim == 2:
-            builder.add_shape_cylinder(body, radius=c.radius, half_height=0.5, cfg=cfg)  # a disc, along z
-        elif c.type == "sphere":
-            builder.add_shape_sphere(body, radius=c.radius, cfg=cfg)
-        elif c.type == "mesh":  # its vertices about the body's origin, the centroid (mpm.rigid.RigidBody.center)
-            assert c.mesh is not None  # mpm.rigid.RigidBody.problems checks
-            pts, tris = c.mesh.geometry
-            mesh = newton.Mesh((pts - np.asarray(centre)).astype(np.float32), tris.reshape(-1))
-            builder.add_shape_mesh(body, mesh=mesh, cfg=cfg)
-        else:
-            from .colliders import axis_vector
-
-            turn = wp.quat_between_vectors(wp.vec3(0.0, 0.0, 1.0), wp.vec3(*axis_vector(c.axis, 3)))
-            builder.add_shape_cylinder(body, xform=wp.transform((0.0, 0.0, 0.0), turn), radius=c.radius,
-                                       half_height=c.half_height, cfg=cfg)
+        add_shape(builder, body, b, dim)
     return builder.finalize(device=device)
 
 
@@ -197,6 +209,39 @@ def make_push_bodies(t: Types):
     return push_bodies
 
 
+@functools.cache
+def make_wrench(t: Types):
+    """Kernel (scenes with joints, mpm.joints): each body's ``body_f``, minus
+    the material's impulse and angular impulse over the step as a force and
+    a torque (as :func:`make_push_bodies` takes them), and the step into
+    ``clock[0]`` for the host (0 where the driver skips it)."""
+    dim = t.dim
+
+    @warp_kernel
+    def wrench(control: StepControl, first: int, n_grids: float, impulse: wp.array(dtype=wp.float64),
+               torque: wp.array(dtype=wp.float64), body_f: wp.array(dtype=wp.spatial_vector),
+               clock: wp.array(dtype=wp.float64)):
+        b = wp.tid()
+        if control.skip[0] != wp.float64(0.0):
+            if b == 0:
+                clock[0] = wp.float64(0.0)
+            return
+        k = first + b  # pyright: ignore[reportOperatorIssue]
+        dt = control.dt[0]
+        per = wp.float64(-1.0) / (wp.float64(n_grids) * dt)  # minus the material's share, as a mean force
+        f = wp.vec3()
+        tau = wp.vec3()
+        for d in range(wp.static(dim)):
+            f[d] = float(impulse[k * dim + d] * per)
+        for a in range(3):
+            tau[a] = float(torque[3 * k + a] * per)
+        body_f[b] = wp.spatial_vector(f, tau)  # pyright: ignore[reportArgumentType]
+        if b == 0:
+            clock[0] = dt
+
+    return wrench
+
+
 class Coupler:
     """``model``'s rigid bodies in Newton and the two stages of a step that
     couple them to the material (module docstring): :meth:`place` before the
@@ -205,23 +250,45 @@ class Coupler:
     packed records and the angular impulses, ``control`` the step's clock.
     ``newton``: the Newton model; ``state``: its state (``body_q``,
     ``body_qd``, also named here for checkpoints; ``body_f`` the wrench the
-    material applied over the last step)."""
+    material applied over the last step). A scene with joints (mpm.joints)
+    or rigid contact (mpm.rigid_contact) has ``joints``, the
+    :class:`mpm.joints.Articulation` that Newton's
+    Featherstone solver advances (its generalized state ``joint_q``,
+    ``joint_qd`` named here too), and reads each step back once
+    (``reads``); else ``joints`` is None and nothing is read."""
 
     def __init__(self, model, conditions, control):
         t, scene = model.types, model.scene
         self.model, self.conditions, self.control = model, conditions, control
         self.first = len(scene.colliders)
         self.n = len(scene.rigid_bodies)
-        self.newton = newton_model(scene, model.device)
-        self.state = self.newton.state()
-        spins = [b.spin(scene.dim) for b in scene.rigid_bodies]
-        speeds = [tuple(b.velocity or ()) + (0.0,) * (3 - len(b.velocity or ())) for b in scene.rigid_bodies]
-        self.state.body_qd.assign(np.array([tuple(v) + tuple(w) for v, w in zip(speeds, spins)], np.float32))  # pyright: ignore[reportOptionalMemberAccess]
+        self.place_kernel = make_place_bodies(t)
+        if getattr(scene, "joints", None) or getattr(scene, "rigid_contact", "none") != "none":
+            from .joints import Articulation
+
+            self.joints = Articulation(scene, model.device)
+            self.newton, self.state = self.joints.model, self.joints.state
+            self.push_kernel = make_wrench(t)
+            self.clock = wp.zeros(1, dtype=wp.float64, device=model.device)  # the step, for the host [s]
+            self.reads = 0  # steps read back to the host
+            self.joint_q, self.joint_qd = self.state.joint_q, self.state.joint_qd
+        else:
+            self.joints = None
+            self.newton = newton_model(scene, model.device)
+            self.state = self.newton.state()
+            spins = [b.spin(scene.dim) for b in scene.rigid_bodies]
+            speeds = [tuple(b.velocity or ()) + (0.0,) * (3 - len(b.velocity or ())) for b in scene.rigid_bodies]
+            self.state.body_qd.assign(np.array([tuple(v) + tuple(w) for v, w in zip(speeds, spins)], np.float32))  # pyright: ignore[reportOptionalMemberAccess]
+            self.push_kernel = make_push_bodies(t)
         # the state's arrays, named here so that a checkpoint (mpm.checkpoint) holds them
         self.body_q, self.body_qd = self.state.body_q, self.state.body_qd
-        self.place_kernel, self.push_kernel = make_place_bodies(t), make_push_bodies(t)
         self.reach = wp.array([b.reach(scene.dim) for b in scene.rigid_bodies], dtype=wp.float64,
                               device=model.device)  # [m] each body's surface from its centre of mass
+
+    @property
+    def reads_step(self) -> bool:
+        """Whether each step is read back to the host (a scene with joints: mpm.joints)."""
+        return self.joints is not None
 
     def kernels(self) -> list:
         return [self.place_kernel, self.push_kernel]
@@ -243,8 +310,20 @@ class Coupler:
 
     def push(self, status) -> None:
         """The bodies advanced over the step with minus the material's impulse
-        (``status.collider_impulse``, mpm.stepping.status), plus gravity."""
+        (``status.collider_impulse``, mpm.stepping.status), plus gravity: by
+        Newton's integrator on the device, or (joints) by Newton's
+        Featherstone solver over the step read back (none where the driver
+        skips it)."""
         nm = self.newton
+        if self.joints is not None:
+            wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
+                self.control, self.first, float(self.model.kernel.n_grids), status.collider_impulse,
+                self.conditions.data.collider_torque, self.state.body_f, self.clock])
+            dt = float(self.clock.numpy()[0])
+            self.reads += 1
+            if dt > 0.0:
+                self.joints.step(dt)
+            return
         wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
             self.state.body_q, self.state.body_qd, nm.body_com, nm.body_inertia, nm.body_inv_mass,
             nm.body_inv_inertia, nm.gravity, self.control, self.first, float(self.model.kernel.n_grids),

@@ -12,6 +12,7 @@ from typing import Protocol, Sequence, Union
 import numpy as np
 
 from .colliders import Collider
+from .joints import Joint
 from .rigid import RigidBody
 from .materials import Material
 
@@ -372,6 +373,15 @@ class Scene:
     """rigid colliders other than the walls (mpm.colliders)"""
     rigid_bodies: list[RigidBody] = field(default_factory=list)
     """rigid bodies the material pushes back, advanced by Newton (mpm.rigid; default none)"""
+    joints: list[Joint] = field(default_factory=list)
+    """joints holding rigid bodies to the world or to one another (mpm.joints; default none)"""
+    rigid_contact: str = "none"
+    """what rigid bodies meet besides the material (mpm.rigid_contact.RIGID_CONTACTS): "none", "walls" (the
+    closed walls' faces) or "all" (the walls and each other)"""
+    rigid_contact_stiffness: float = 1.0e5
+    """penalty stiffness of a rigid body's contact point [N/m; 2D: per metre of depth] (mpm.rigid_contact)"""
+    rigid_contact_damping: float = 1.0e3
+    """penalty damping of a rigid body's contact point [N s/m; 2D: per metre of depth] (mpm.rigid_contact)"""
     loads: list = field(default_factory=list)
     """external loads: point loads, tractions, body forces (mpm.loads.Load)"""
     particle_volume: str = "shape"

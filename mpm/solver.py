@@ -145,6 +145,11 @@ def check_solver_inputs(model, scheme, options) -> None:
     if scene.contact == "shared" and scheme is not None and not isinstance(scheme, EMPM):
         raise ValueError("scheme: contact 'shared' (one grid for all bodies) needs the Eulerian scheme; "
                          "accepted: mpm.EMPM()")
+    if options is not None and isinstance(options.integrator, Implicit) and (
+            getattr(scene, "joints", None) or getattr(scene, "rigid_contact", "none") != "none"):
+        raise ValueError("options.integrator: joints and rigid contact (mpm.joints, mpm.rigid_contact) are "
+                         "advanced under the explicit integrator only; accepted: mpm.Explicit(), or no joints "
+                         "and rigid_contact 'none'")
     if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
             scene.solution, "has_body_force", False)):
         raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "

@@ -180,7 +180,13 @@ class Driver:
         self.solver, self.state, self.policy, self.k = solver, state, policy, int(k)
         self.detection = detection if detection is not None else Detection()
         self.observers = list(observers)
-        self.graph = bool(graph if graph is not None else opt.batched and device.is_cuda) and self.k > 1
+        rigid = getattr(getattr(solver, "conditions", None), "rigid", None)
+        host_step = bool(getattr(rigid, "reads_step", False))  # joints: each step read back (mpm.joints)
+        self.graph = bool(graph if graph is not None else opt.batched and device.is_cuda and not host_step) \
+            and self.k > 1
+        if self.graph and host_step:
+            raise ValueError("graph: a scene with joints or rigid contact reads each step back for Newton's solver "
+                             "(mpm.joints), which a CUDA graph cannot hold; accepted: false or null")
         if self.graph and not device.is_cuda:
             raise ValueError("graph: CUDA graphs need a CUDA device; accepted on the CPU: false")
         if self.detection.action != "off" and not opt.track_energy:

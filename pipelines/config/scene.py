@@ -22,7 +22,7 @@ from mpm.responses import QUANTITIES, REDUCTIONS
 from mpm.sampling import PARTICLE_VOLUMES
 from mpm.scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
-from .colliders import ColliderConfig, COLLIDERS, RigidBodyConfig
+from .colliders import ColliderConfig, COLLIDERS, JointConfig, RigidBodyConfig
 from .fields import ConfigError, Context, Family, check, choice, given, number, plain, setting, vector
 from .physics import MATERIAL
 from .shapes import SHAPES, ShapeConfig, fixed_shape
@@ -308,6 +308,14 @@ class SceneConfig:
     loads: List[LoadConfig] = setting([], "external loads: point loads, tractions, body forces")
     colliders: List[ColliderConfig] = setting([], "rigid colliders", family=COLLIDERS)
     rigid_bodies: List[RigidBodyConfig] = setting([], "rigid bodies the material pushes back, advanced by Newton")
+    joints: List[JointConfig] = setting([], "joints holding rigid bodies to the world or to one another (Newton)")
+    rigid_contact: str = setting("none", "what rigid bodies meet besides the material: none, walls (the closed "
+                                         "walls' faces) or all (the walls and each other)",
+                                 choices=mpm.RIGID_CONTACTS)
+    rigid_contact_stiffness: float = setting(1.0e5, "penalty stiffness of a rigid body's contact point [N/m; 2D: "
+                                                    "per metre of depth]", gt=0.0)
+    rigid_contact_damping: float = setting(1.0e3, "penalty damping of a rigid body's contact point [N s/m; 2D: "
+                                                  "per metre of depth]", ge=0.0)
     size: str = setting("default", "a key of sizes: its values replace resolution, ppc, ...")
     sizes: Dict[str, Any] = setting({}, "name -> {resolution: ..., ppc: ...}")
     particle_resolution: Optional[int] = setting(None, "sample the particles as on this grid (a fixed particle "
@@ -390,6 +398,9 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                       regions=regions, particle_resolution=sc.particle_resolution,
                       colliders=[c.build(f"{key}.colliders[{i}]", ctx) for i, c in enumerate(sc.colliders)],
                       rigid_bodies=[b.build(f"{key}.rigid_bodies[{i}]", ctx) for i, b in enumerate(sc.rigid_bodies)],
+                      joints=[j.build(f"{key}.joints[{i}]", ctx) for i, j in enumerate(sc.joints)],
+                      rigid_contact=sc.rigid_contact, rigid_contact_stiffness=sc.rigid_contact_stiffness,
+                      rigid_contact_damping=sc.rigid_contact_damping,
                       loads=[_load(f"{key}.loads[{i}]", ld, body_index, ctx) for i, ld in enumerate(sc.loads)])
     scene.solution = _solution(sc.solution, f"{key}.solution", scene)
     return scene, sc

@@ -221,6 +221,10 @@ def resolve(cfg) -> RunSpec:
     if scene.contact == "shared" and scheme.name != "empm":
         raise ConfigError("scene.contact", "'shared' (one grid for all bodies) needs scheme=empm; "
                                            "accepted with other schemes: frictionless, none")
+    if run.graph and (scene.joints or scene.rigid_contact != "none"):
+        raise ConfigError("run.graph", "true: a scene with joints or rigid contact reads each step back for "
+                                       "Newton's solver (mpm.joints), which a CUDA graph cannot hold; accepted: "
+                                       "false or null")
     if run.steps is None and run.duration is None:
         run.duration = sc.duration
     log = check(LogSettings, plain(cfg.log), "log")

@@ -72,6 +72,10 @@ CASES = {  # name: (scene, scheme, options, sync_every)
     "rigid": (lambda: ball(rigid_bodies=[mpm.RigidBody(mpm.Collider.sphere((0.5, 0.52), 0.05), density=800.0,
                                                        velocity=(0.0, -3.0), angular_velocity=1.0)]),
               mpm.EMPM, {}, 1),
+    # the disc hinged (mpm.joints): Newton's generalized state (joint_q, joint_qd) is the run's too
+    "hinged": (lambda: ball(rigid_bodies=[mpm.RigidBody(mpm.Collider.sphere((0.5, 0.52), 0.05), density=800.0,
+                                                        angular_velocity=-8.0, name="disc")],
+                            joints=[mpm.Joint("disc", (0.3, 0.52))]), mpm.EMPM, {}, 1),
 }
 STEPS, SAVE_AT = 24, 10
 
@@ -114,10 +118,13 @@ def test_a_resumed_run_ends_where_the_whole_run_ends_bit_for_bit(case, tmp_path)
         a, b = getattr(whole.state, name).numpy(), getattr(fresh.state, name).numpy()
         assert np.array_equal(a, b), f"{case}: state.{name} differs after the resume"
     assert np.array_equal(whole.solver.layout.lo, fresh.solver.layout.lo)
-    if case == "rigid":  # the disc struck the ball before the save, and ends where the whole run's does
+    if case == "rigid":  # the disc struck the ball before the save
         coupler = first.solver.conditions.rigid
         assert coupler.poses()["velocity"][0][1] > -3.0 + 9.81 * first.time + 1e-3
-        for name in ("body_q", "body_qd"):
+    if case == "hinged":  # the disc turned about its hinge before the save
+        assert first.solver.conditions.rigid.joint_q.numpy()[0] < -0.01
+    if case in ("rigid", "hinged"):  # the disc ends where the whole run's does
+        for name in ("body_q", "body_qd") + (("joint_q", "joint_qd") if case == "hinged" else ()):
             a, b = (getattr(d.solver.conditions.rigid, name).numpy() for d in (whole, fresh))
             assert np.array_equal(a, b), f"rigid: {name} differs after the resume"
     assert dict(whole.binding) == dict(fresh.binding) and whole.summary() == fresh.summary()

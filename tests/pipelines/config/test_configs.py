@@ -232,7 +232,7 @@ def test_run_length_and_logging_defaults():
 
 def closed_box(spec, velocities: bool = True) -> mpm.Scene:
     """The scene's bodies alone: open walls, no gravity, colliders, rigid
-    bodies, regions or closed-form solution (its body force), so that nothing outside the
+    bodies, joints, regions or closed-form solution (its body force), so that nothing outside the
     bodies acts; each body thrown towards the domain's centre (plus a sideways
     part of its own) and spinning, so that they move, turn and, where they
     touch, push each other."""
@@ -248,7 +248,7 @@ def closed_box(spec, velocities: bool = True) -> mpm.Scene:
                                           angular_velocity=(2.0 if d == 2 else (1.0, 2.0, -1.0)) if velocities
                                           else b.angular_velocity))
     return dataclasses.replace(s, bodies=bodies, walls=("open",) * (2 * d), gravity=(0.0,) * d, colliders=[],
-                               rigid_bodies=[], regions=[], solution=None)
+                               rigid_bodies=[], joints=[], regions=[], solution=None)
 
 
 def assert_conserved(scene, spec, steps: int, device: str):

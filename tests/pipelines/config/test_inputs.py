@@ -483,3 +483,44 @@ def test_a_rigid_body_is_read_and_its_bad_keys_refused():
                            (["scene.rigid_bodies.0.shape.center=[0.9,0.2]"], "rigid_bodies[0].shape.center")):
         text = refusal(replace_inline_mappings(["scene=floating_box_2d"] + overrides))
         assert key in text.split(": ")[0] and "; accepted: " in text and "\n" not in text, text
+
+
+def test_a_joint_is_read_and_its_bad_keys_refused():
+    """scene.joints: the hinge of the pendulum_jelly_2d scene becomes an
+    mpm.Joint; a missing body, an unknown type, a ball in 2D, an anchor
+    outside the domain or of the wrong size, an axis in 2D and a missing
+    child are refused in one line naming the key, with the accepted values."""
+    from helpers import spec_for
+
+    joint = spec_for(["scene=pendulum_jelly_2d"]).scene.joints[0]
+    assert type(joint).__name__ == "Joint" and joint.child == "bob" and joint.parent is None
+    assert tuple(joint.anchor) == (0.5, 0.45) and joint.type == "revolute"
+    base = ["scene=pendulum_jelly_2d"]
+    for override, key, accepted in (
+            ("scene.joints.0.child=lid", "scene.joints[0].child", "a rigid body's index (0 to 0) or name (bob)"),
+            ("scene.joints.0.child=2", "scene.joints[0].child", "a rigid body's index"),
+            ("scene.joints.0.child=null", "scene.joints[0].child", ""),
+            ("scene.joints.0.parent=jelly", "scene.joints[0].parent", "null (the world) or a rigid body's index"),
+            ("scene.joints.0.type=hinge", "scene.joints[0].type", "revolute, ball"),
+            ("scene.joints.0.type=ball", "scene.joints[0].type", "accepted: revolute (in 2D; ball in 3D)"),
+            ("scene.joints.0.anchor=[0.5,1.5]", "scene.joints[0].anchor", "a point in [0, 1] x [0, 1] [m]"),
+            ("scene.joints.0.anchor=[0.5]", "scene.joints[0].anchor", ""),
+            ("scene.joints.0.axis=[0,0,1]", "scene.joints[0].axis", "null (about z in 2D)")):
+        err = refused(base + [override])
+        assert err.key == key and accepted in str(err), (override, str(err))
+    assert refused(base + ["run.graph=true"]).key == "run.graph"  # (the step is read back every step)
+
+
+
+def test_rigid_contact_is_read_and_its_bad_keys_refused():
+    """scene.rigid_contact and its penalty reach mpm.Scene; an unknown mode
+    and a stiffness that is not positive are refused in one line."""
+    from helpers import spec_for
+
+    s = spec_for(["scene=pendulum_jelly_2d", "scene.rigid_contact=all", "scene.rigid_contact_stiffness=2e5",
+                  "scene.rigid_contact_damping=50"]).scene
+    assert (s.rigid_contact, s.rigid_contact_stiffness, s.rigid_contact_damping) == ("all", 2e5, 50.0)
+    err = refused(["scene=pendulum_jelly_2d", "scene.rigid_contact=floor"])
+    assert err.key == "scene.rigid_contact" and "none, walls, all" in str(err)
+    assert refused(["scene=pendulum_jelly_2d", "scene.rigid_contact_stiffness=0"]).key == \
+        "scene.rigid_contact_stiffness"

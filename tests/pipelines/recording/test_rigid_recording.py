@@ -168,3 +168,27 @@ def test_a_rerun_of_the_floating_box_reproduces_its_recording(tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "identical bit for bit" in r.stdout
+
+
+def test_the_pendulum_striking_a_jelly_block_is_recorded_hinged(tmp_path):
+    """scene=pendulum_jelly_2d up to just past the strike (0.45 s): the run
+    completes, the recording draws the disc (rigid/bob) at its Newton pose
+    on every frame, its centre 0.3 m from the hinge's anchor (0.5, 0.45) on
+    every frame to float32 rounding, and the jelly was pushed (its centre
+    moved along +x)."""
+    m = execute(spec_for(["scene=pendulum_jelly_2d", "run.duration=0.45", "log.every=50", "log.progress=false"]),
+                tmp_path)
+    assert m["status"] == "completed"
+    rec = recordings.read(tmp_path / "recording.rrd")
+    centre = np.array([0.2203883, 0.3412927])  # conf/scene/pendulum_jelly_2d.yaml
+    steps, shifts = rec.collider_shift["rigid/bob"]
+    _, mats = rec.collider_turn["rigid/bob"]
+    assert len(steps) >= 5
+    placed = np.array([R[:2, :2] @ centre + b[:2] for R, b in zip(mats, shifts)])
+    np.testing.assert_allclose(np.linalg.norm(placed - [0.5, 0.45], axis=1), 0.3, atol=2e-6)
+    _, x = rec.scalars["rigid/bob/position_x"]
+    assert x[-1] > 0.5  # it swung past the bottom
+    final = m["rigid_bodies"]["bob"]
+    assert np.linalg.norm(np.array(final["position"]) - [0.5, 0.45]) == pytest.approx(0.3, abs=2e-6)
+    jelly = rec.positions[0][:, 0].mean(), rec.positions[-1][:, 0].mean()
+    assert jelly[1] > jelly[0] + 1e-3, jelly
