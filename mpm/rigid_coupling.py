@@ -165,6 +165,29 @@ def make_place_bodies(t: Types):
 
 
 @functools.cache
+def make_material_wrench(t: Types):
+    """``material_wrench(k, dt, n_grids, impulse, torque)``: collider ``k``'s
+    wrench on its body over the step ``dt`` [s], minus the material's impulse
+    and angular impulse (summed over the kernel's ``n_grids`` grids) as a mean
+    force [N] and torque [N m] (a spatial vector, float32 as Newton's state)."""
+    dim = t.dim
+
+    @wp.func
+    def material_wrench(k: int, dt: wp.float64, n_grids: float, impulse: wp.array(dtype=wp.float64),
+                        torque: wp.array(dtype=wp.float64)):
+        per = wp.float64(-1.0) / (wp.float64(n_grids) * dt)  # minus the material's share, as a mean force
+        f = wp.vec3()
+        tau = wp.vec3()
+        for d in range(wp.static(dim)):
+            f[d] = float(impulse[k * dim + d] * per)
+        for a in range(3):
+            tau[a] = float(torque[3 * k + a] * per)
+        return wp.spatial_vector(f, tau)  # pyright: ignore[reportArgumentType]
+
+    return material_wrench
+
+
+@functools.cache
 def make_push_bodies(t: Types):
     """Kernel: each rigid body advanced by Newton's integrator over the
     step ``control.dt`` with minus the material's impulse and angular
@@ -172,6 +195,7 @@ def make_push_bodies(t: Types):
     from newton._src.solvers.solver import integrate_rigid_body
 
     dim = t.dim
+    material_wrench = make_material_wrench(t)
 
     @warp_kernel
     def push_bodies(body_q: wp.array(dtype=wp.transform), body_qd: wp.array(dtype=wp.spatial_vector),
@@ -183,16 +207,8 @@ def make_push_bodies(t: Types):
         b = wp.tid()
         if control.skip[0] != wp.float64(0.0):
             return
-        k = first + b  # pyright: ignore[reportOperatorIssue]
         dt = control.dt[0]
-        per = wp.float64(-1.0) / (wp.float64(n_grids) * dt)  # minus the material's share, as a mean force
-        f = wp.vec3()
-        tau = wp.vec3()
-        for d in range(wp.static(dim)):
-            f[d] = float(impulse[k * dim + d] * per)
-        for a in range(3):
-            tau[a] = float(torque[3 * k + a] * per)
-        wrench = wp.spatial_vector(f, tau)  # pyright: ignore[reportArgumentType]
+        wrench = material_wrench(first + b, dt, n_grids, impulse, torque)  # pyright: ignore[reportOperatorIssue]
         body_f[b] = wrench
         q, qd = integrate_rigid_body(body_q[b], body_qd[b], wrench, body_com[b], inertia[b], inv_mass[b],
                                      inv_inertia[b], gravity[0], 0.0, float(dt))
@@ -215,7 +231,7 @@ def make_wrench(t: Types):
     the material's impulse and angular impulse over the step as a force and
     a torque (as :func:`make_push_bodies` takes them), and the step into
     ``clock[0]`` for the host (0 where the driver skips it)."""
-    dim = t.dim
+    material_wrench = make_material_wrench(t)
 
     @warp_kernel
     def wrench(control: StepControl, first: int, n_grids: float, impulse: wp.array(dtype=wp.float64),
@@ -226,16 +242,8 @@ def make_wrench(t: Types):
             if b == 0:
                 clock[0] = wp.float64(0.0)
             return
-        k = first + b  # pyright: ignore[reportOperatorIssue]
         dt = control.dt[0]
-        per = wp.float64(-1.0) / (wp.float64(n_grids) * dt)  # minus the material's share, as a mean force
-        f = wp.vec3()
-        tau = wp.vec3()
-        for d in range(wp.static(dim)):
-            f[d] = float(impulse[k * dim + d] * per)
-        for a in range(3):
-            tau[a] = float(torque[3 * k + a] * per)
-        body_f[b] = wp.spatial_vector(f, tau)  # pyright: ignore[reportArgumentType]
+        body_f[b] = material_wrench(first + b, dt, n_grids, impulse, torque)  # pyright: ignore[reportOperatorIssue]
         if b == 0:
             clock[0] = dt
 
