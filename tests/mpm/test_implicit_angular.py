@@ -72,7 +72,7 @@ def test_backward_euler_changes_angular_momentum_by_dt_sum_m_v_cross_v_star(sche
     bound |R| (sum_i |x^_i|^2)^1/2 / G plus round-off: the transfers, the
     affine C, the position update and the stress keep angular momentum, and
     all of its loss is backward Euler's. Measured at newton_tol = 1e-4:
-    0.04-0.09 of the bound for EMPM; under TLMPM (and A-ULMPM, which makes
+    0.04-0.07 of the bound for EMPM; under TLMPM (and A-ULMPM, which makes
     no reference update here) the nodes x_i are the reference lattice's and
     the lever is their image, which q_i (the mass-weighted node position)
     approximates: measured within 1e-5 of the step's dL, allowed 1e-4."""
