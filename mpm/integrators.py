@@ -12,7 +12,8 @@ changes it by dt/G sum_i x_i x f_i (x_i the nodes, G the kernel's grids).
 Forward Euler's force, that of the nodes at x_i, is torque-free about them:
 angular momentum is kept to round-off (EMPM with the quadratic or cubic
 kernel; with the linear or compact kernel it loses some under either
-integrator, and under TLMPM, whose nodes are the reference lattice's, it is
+integrator, C_p being spread again from the moved particle, where the
+kernel's second moment differs, and under TLMPM, whose nodes are the reference lattice's, it is
 kept to 2e-8 to 1e-4 over 0.15 s: RESULTS.md). Backward Euler's, that of the moved
 nodes x_i + dt v~_i, is torque-free about those, so a step changes it by
 
