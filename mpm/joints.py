@@ -195,7 +195,7 @@ def articulated_model(scene, device):
     import warp as wp
 
     from . import rigid_contact
-    from .rigid_coupling import add_shape, quaternion
+    from .rigid_model import add_shape, quaternion
 
     dim = scene.dim
     builder = newton.ModelBuilder(gravity=tuple(scene.gravity) + (0.0,) * (3 - dim))

@@ -39,7 +39,7 @@ from __future__ import annotations
 import collections
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
@@ -49,10 +49,10 @@ from ..launch import load
 from ..params import instance_problem, param, violations
 from .policy import Policy
 from .detection import Detection, Detector
+from .outcome import Event, Outcome
 from .status import COLLAPSE, DETECTION, DONE, NONFINITE, OUTSIDE, TRIP_SIZE, StepReport
 from .timestep import BINDINGS, CRUSHED, collapse_reason  # noqa: F401 (CRUSHED: the driver's limit)
 
-STATUSES = ("running", "completed", "unstable")
 SYNC_EVERY_CUDA = 10  # the default k on CUDA (batched solvers)
 
 
@@ -79,47 +79,6 @@ class StepPolicy:
             given = "both" if self.steps is not None else "neither"
             out.append(("steps", f"{given} of steps and duration given; accepted: exactly one of them"))
         return out
-
-
-@dataclass
-class Event:
-    """Something a person should read: a warning, a halved step."""
-
-    step: int
-    """the step it happened at"""
-    time: float
-    """[s]"""
-    text: str
-    """what happened, one line"""
-    level: str = "INFO"
-    """INFO | WARN | ERROR"""
-    values: dict = field(default_factory=dict)
-    """the figures behind it, by name"""
-    kind: str = ""
-    """"detection": a warning of the blow-up detection; "halving": an implicit step halved;
-    "unsettled": an implicit step's contact rounds ran out (mpm.implicit.solve ROUNDS)"""
-
-
-@dataclass
-class Outcome:
-    """How a run ended (``status`` running while it has not)."""
-
-    status: str = "running"
-    """one of STATUSES"""
-    reason: str = ""
-    """why the run stopped, one line (empty: completed)"""
-    step: int = 0
-    """steps completed"""
-    time: float = 0.0
-    """[s]"""
-    criterion: str | None = None
-    """nonfinite, outside, dt_collapse, newton, or a detection criterion"""
-    body: str | None = None
-    """the body it names, if any"""
-    values: dict = field(default_factory=dict)
-    """the criterion's figures, by name"""
-    report: StepReport | None = None
-    """the step that failed (None: none was taken)"""
 
 
 class Observer:

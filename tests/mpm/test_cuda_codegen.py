@@ -182,6 +182,7 @@ class Case:
     friction: bool = False
     turning: bool = False  # the first collider turns (mpm.collider_motion: the kinds take TURNING)
     rigid: bool = False  # rigid bodies coupled through Newton (mpm.rigid_coupling: the kinds take RIGID)
+    joints: bool = False  # the first rigid body hinged to the world (mpm.joints: the wrench kernel)
     open_walls: bool = False
     fuse: bool | None = None
     record_dJ: bool = False
@@ -240,6 +241,7 @@ def scene(case: Case, dim: int) -> mpm.Scene:
                  mpm.RigidBody(Collider.sphere(at(0.7, 0.8, 0.5), 0.05, friction=0.3), density=500.0)]
         if dim == 3:
             rigid.append(mpm.RigidBody(Collider.cylinder((0.5, 0.8, 0.3), 0.05, 0.05, axis=0), mass=0.1))
+    joints = [mpm.Joint(0, (0.3, 0.7, 0.5)[:dim], axis=None if dim == 2 else (0.0, 0.0, 1.0))] if case.joints else []
     loads = []
     if case.loads:
         c, f = (centres[0],) + (0.5,) * (dim - 1), (0.0, -1.0, 0.0)[:dim]
@@ -250,7 +252,7 @@ def scene(case: Case, dim: int) -> mpm.Scene:
                      gravity=(0.0, -9.81, 0.0)[:dim], walls=walls, contact=case.contact,
                      contact_friction=case.contact_friction, contact_normal=case.normal, regions=regions,
                      colliders=colliders, solution=_Forcing() if case.forcing else None, loads=loads,
-                     boundary_rule=case.rule, rigid_bodies=rigid)
+                     boundary_rule=case.rule, rigid_bodies=rigid, joints=joints)
 
 
 def scheme(case: Case):
@@ -347,11 +349,13 @@ def cases(dim: int) -> list[Case]:
     out += [Case(colliders=(k,)) for k in every]
     # a turning collider among them (the rotation compiled: the kinds end with TURNING)
     out += [Case(colliders=every, friction=True, turning=True), Case(colliders=every, friction=True, rigid=True),
-            Case(rigid=True), Case(batched=True, rigid=True),
+            Case(rigid=True), Case(batched=True, rigid=True), Case(rigid=True, joints=True),
+            Case(colliders=every, friction=True, rigid=True, implicit=True),
             Case(scheme="tlmpm", colliders=every, friction=True, implicit=True, turning=True)]
     # the node rule of earlier versions (walls and colliders on the nodes inside them)
     out += [Case(rule="nodes", colliders=every, friction=True), Case(rule="nodes", materials=two, colliders=every),
-            Case(rule="nodes", scheme="tlmpm", colliders=every, friction=True, implicit=True)]
+            Case(rule="nodes", scheme="tlmpm", colliders=every, friction=True, implicit=True),
+            Case(rule="nodes", colliders=every, friction=True, rigid=True, implicit=True)]
     return out
 
 
@@ -437,6 +441,8 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return set(mpm.scene.BOUNDARY_RULES)
     if name == "compensated":  # the factor of F whose sum G2P compensates (mpm.p2g's exact energy)
         return {"", "sn", "0s"}
+    if name == "first":  # the first rigid body's collider: none before it, and after every kind
+        return {0, len(kinds(t.dim))}
     if parameter.annotation in (bool, "bool") or isinstance(parameter.default, bool):
         return {False, True}
     raise AssertionError(f"{factory}: no values known for argument {name!r} ({annotation}); "
