@@ -3,15 +3,16 @@ elastic slab down a plane tilted by gravity, coupled through Newton, against
 the closed forms, at one or several resolutions (2D).
 
     python examples/rigid_incline.py [--case slide] [--resolutions 32,64] [--angle 30] [--friction 0.3]
-        [--duration 0.4] [--scheme empm] [--kernel quadratic] [--device cpu]
+        [--gap 0.005] [--duration 0.4] [--scheme empm] [--kernel quadratic] [--device cpu]
 
 The slab (0.8 x 0.1 m, fixed-corotated E = 2e6 Pa, nu = 0.3, rho = 1000
 kg/m^3, its bottom strip held still by a kinematic region, as in
 examples/rolling.py) has its top at y = 0.25 m in a box 1 m long; gravity
 (g = 9.81 m/s^2) is tilted by ``--angle`` theta towards +x. Onto it a
 rigid body (mpm.RigidBody, density 1000 kg/m^3, advanced by Newton) is
-dropped from DROP = 5 mm above (a block started flush with the slab's top,
-which lies on a grid line, stays caught there, even frictionless): a box
+dropped from ``--gap`` above (default DROP = 5 mm; 0: flush with the
+slab's top, which lies on a grid line, where a block once stayed caught,
+mpm.collider_device.make_edge): a box
 0.1 x 0.05 m (``--case slide`` or ``--case hold``) or a disk of radius
 0.05 m (``--case roll``), its boundary "separate" with Coulomb friction mu
 against the material. Closed forms (mpm.inclines): a block slides at
@@ -95,13 +96,14 @@ class Run:
         return self.acceleration / self.expected - 1.0 if self.expected else math.nan
 
 
-def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3) -> mpm.Scene:
-    """The scene of the module docstring."""
+def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
+          gap: float = DROP) -> mpm.Scene:
+    """The scene of the module docstring, the body ``gap`` [m] above the slab."""
     th = math.radians(angle)
     if case == "roll":
-        shape = Collider.sphere((0.2, TOP + DROP + R), R, boundary="separate", friction=friction)
+        shape = Collider.sphere((0.2, TOP + gap + R), R, boundary="separate", friction=friction)
     else:
-        shape = Collider.box((0.2, TOP + DROP + HALF[1]), HALF, boundary="separate", friction=friction)
+        shape = Collider.box((0.2, TOP + gap + HALF[1]), HALF, boundary="separate", friction=friction)
     slab = mpm.Body(mpm.Box((0.5, TOP - 0.05), (0.4, 0.05)), mpm.FixedCorotated(E=2.0e6, nu=0.3), name="slab")
     held = mpm.Box((0.5, TOP - 0.09), (0.4, 0.011))
     return mpm.Scene(
@@ -112,10 +114,11 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
 
 
 def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
-        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu") -> Run:
+        duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu",
+        gap: float = DROP) -> Run:
     """Run the scene for ``duration`` [s] and measure it (module docstring)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(case, resolution, angle, friction), mpm.KERNELS[kernel], "float32", device)
+    model, state = mpm.build(scene(case, resolution, angle, friction, gap), mpm.KERNELS[kernel], "float32", device)
     solver = mpm.Solver(model, mpm.SCHEMES[scheme]())
     track = Track()
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
@@ -140,6 +143,8 @@ def main(argv=None) -> int:
                         help="the incline [deg] (default: the case's)")
     parser.add_argument("--friction", type=bounded(0.0, 2.0, "-"), default=None,
                         help="Coulomb mu (default: the case's)")
+    parser.add_argument("--gap", type=bounded(0.0, 0.05, "m"), default=DROP,
+                        help="the body's start above the slab [m] (0: flush)")
     parser.add_argument("--duration", type=bounded(0.2, 2.0, "s"), default=0.4, help="simulated time [s]")
     parser.add_argument("--scheme", type=choice(mpm.SCHEMES), default="empm", help=", ".join(mpm.SCHEMES))
     parser.add_argument("--kernel", type=choice(mpm.KERNELS), default="quadratic", help=", ".join(mpm.KERNELS))
@@ -149,11 +154,11 @@ def main(argv=None) -> int:
     mu = CASES[args.case][1] if args.friction is None else args.friction
     body = "disk" if args.case == "roll" else "block"
     print(f"a rigid {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, "
-          f"theta {angle:g} deg, mu {mu:g}, {args.duration:g} s")
+          f"theta {angle:g} deg, mu {mu:g}, gap {args.gap:g} m, {args.duration:g} s")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'travel [cells]':>14} "
           f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}")
     for res in args.resolutions:
-        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device)
+        r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device, args.gap)
         error = f"{100 * r.error:>+7.2f}%" if r.expected else f"{'-':>8}"
         print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} "
               f"{r.slip * res:>12.3f} {r.steps:>6} {r.seconds:>8.1f}")
