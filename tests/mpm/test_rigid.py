@@ -164,8 +164,8 @@ def floating_cube(res: int, duration: float):
 def test_box_floats_at_half_its_height():
     """Archimedes: a box of half the water's density floats with half its
     height below the free surface. Measured (32 cells, 1 s): mean draft
-    0.0341 m against 0.030 (+14 %, 0.34 cells; 64 cells: +9.5 %, 128
-    cells: +1.8 %, RESULTS.md); the tolerance, 20 % of the draft (0.48
+    0.0337 m against 0.030 (+12.3 %, 0.30 cells; 64 cells: +8.7 %, 128
+    cells: +2.8 %, RESULTS.md); the tolerance, 20 % of the draft (0.48
     cells), leaves room for the sloshing's mean and fails for a buoyancy
     off by a fifth (a box with no material force sinks to the floor, one
     with twice the force floats at a quarter of its height)."""
