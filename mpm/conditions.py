@@ -105,8 +105,6 @@ class Conditions:
                   for k, T in enumerate(region_types(t))]
         data.region_u, data.region_gradient, data.region_center, data.region_window = tables
         data.colliders = pack(self.solids, t, self._meshes, m.device, len(m.scene.rigid_bodies or ()))
-        # per collider 3: the angular impulse about its centre (summed only with rigid bodies, mpm.rigid_coupling)
-        data.collider_torque = wp.zeros(3 * max(len(self.solids), 1), dtype=wp.float64, device=m.device)
         return data
 
     def speed(self) -> float:

@@ -11,12 +11,12 @@ device and with no read-back:
 * :meth:`Coupler.place`, at the step's start: each body's collider record
   (rigid body b is collider ``len(scene.colliders) + b``) takes the pose and
   the velocities of the Newton state at the step's time ``control.t``
-  (mpm.collider_motion places it at any time of the step from them), and
-  the angular impulses are zeroed;
+  (mpm.collider_motion places it at any time of the step from them);
 * the grid rule (mpm.collider_device) and the keep-out (mpm.keep_out) then
   sum the impulse J they give the material at each body's surface
   (``status.collider_impulse``, all grids) and its angular impulse about
-  the body's centre of mass, r x J (``conditions.data.collider_torque``);
+  the body's centre of mass, r x J (``status.collider_torque``, reset with
+  the step's status);
 * :meth:`Coupler.push`, after G2P: each body takes minus that, as the force
   -J / dt and the torque -(r x J) / dt over the step ``control.dt``, plus
   gravity, and Newton's semi-implicit rigid-body integrator (its
@@ -213,20 +213,20 @@ class Coupler:
         return [self.place_kernel, self.push_kernel]
 
     def place(self) -> None:
-        """The bodies' collider records from their state at the step's start; the angular impulses zeroed."""
+        """The bodies' collider records from their state at the step's start."""
         data = self.conditions.data
-        data.collider_torque.zero_()
         wp.launch(self.place_kernel, self.n, device=self.model.device, inputs=[
             self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders])
 
     def push(self, status) -> None:
         """The bodies advanced over the step with minus the material's impulse
-        (``status.collider_impulse``, mpm.stepping.status), plus gravity."""
+        and angular impulse (``status.collider_impulse``, ``collider_torque``,
+        mpm.stepping.status), plus gravity."""
         nm = self.newton
         wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
             self.state.body_q, self.state.body_qd, nm.body_com, nm.body_inertia, nm.body_inv_mass,
             nm.body_inv_inertia, nm.gravity, self.control, self.first, float(self.model.kernel.n_grids),
-            status.collider_impulse, self.conditions.data.collider_torque, self.state.body_f])
+            status.collider_impulse, status.collider_torque, self.state.body_f])
 
     def poses(self) -> dict[str, np.ndarray]:
         """The bodies' state on the host: ``position`` (centre of mass) [m],

@@ -68,7 +68,7 @@ def test_free_body_follows_gravity_and_a_constant_wrench(dim):
     for _ in range(n):
         solver.buffer.set(dt=dt)
         status.collider_impulse.assign(np.array(-F[:dim] * dt))
-        solver.conditions.data.collider_torque.assign(np.array(-tau * dt))
+        status.collider_torque.assign(np.array(-tau * dt))
         coupler.push(status)
     q = coupler.poses()
     alpha = tau / inertia
