@@ -35,7 +35,7 @@ def make_collider_data(t: Types):
         mesh: wp.uint64  # wp.Mesh id (mesh colliders)
         origin: t.vec  # rigid bodies: the pivot's displacement from rest at the window's start [m] (else 0)
         frame: wp.types.vector(3, t.scalar)  # rigid bodies: the rotation vector from rest then [rad] (else 0)
-        body: int  # 1: a rigid body's shape (mpm.rigid; its box meets the grid by its corners' share, mpm.surface)
+        body: int  # 1: a rigid body's shape (mpm.rigid; a box's edges: mpm.collider_device.make_edge)
 
     return ColliderData
 
