@@ -140,6 +140,44 @@ def make_place(t: Types, kinds: tuple[str, ...]):
 
 
 @functools.cache
+def make_box_face(t: Types):
+    """For a rigid body's box (a record of a scene with rigid bodies, whose
+    kernels compile the rotation): ``rest(c, q, time) -> d``, where the point
+    ``q`` lies in the box at rest at ``time``, from its centre [m] (module
+    docstring: d = q_rest - c.p); ``face(c, q, time, d, j) -> (phi, n, u)``:
+    the signed distance [m] of ``q`` from the plane of the box's face across
+    axis ``j`` on d's side, that face's outward normal where the box is, and
+    the velocity of the box at the point q - phi n of that plane."""
+    S, vec, Data = t.scalar, t.vec, make_collider_data(t)
+    V3 = wp.types.vector(3, S)
+    turn, spin = make_turn(t)
+    motion = make_motion(t)
+
+    @wp.func
+    def rest(c: Data, q: vec, time: S):
+        shift, u = motion(c, time)
+        angle = (wp.min(wp.max(time, c.window[0]), c.window[1]) - c.window[0]) * c.omega
+        return c.pivot + turn(turn(q - (c.pivot + c.origin + shift), -angle), -c.frame) - c.p
+
+    @wp.func
+    def face(c: Data, q: vec, time: S, d: vec, j: int):
+        shift, u = motion(c, time)
+        w = V3()
+        if time >= c.window[0] and time < c.window[1]:
+            w = c.omega
+        angle = (wp.min(wp.max(time, c.window[0]), c.window[1]) - c.window[0]) * c.omega
+        n_rest = vec()
+        n_rest[j] = S(1.0)
+        if d[j] < S(0.0):
+            n_rest[j] = S(-1.0)
+        phi = wp.abs(d[j]) - c.h[j]
+        n = turn(turn(n_rest, c.frame), angle)
+        return phi, n, u + spin(w, q - phi * n - (c.pivot + c.origin + shift))
+
+    return rest, face
+
+
+@functools.cache
 def make_centre(t: Types):
     """``centre(c, time)``: where collider ``c``'s pivot is at ``time`` [m]
     (a rigid body's: its centre of mass)."""

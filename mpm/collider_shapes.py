@@ -35,14 +35,16 @@ def make_collider_data(t: Types):
         mesh: wp.uint64  # wp.Mesh id (mesh colliders)
         origin: t.vec  # rigid bodies: the pivot's displacement from rest at the window's start [m] (else 0)
         frame: wp.types.vector(3, t.scalar)  # rigid bodies: the rotation vector from rest then [rad] (else 0)
+        body: int  # 1: a rigid body's shape (mpm.rigid; a box's edges: mpm.collider_device.make_edge)
 
     return ColliderData
 
 
-def pack(colliders: list[Collider], t: Types, meshes: dict, device) -> wp.array:
+def pack(colliders: list[Collider], t: Types, meshes: dict, device, bodies: int = 0) -> wp.array:
     """Device array of :func:`make_collider_data` records (one placeholder
     record when there is no collider; the kernels then compile them out).
-    ``meshes`` maps a collider index to its wp.Mesh (kept alive by the caller)."""
+    ``meshes`` maps a collider index to its wp.Mesh (kept alive by the caller);
+    the last ``bodies`` colliders are rigid bodies' shapes (mpm.rigid.solids)."""
     Data = make_collider_data(t)
     out = []
     for i, c in enumerate(colliders or [Collider("half_space", point=(0.0,) * t.dim,
@@ -56,6 +58,7 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device) -> wp.array:
         d.window = wp.types.vector(2, t.scalar)(*rec["window"])
         d.omega = wp.types.vector(3, t.scalar)(*rec["omega"])
         d.mesh = wp.uint64(meshes[i].id if i in meshes else 0)
+        d.body = int(bodies > 0 and i >= len(colliders) - bodies)
         out.append(d)
     return wp.array(out, dtype=Data, device=device)
 

@@ -105,9 +105,7 @@ class Conditions:
         tables = [wp.array(np.array([r[k] for r in rows], dtype=dtype), dtype=T)
                   for k, T in enumerate(region_types(t))]
         data.region_u, data.region_gradient, data.region_center, data.region_window = tables
-        data.colliders = pack(self.solids, t, self._meshes, m.device)
-        # per collider 3: the angular impulse about its centre (summed only with rigid bodies, mpm.rigid_coupling)
-        data.collider_torque = wp.zeros(3 * max(len(self.solids), 1), dtype=wp.float64, device=m.device)
+        data.colliders = pack(self.solids, t, self._meshes, m.device, len(m.scene.rigid_bodies or ()))
         return data
 
     def speed(self) -> float:

@@ -108,7 +108,6 @@ def make_boundary_data(t: Types):
         region_center: wp.array(dtype=Cc)  # centre at start [m]
         region_window: wp.array(dtype=Win)  # (start, end) [s]
         colliders: wp.array(dtype=Collider)  # mpm.colliders records
-        collider_torque: wp.array(dtype=wp.float64)  # per collider 3: angular impulse about its centre (rigid bodies)
 
     return BoundaryData
 
@@ -135,7 +134,7 @@ def make_conditions(t: Types, with_regions: bool, colliders: tuple[str, ...] = (
                   data.profile)
         if wp.static(len(colliders) > 0):
             v = collide(v, q, m, V, G, time, data.colliders, data.profile, status.collider_impulse,
-                        data.collider_torque)
+                        status.collider_torque)
         if wp.static(with_regions):
             active, v = kinematic(v, q, m, kin_m, kin_id, time, data.region_u, data.region_gradient,
                                   data.region_center, data.region_window)

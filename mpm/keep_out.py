@@ -76,7 +76,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
                     Jk = (m * S(n_grids)) * (v - v_in)
                     add_impulse(status.collider_impulse, k, Jk)
                     if wp.static(RIGID in kinds):
-                        add_torque(data.collider_torque, k, x - centre(c, time), Jk)
+                        add_torque(status.collider_torque, k, x - centre(c, time), Jk)
         J = (m * S(n_grids)) * (v - v0)
         for d in range(wp.static(t.dim)):
             if J[d] != S(0.0):

@@ -11,14 +11,15 @@ device and with no read-back:
 * :meth:`Coupler.place`, at the step's start: each body's collider record
   (rigid body b is collider ``len(scene.colliders) + b``) takes the pose and
   the velocities of the Newton state at the step's time ``control.t``
-  (mpm.collider_motion places it at any time of the step from them), the
-  angular impulses are zeroed, and the fastest point of each body's
-  surface, |v| + |omega| reach, enters the step's largest speed
-  (``status.max_v2``) that the step rule reads for the next step;
+  (mpm.collider_motion places it at any time of the step from them), and
+  the fastest point of each body's surface, |v| + |omega| reach, enters
+  the step's largest speed (``status.max_v2``) that the step rule reads
+  for the next step;
 * the grid rule (mpm.collider_device) and the keep-out (mpm.keep_out) then
   sum the impulse J they give the material at each body's surface
   (``status.collider_impulse``, all grids) and its angular impulse about
-  the body's centre of mass, r x J (``conditions.data.collider_torque``);
+  the body's centre of mass, r x J (``status.collider_torque``, reset with
+  the step's status);
 * :meth:`Coupler.push`, after G2P: each body takes minus that, as the force
   -J / dt and the torque -(r x J) / dt over the step ``control.dt``, plus
   gravity, and Newton's semi-implicit rigid-body integrator (its
@@ -245,11 +246,10 @@ class Coupler:
         return [self.place_kernel, self.push_kernel]
 
     def place(self, status) -> None:
-        """The bodies' collider records from their state at the step's start; the angular impulses zeroed;
-        the fastest point of their surfaces in the step's largest speed (``status.max_v2``, which the
-        step rule reads as it reads the particles')."""
+        """The bodies' collider records from their state at the step's start;
+        the fastest point of their surfaces in the step's largest speed
+        (``status.max_v2``, which the step rule reads as it reads the particles')."""
         data = self.conditions.data
-        data.collider_torque.zero_()
         wp.launch(self.place_kernel, self.n, device=self.model.device, inputs=[
             self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders, self.reach,
             status.max_v2])
@@ -261,15 +261,15 @@ class Coupler:
 
     def push(self, status) -> None:
         """The bodies advanced over the step with minus the material's impulse
-        (``status.collider_impulse``, mpm.stepping.status), plus gravity: by
-        Newton's integrator on the device, or (joints) by Newton's
-        Featherstone solver over the step read back (none where the driver
-        skips it)."""
+        and angular impulse (``status.collider_impulse``, ``collider_torque``,
+        mpm.stepping.status), plus gravity: by Newton's integrator on the
+        device, or (joints) by Newton's Featherstone solver over the step
+        read back (none where the driver skips it)."""
         nm = self.newton
         if self.joints is not None:
             wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
                 self.control, self.first, float(self.model.kernel.n_grids), status.collider_impulse,
-                self.conditions.data.collider_torque, self.state.body_f, self.clock])
+                status.collider_torque, self.state.body_f, self.clock])
             dt = float(self.clock.numpy()[0])
             self.reads += 1
             if dt > 0.0:
@@ -278,7 +278,7 @@ class Coupler:
         wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
             self.state.body_q, self.state.body_qd, nm.body_com, nm.body_inertia, nm.body_inv_mass,
             nm.body_inv_inertia, nm.gravity, self.control, self.first, float(self.model.kernel.n_grids),
-            status.collider_impulse, self.conditions.data.collider_torque, self.state.body_f])
+            status.collider_impulse, status.collider_torque, self.state.body_f])
 
     def poses(self) -> dict[str, np.ndarray]:
         """The bodies' state on the host: ``position`` (centre of mass) [m],

@@ -330,8 +330,8 @@ class ImplicitSolve:
         ``work``); under the node rule, Coulomb friction at the colliders
         on the solution (mpm.implicit.system ``make_friction``)."""
         s, m = self.solver, self.solver.model
-        data = s.conditions.data  # the colliders and their angular impulses (rigid bodies, mpm.rigid_coupling)
-        lever = [s.grid.q, s.step_time, data.colliders, data.collider_torque]  # (the nodes' positions)
+        status = s.buffer.status  # (the colliders' angular impulses: rigid bodies, mpm.rigid_coupling)
+        lever = [s.grid.q, s.step_time, s.conditions.data.colliders, status.collider_torque]  # (the nodes' positions)
         wp.launch(self._work, s.layout.n_nodes, device=m.device, inputs=[
             s.grid.m, self.reaction, s.grid.v, self.contact_id, *lever, s.buffer.status])
         if self.sliding:  # the work of friction between bodies (mpm.contact.friction)

@@ -28,7 +28,8 @@ from typing import cast
 import numpy as np
 import warp as wp
 
-STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER = "step", "body", "box", "trip", "diag", "axis", "load", "collider"
+STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER, TORQUE = ("step", "body", "box", "trip", "diag", "axis", "load",
+                                                        "collider", "torque")
 TRIP_SIZE = 6  # criterion code, body, value, limit, energy scale, boundary work (mpm.stepping.detection)
 
 # why the steps stopped: the host acts, then (PAUSE, REGRID) the run goes on
@@ -41,7 +42,7 @@ class Field:
     name: str
     per: str
     """STEP, BODY, BOX (body and axis), TRIP, DIAG (mpm.diagnostics), AXIS, LOAD (load and axis),
-    COLLIDER (collider and axis)"""
+    COLLIDER (collider and axis), TORQUE (collider and the three axes of an angular impulse)"""
     reset: float
     """the value before a step (the identity of its reduction), or at the start"""
     doc: str
@@ -56,7 +57,7 @@ def _fields(table: str) -> tuple[Field, ...]:
             out[-1][3] += " " + line.strip()
             continue
         name, per, reset, doc = line.split(maxsplit=3)
-        if per not in (STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER):
+        if per not in (STEP, BODY, BOX, TRIP, DIAG, AXIS, LOAD, COLLIDER, TORQUE):
             raise ValueError(f"unknown extent {per!r} of field {name!r}")
         out.append([name, per, float(reset), doc])
     return tuple(Field(*f) for f in out)
@@ -72,6 +73,9 @@ load_work         step  0     work of the external loads over the step [J] (mpm.
 boundary_impulse  axis  0     momentum the boundary conditions gave the grid in the step,
                               sum m_i (v_bc - v_i) per axis, all grids [N s] (mpm.grid)
 collider_impulse  collider 0  the part of it each collider gave, per axis, all grids [N s] (mpm.collider_device)
+collider_torque   torque 0    its angular impulse about the collider's centre, r x J, per axis (x, y, z; 2D: z
+                              only), all grids [N m s]: summed only where the scene has rigid bodies
+                              (mpm.rigid_coupling), else 0
 kinetic           step  0     kinetic energy of the new state [J] (track_energy)
 potential         step  0     its gravitational potential energy -sum m g . x [J] (track_energy)
 elastic           step  0     elastic energy of the state the step started from [J] (P2G)
@@ -156,7 +160,8 @@ class StepBuffer:
         self.n_bodies, self.dim, self.n_loads, self.n_colliders = n_bodies, dim, n_loads, n_colliders
         self.max_trips = max_trips if max_trips is not None else 1 + 3 * n_bodies
         sizes = {STEP: 1, BODY: n_bodies, BOX: n_bodies * dim, TRIP: TRIP_SIZE * self.max_trips,
-                 DIAG: n_diagnostics, AXIS: dim, LOAD: max(n_loads, 1) * dim, COLLIDER: max(n_colliders, 1) * dim}
+                 DIAG: n_diagnostics, AXIS: dim, LOAD: max(n_loads, 1) * dim, COLLIDER: max(n_colliders, 1) * dim,
+                 TORQUE: max(n_colliders, 1) * 3}
         self.slices: dict[str, slice] = {}
         start = 0
         for f in FIELDS + CONTROL:
@@ -278,6 +283,8 @@ class StepReport:
     grid carries their full mass"""
     collider_impulse: np.ndarray | None = None
     """[N s] per collider and axis: its part of ``boundary_impulse`` (all grids)"""
+    collider_torque: np.ndarray | None = None
+    """[N m s] per collider, 3 axes: its angular impulse about its centre (all grids; rigid bodies only, else 0)"""
     load_position: np.ndarray | None = None
     """per load: its particles' mean position at the step's start [m]"""
     kinetic: float = float("nan")
@@ -341,6 +348,7 @@ class StepReport:
             boundary_work=float(v["boundary_work"][0]), load_work=float(v["load_work"][0]),
             boundary_impulse=v["boundary_impulse"].copy(),
             collider_impulse=v["collider_impulse"].reshape(-1, dim).copy(),
+            collider_torque=v["collider_torque"].reshape(-1, 3).copy(),
             load_position=v["load_position"].reshape(-1, dim).copy(), contact_nodes=int(v["contact_nodes"][0]),
             contact_work=float(v["contact_work"][0]),
             removed=removed.astype(np.int64) if removed.any() else None,

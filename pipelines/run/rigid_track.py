@@ -2,20 +2,20 @@
 
 Per body ``<name>`` (its name, else ``rigid<i>``):
 
-* every step, the coupling force the material exerts on it over the step,
-  minus its collider's impulse (StepReport.collider_impulse: rigid body b
-  is collider ``len(scene.colliders) + b``, every kernel grid's) divided by
-  the step and the kernel's grids, as the Coupler applies it: scalars
-  ``rigid/<name>/force_<axis>`` [N; 2D: N/m];
+* every step, the coupling force and torque the material exerts on it over
+  the step, minus its collider's impulse and angular impulse about its
+  centre of mass (StepReport.collider_impulse, collider_torque: rigid body
+  b is collider ``len(scene.colliders) + b``, every kernel grid's) divided
+  by the step and the kernel's grids, as the Coupler applies them: scalars
+  ``rigid/<name>/force_<axis>`` [N; 2D: N/m] and ``torque`` [N m; 2D: N m/m,
+  about z] (3D: ``torque_<axis>``);
 * at every particle frame, its Newton state then (read from the device
   with the frame, no other read): the pose as the transform that takes its
   shape at rest to its place (drawn under /rigid/<name>), and scalars
   ``rigid/<name>/position_<axis>`` (centre of mass) [m],
   ``velocity_<axis>`` [m/s], ``angular_velocity`` [rad/s] (2D: about z;
-  3D: ``angular_velocity_<axis>``), ``angle`` [rad] (2D: about z; 3D:
-  ``rotation_<axis>``, the rotation vector) and ``torque`` [N m; 2D: N m/m]
-  (3D: ``torque_<axis>``), the material's torque about the centre of mass
-  over the last step (the Coupler's wrench);
+  3D: ``angular_velocity_<axis>``) and ``angle`` [rad] (2D: about z; 3D:
+  ``rotation_<axis>``, the rotation vector);
 * in ``metrics.json`` (``rigid_bodies``) its final pose and velocities.
 """
 
@@ -57,13 +57,21 @@ class RigidTrack:
         self.rest = [np.pad(b.center(), (0, 3 - scene.dim)) for b in scene.rigid_bodies]  # initial centres
 
     def forces(self, report) -> dict:
-        """A step's report: its force scalars, by name."""
+        """A step's report: its force and torque scalars, by name."""
         if report.collider_impulse is None or report.dt <= 0.0:
             return {}
-        J = report.collider_impulse[self.first:self.first + len(self.names)]
-        f = -J / (self.n_grids * report.dt)
-        return {f"rigid/{name}/force_{AXES[k]}": float(f[i, k]) for i, name in enumerate(self.names)
-                for k in range(self.dim)}
+        rows = slice(self.first, self.first + len(self.names))
+        f = -report.collider_impulse[rows] / (self.n_grids * report.dt)
+        out = {f"rigid/{name}/force_{AXES[k]}": float(f[i, k]) for i, name in enumerate(self.names)
+               for k in range(self.dim)}
+        if report.collider_torque is not None:
+            tau = -report.collider_torque[rows] / (self.n_grids * report.dt)
+            for i, name in enumerate(self.names):
+                if self.dim == 2:
+                    out[f"rigid/{name}/torque"] = float(tau[i, 2])
+                else:
+                    out.update({f"rigid/{name}/torque_{AXES[k]}": float(tau[i, k]) for k in range(3)})
+        return out
 
     def state(self) -> dict[str, np.ndarray]:
         """The Newton state now (one read from the device): the Coupler's poses, and ``torque`` [N m], the
@@ -85,13 +93,11 @@ class RigidTrack:
             row.update({f"{p}velocity_{AXES[k]}": float(s["velocity"][i, k]) for k in range(d)})
             turn = rotation_vector(s["quaternion"][i])
             if d == 2:
-                row.update({f"{p}angle": float(turn[2]), f"{p}angular_velocity": float(s["angular_velocity"][i, 2]),
-                            f"{p}torque": float(s["torque"][i, 2])})
+                row.update({f"{p}angle": float(turn[2]), f"{p}angular_velocity": float(s["angular_velocity"][i, 2])})
             else:
                 for k in range(3):
                     row.update({f"{p}rotation_{AXES[k]}": float(turn[k]),
-                                f"{p}angular_velocity_{AXES[k]}": float(s["angular_velocity"][i, k]),
-                                f"{p}torque_{AXES[k]}": float(s["torque"][i, k])})
+                                f"{p}angular_velocity_{AXES[k]}": float(s["angular_velocity"][i, k])})
         return poses, row
 
     def summary(self, s: dict[str, np.ndarray]) -> dict:

@@ -1,9 +1,9 @@
 """Rigid bodies of a closed triangle mesh (mpm.rigid with a mesh shape):
 the solid's volume and centroid against closed forms, Newton's mass and
-inertia against an independent computation (trimesh), a mesh cube striking
-an elastic block as the box body does, and an off-centre mesh (a prism,
-whose centroid is not its bounding box's centre) keeping the momentum and
-angular momentum of body and material together."""
+inertia against closed forms and an independent computation (trimesh), a
+mesh cube's distance the box's, and an off-centre mesh (a prism, whose
+centroid is not its bounding box's centre) turning about its centroid and
+keeping the momentum and angular momentum of body and material together."""
 
 import numpy as np
 import pytest
@@ -90,23 +90,35 @@ def _strike(shape: Collider, steps: int = 200):
     return coupler, worst / [np.linalg.norm(P0), np.linalg.norm(L0)]
 
 
-def test_a_mesh_cube_strikes_a_block_as_the_box_body_does(tmp_path):
-    """A cube given as a triangle mesh and the same cube as a box collider,
-    each a rigid body striking the block: the same mass (density times
-    s^3), the centre of mass at the body's origin, and after 200 steps the
-    same velocity and angular velocity (the mesh's distance is the box's:
-    measured within 3.3e-6 and 4.4e-5 of each other's scale)."""
-    box, _ = _strike(Collider.box(CENTRE, (SIZE / 2,) * 3, boundary="separate", friction=0.3))
-    mesh, drift = _strike(Collider.from_mesh(MeshShape(_cube(tmp_path / "c.obj"), CENTRE, SIZE),
-                                             boundary="separate", friction=0.3))
-    assert float(mesh.newton.body_mass.numpy()[0]) == pytest.approx(2000.0 * SIZE**3, rel=1e-6)
-    assert np.abs(mesh.newton.body_com.numpy()[0]).max() < 1e-7 * SIZE
-    a, b = box.poses(), mesh.poses()
-    assert np.linalg.norm(a["velocity"][0] - b["velocity"][0]) < 1e-4 * 2.0
-    assert np.linalg.norm(a["angular_velocity"][0] - b["angular_velocity"][0]) < 1e-3 * np.linalg.norm(
-        a["angular_velocity"][0])
-    assert np.linalg.norm(a["angular_velocity"][0]) > 1.0  # it was set turning
-    assert drift[0] < 1e-6
+def test_a_mesh_cube_is_the_box_body_in_mass_inertia_and_distance(tmp_path):
+    """A cube given as 12 triangles and the same cube as a box: Newton's
+    mass rho s^3 and inertia m s^2 / 6 about every axis (closed form) for
+    both, the mesh's centre of mass at the body's origin, and the solver's
+    signed distance of the two colliders the same at points around the
+    surface (to the mesh's float32 rounding). (A box body meets the
+    material at its edges by its faces' rule, mpm.collider_device
+    ``make_edge``, which a mesh body does not: the two differ there.)"""
+    from collider_sdf import evaluate
+
+    path = _cube(tmp_path / "c.obj")
+    box = Collider.box(CENTRE, (SIZE / 2,) * 3, boundary="separate", friction=0.3)
+    mesh = Collider.from_mesh(MeshShape(path, CENTRE, SIZE), boundary="separate", friction=0.3)
+    block = mpm.Body(mpm.Box((0.72,) * 3, (0.04,) * 3), FixedCorotated(E=1e4, nu=0.3, rho=1000.0))
+    m = 2000.0 * SIZE**3
+    for shape in (box, mesh):
+        scene = mpm.Scene(dim=3, domain=(1.0,) * 3, resolution=16, bodies=[block], gravity=(0.0,) * 3,
+                          walls=("slip",) * 6, rigid_bodies=[mpm.RigidBody(shape, density=2000.0)])
+        model = mpm.build(scene, mpm.KERNELS["quadratic"], "float64")[0]
+        newton = mpm.Solver(model, mpm.EMPM()).conditions.rigid.newton
+        assert float(newton.body_mass.numpy()[0]) == pytest.approx(m, rel=1e-6)
+        inertia = np.eye(3) * m * SIZE**2 / 6.0
+        np.testing.assert_allclose(newton.body_inertia.numpy()[0], inertia, atol=1e-6 * m * SIZE**2)
+        assert np.abs(newton.body_com.numpy()[0]).max() < 1e-7 * SIZE
+    q = np.asarray(CENTRE) + np.random.default_rng(3).uniform(-0.08, 0.08, (400, 3))
+    phi_box, n_box = evaluate(box, q)
+    phi_mesh, n_mesh = evaluate(mesh, q)
+    np.testing.assert_allclose(phi_mesh, phi_box, atol=2e-6)
+    assert np.abs(phi_box).min() < 0.005 and (phi_box < 0).any() and (phi_box > 0).any()
 
 
 def test_an_off_centre_mesh_turns_about_its_centroid_and_keeps_angular_momentum(tmp_path):

@@ -1,6 +1,6 @@
 """A rigid body in the recording (pipelines.run.rigid_track): its shape
 placed at its Newton pose on every particle frame, its series (state at
-the frames, coupling force every step), its final state in metrics.json,
+the frames, coupling force and torque every step), its final state in metrics.json,
 drawn and exported where it is, and a rerun reproducing the recording."""
 
 import json
@@ -79,15 +79,17 @@ def test_the_body_series_and_final_state(floating):
             np.testing.assert_array_equal(values, [seen[s][k][0, i:j][a] for s in frames])
     steps, w = rec.scalars["rigid/box/angular_velocity"]
     np.testing.assert_array_equal(w, [seen[s][2][0, 5] for s in frames])
-    steps, tau = rec.scalars["rigid/box/torque"]
-    np.testing.assert_array_equal(tau, [seen[s][3][0, 5] for s in frames])
     m = json.loads((out / "metrics.json").read_text())
-    # the force every step (logged at the step's start), the Coupler's at each frame's last step
+    # the force and the torque every step (logged at the step's start), the Coupler's at each frame's last step
     steps, fy = rec.scalars["rigid/box/force_y"]
     assert list(steps) == list(range(m["steps"]))
     assert fy.max() > 1.0  # the water pushed the box up
+    steps, tau = rec.scalars["rigid/box/torque"]
+    assert list(steps) == list(range(m["steps"]))
+    assert np.abs(tau).max() > 0.0  # (the water's torque on the box is not exactly nil)
     for s in frames[1:]:
         np.testing.assert_allclose(fy[s - 1], seen[s][3][0, 1], rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(tau[s - 1], seen[s][3][0, 5], rtol=1e-5, atol=1e-9)
     _, q, qd, f = seen[frames[-1]]
     final = m["rigid_bodies"]["box"]
     assert final["position"] == list(q[0, :2]) and final["quaternion"] == list(q[0, 3:])
@@ -144,6 +146,9 @@ def test_a_3d_body_is_recorded_at_its_pose(tmp_path):
         assert rec.scalars[f"rigid/cube/rotation_{axis}"][1][-1] == final["rotation"][k]
         assert rec.scalars[f"rigid/cube/angular_velocity_{axis}"][1][-1] == final["angular_velocity"][k]
     assert float(np.linalg.norm(final["rotation"])) > 0.02  # it turned
+    for axis in "xyz":  # the torque every step, as the force
+        assert list(rec.scalars[f"rigid/cube/torque_{axis}"][0]) == list(rec.scalars["rigid/cube/force_x"][0])
+    assert list(rec.scalars["rigid/cube/force_x"][0]) == list(range(m["steps"]))
     assert [layout.unit(f"rigid/cube/{q}_z", 3) for q in ("force", "torque", "angular_velocity", "rotation")] == [
         "N", "N m", "rad/s", "rad"]
 
