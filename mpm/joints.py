@@ -180,12 +180,6 @@ def scene_problems(scene) -> list[tuple[str, str]]:
     return out
 
 
-def _rotate(q: tuple[float, ...], v: np.ndarray) -> np.ndarray:
-    """The vector ``v`` turned by the unit quaternion ``q`` (x, y, z, w)."""
-    u, w = np.asarray(q[:3], float), float(q[3])
-    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
-
-
 def articulated_model(scene, device):
     """The Newton model of a scene with joints (module docstring) and its
     initial generalized state: (model, joint_q, joint_qd), every joint's
@@ -195,6 +189,7 @@ def articulated_model(scene, device):
     import warp as wp
 
     from . import rigid_contact
+    from .colliders import rotation_of
     from .rigid_model import add_shape, quaternion
 
     dim = scene.dim
@@ -220,7 +215,8 @@ def articulated_model(scene, device):
         if body < 0:
             return wp.transform(tuple(point), wp.quat_identity())
         inverse = (-turns[body][0], -turns[body][1], -turns[body][2], turns[body][3])
-        return wp.transform(tuple(_rotate(inverse, point - centres[body])), wp.quat(*inverse))
+        local = rotation_of(bodies[body].turned(dim), 3).T @ (point - centres[body])  # R^T (p - c)
+        return wp.transform(tuple(local), wp.quat(*inverse))
 
     links = resolved(scene)
     children: dict[int, list[int]] = {}

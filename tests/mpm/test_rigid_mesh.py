@@ -13,6 +13,7 @@ from mpm.colliders import Collider
 from mpm.materials import FixedCorotated
 from mpm.meshes import MeshShape, solid_properties
 from mpm.model import SceneError
+from test_rigid import strike_3d
 
 pytest.importorskip("newton")
 
@@ -52,42 +53,6 @@ def test_a_closed_meshs_volume_and_centroid_are_the_closed_forms(tmp_path):
     volume, centroid = solid_properties(pts, tris)
     assert volume == pytest.approx(SIZE**3, rel=1e-12)
     np.testing.assert_allclose(centroid, CENTRE, atol=1e-14)
-
-
-def _strike(shape: Collider, steps: int = 200):
-    """3D, float64, no gravity (as tests/mpm/test_rigid.py's ball): the body
-    (density 2000, 2 m/s along x, mu = 0.3) strikes an elastic block off
-    centre. Returns the coupler and the largest drift of the momentum and
-    of the angular momentum about the origin (material plus body, I omega +
-    x x m v with Newton's inertia turned to the world), each over its scale."""
-    import warp as wp
-
-    body = mpm.RigidBody(shape, density=2000.0, velocity=(2.0, 0.0, 0.0))
-    block = mpm.Body(mpm.Box((0.5, 0.5, 0.5), (0.08, 0.08, 0.08)), FixedCorotated(E=2e5, nu=0.3, rho=1000.0))
-    scene = mpm.Scene(dim=3, domain=(1.0, 1.0, 1.0), resolution=24, bodies=[block], gravity=(0.0, 0.0, 0.0),
-                      walls=("slip",) * 6, rigid_bodies=[body], ppc=8)
-    model, state = mpm.build(scene, mpm.KERNELS["quadratic"], "float64")
-    solver = mpm.Solver(model, mpm.EMPM())
-    solver.prepare(state)
-    coupler, names = solver.conditions.rigid, solver.diagnostics.names
-    inertia = coupler.newton.body_inertia.numpy()[0].astype(np.float64)
-
-    def totals():
-        d = solver.measure(state, elastic=False)
-        c, P, L = (np.array([d[names.index(f"{k}_{a}")] for a in "xyz"])
-                   for k in ("center_of_mass", "momentum", "angular_momentum"))
-        p = coupler.poses()
-        x, mv = p["position"][0], p["momentum"][0]
-        R = np.array(wp.quat_to_matrix(wp.quat(*p["quaternion"][0])), np.float64).reshape(3, 3)
-        return P + mv, L + np.cross(c, P) + R @ inertia @ R.T @ p["angular_velocity"][0] + np.cross(x, mv)
-
-    (P0, L0), worst, report = totals(), np.zeros(2), None
-    for i in range(steps):
-        report = solver.advance(state, solver.timestep.stable_dt(0.4, report))
-        if i % 20 == 19:
-            P, L = totals()
-            worst = np.maximum(worst, [np.linalg.norm(P - P0), np.linalg.norm(L - L0)])
-    return coupler, worst / [np.linalg.norm(P0), np.linalg.norm(L0)]
 
 
 def test_a_mesh_cube_is_the_box_body_in_mass_inertia_and_distance(tmp_path):
@@ -132,7 +97,7 @@ def test_an_off_centre_mesh_turns_about_its_centroid_and_keeps_angular_momentum(
     import trimesh
 
     path = _prism(tmp_path / "p.obj")
-    coupler, drift = _strike(Collider.from_mesh(MeshShape(path, CENTRE, SIZE), boundary="separate", friction=0.3))
+    coupler, drift = strike_3d(Collider.from_mesh(MeshShape(path, CENTRE, SIZE), boundary="separate", friction=0.3))
     pts, tris = MeshShape(path, CENTRE, SIZE).geometry
     solid = trimesh.Trimesh(pts, tris, process=False)
     solid.density = 2000.0
