@@ -22,6 +22,7 @@ about z keep them there.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 from dataclasses import dataclass, replace
 from typing import Sequence
@@ -67,11 +68,12 @@ class RigidBody:
         if c.type == "sphere":
             return np.pi * c.radius**2 if dim == 2 else 4.0 / 3.0 * np.pi * c.radius**3
         if c.type == "mesh":
-            return self._solid()[0]
+            return self._solid[0]
         return np.pi * c.radius**2 * 2.0 * c.half_height
 
+    @functools.cached_property
     def _solid(self) -> tuple[float, np.ndarray]:
-        """A mesh body's (volume [m^3], centroid [m]) (mpm.meshes.solid_properties)."""
+        """A mesh body's (volume [m^3], centroid [m]) (mpm.meshes.solid_properties), computed once."""
         from .meshes import solid_properties
 
         assert self.shape.mesh is not None  # problems() checks
@@ -84,7 +86,7 @@ class RigidBody:
     def center(self) -> np.ndarray:
         """Its initial centre of mass [m] (the shape's centre; a mesh's centroid)."""
         if self.shape.type == "mesh":
-            return self._solid()[1]
+            return self._solid[1]
         return np.asarray(self.shape.center, float)
 
     def solid(self) -> Collider:
