@@ -4,7 +4,7 @@ against the closed form, at one or several resolutions.
 
     python examples/rolling.py [--dim 2] [--on collider] [--scheme empm] [--resolutions 32,48,64]
         [--angle 20] [--friction 0.5] [--duration 0.4] [--integrator explicit] [--kernel quadratic]
-        [--device cpu]
+        [--device cpu] [--boundary separate] [--stiffness 0.5] [--dt 0]
 
 The body (radius R = 0.1 m, fixed-corotated E = 2e5 Pa, nu = 0.3,
 rho = 1000 kg/m^3) starts at rest, touching the plane y = 0.25 m, in a box
@@ -13,7 +13,9 @@ rho = 1000 kg/m^3) starts at rest, touching the plane y = 0.25 m, in a box
 a half-space collider (``--on collider``, friction mu, the body free to
 leave it) or the top of a slab 0.1 m thick (``--on body``, E = 2e6 Pa,
 0.8 m long, its bottom strip held still, friction mu between the bodies, contact
-normal "stiffer", fill 1). Rolling without slip, a solid disk accelerates
+normal "stiffer", fill 1). The collider acts on the grid (``--boundary
+separate``) or through springs on the particles that touch it (``elastic``,
+``--stiffness``, mpm.elastic_contact). Rolling without slip, a solid disk accelerates
 at (2/3) g sin theta and a sphere at (5/7) g sin theta while mu is above
 (1/3) tan theta and (2/7) tan theta (mpm.inclines.rolling).
 
@@ -53,6 +55,7 @@ TOP = 0.25  # the plane's height [m]
 SETTLE = 0.1  # the fit starts here [s]: the body starts without its weight on the plane
 SAMPLE = 0.0025  # the body's motion is sampled every this many seconds [s]
 PLANES = ("collider", "body")
+BOUNDARIES = ("separate", "elastic")  # the collider's: the grid rule, or springs on the particles
 
 
 def rigid_motion(x: np.ndarray, v: np.ndarray, m: np.ndarray):
@@ -112,7 +115,7 @@ class Rolled:
 
 
 def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float = 20.0,
-          friction: float = 0.5) -> mpm.Scene:
+          friction: float = 0.5, boundary: str = "separate", stiffness: float = 0.5) -> mpm.Scene:
     """The scene of the module docstring."""
     th = math.radians(angle)
     depth = (0.25,) if dim == 3 else ()  # the 3D box is 0.5 m deep; the body in its middle
@@ -120,7 +123,8 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float
     bodies, colliders, regions = [ball], [], []
     if on == "collider":
         colliders = [mpm.Collider.half_space((0.5, TOP) + depth, (0.0, 1.0) + (0.0,) * (dim - 2),
-                                             boundary="separate", friction=friction, name="plane")]
+                                             boundary=boundary, friction=friction, stiffness=stiffness,
+                                             name="plane")]
     else:
         across = (0.13,) if dim == 3 else ()
         slab = mpm.Body(mpm.Box((0.5, TOP - 0.05) + depth, (0.4, 0.05) + across),
@@ -138,13 +142,16 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float
 
 def roll(dim: int = 2, on: str = "collider", scheme: str = "empm", resolution: int = 64, angle: float = 20.0,
          friction: float = 0.5, duration: float = 0.4, integrator: str = "explicit", kernel: str = "quadratic",
-         device: str = "cpu") -> Rolled:
-    """Run the scene for ``duration`` [s] and measure it (module docstring)."""
+         device: str = "cpu", boundary: str = "separate", stiffness: float = 0.5, dt: float = 0.0) -> Rolled:
+    """Run the scene for ``duration`` [s] (steps of ``dt`` [s]; 0: the step
+    rule's) and measure it (module docstring)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(dim, on, resolution, angle, friction), mpm.KERNELS[kernel], "float32", device)
+    model, state = mpm.build(scene(dim, on, resolution, angle, friction, boundary, stiffness), mpm.KERNELS[kernel],
+                             "float32", device)
     solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track(model, len(model.body_ranges) - 1)
-    driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
+    policy = mpm.StepPolicy(duration=duration, dt=dt) if dt else mpm.StepPolicy(duration=duration)
+    driver = mpm.Driver(solver, state, policy, observers=[track])
     if driver.run().status != "completed":
         raise RuntimeError(f"the run stopped: {driver.outcome.reason}")
     t, c, v, w = np.array(track.t), np.array(track.c), np.array(track.v), np.array(track.w)
@@ -189,16 +196,22 @@ def main(argv=None) -> int:
                         help=", ".join(mpm.INTEGRATORS))
     parser.add_argument("--kernel", type=choice(mpm.KERNELS), default="quadratic", help=", ".join(mpm.KERNELS))
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
+    parser.add_argument("--boundary", type=choice(BOUNDARIES), default="separate",
+                        help="the collider's: separate (the grid rule) or elastic (springs on the particles)")
+    parser.add_argument("--stiffness", type=bounded(0.01, 4.0, "-"), default=0.5,
+                        help="an elastic collider's springs, times the body's P-wave modulus")
+    parser.add_argument("--dt", type=bounded(0.0, 0.01, "s"), default=0.0, help="a fixed step [s]; 0: the step rule")
     args = parser.parse_args(argv)
     shape = "disk" if args.dim == "2" else "sphere"
-    print(f"a {shape} rolling on a {args.on}, {args.scheme}, {args.integrator}, {args.kernel}, "
+    plane = args.on if args.on == "body" else f"{args.boundary} collider"
+    print(f"a {shape} rolling on a {plane}, {args.scheme}, {args.integrator}, {args.kernel}, "
           f"theta {args.angle:g} deg, mu {args.friction:g}, {args.duration:g} s")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'slip [cells]':>12} "
           f"{'sink [cells]':>12} {'elastic':>8} {'steps':>6} {'wall [s]':>8}")
     runs = []
     for res in args.resolutions:
         r = roll(int(args.dim), args.on, args.scheme, res, args.angle, args.friction, args.duration,
-                 args.integrator, args.kernel, args.device)
+                 args.integrator, args.kernel, args.device, args.boundary, args.stiffness, args.dt)
         runs.append(r)
         print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {100 * r.error:>+7.2f}% "
               f"{r.slip * res:>12.3f} {r.sink * res:>12.3f} {r.flattening * res:>8.3f} {r.steps:>6} {r.seconds:>8.1f}")

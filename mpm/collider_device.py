@@ -12,13 +12,13 @@ import warp as wp
 
 from .collider_motion import make_box_face, make_centre, make_place
 from .collider_shapes import make_collider_data
-from .colliders import BOUNDARIES, KINDS, RIGID, TURNING, Collider
+from .colliders import BOUNDARIES, ELASTIC, KINDS, RIGID, TURNING, Collider
 from .launch import warp_kernel
 from .rigid import solids
 from .surface import APART, CONTACT, make_profile_type, make_surface
 from .types import Types
 
-STICKY, SLIP, SEPARATE = range(len(BOUNDARIES))
+STICKY, SLIP, SEPARATE, SPRINGS = range(len(BOUNDARIES))
 BOX = KINDS.index("box")
 
 
@@ -210,6 +210,9 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
                 impulse: wp.array(dtype=wp.float64), torque: wp.array(dtype=wp.float64)):
         for k in range(colliders.shape[0]):
             c = colliders[k]
+            if wp.static(ELASTIC in kinds):
+                if c.boundary == SPRINGS:
+                    continue  # it acts on the particles (mpm.elastic_contact)
             phi, n, u = place(c, q, time)
             state, vs = reach(phi, n, V, G, v, profile)
             if state == CONTACT:
@@ -340,11 +343,13 @@ def make_inside_count(t: Types, kinds: tuple[str, ...]):
 
 
 def kinds_of(colliders: list[Collider], rigid: bool = False) -> tuple[str, ...]:
-    """The shapes present, in KINDS order, TURNING where a collider turns and
-    RIGID last where the scene has rigid bodies (``rigid``; their shapes
-    among ``colliders``): the kernels' specialisation key."""
+    """The shapes present, in KINDS order, TURNING where a collider turns,
+    ELASTIC where one acts through springs (mpm.elastic_contact) and RIGID
+    last where the scene has rigid bodies (``rigid``; their shapes among
+    ``colliders``): the kernels' specialisation key."""
     return (tuple(k for k in KINDS if any(c.type == k for c in colliders))
-            + ((TURNING,) if any(c.turns for c in colliders) or rigid else ()) + ((RIGID,) if rigid else ()))
+            + ((TURNING,) if any(c.turns for c in colliders) or rigid else ())
+            + ((ELASTIC,) if any(c.boundary == ELASTIC for c in colliders) else ()) + ((RIGID,) if rigid else ()))
 
 
 def scene_kinds(scene) -> tuple[str, ...]:

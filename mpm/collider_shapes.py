@@ -20,6 +20,7 @@ def make_collider_data(t: Types):
         kind: int  # KINDS
         boundary: int  # BOUNDARIES
         friction: t.scalar
+        stiffness: t.scalar  # an elastic collider's spring factor (mpm.elastic_contact)
         invert: int  # 1: a container (the solid is outside the shape)
         p: t.vec  # point, centre
         n0: t.vec  # normal or axis (unit)
@@ -53,6 +54,7 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device, bodies: int 
         d = Data()
         d.kind, d.boundary, d.invert = rec["kind"], rec["boundary"], rec["invert"]
         d.friction, d.r, d.a, d.w = (t.scalar(float(rec[k])) for k in ("friction", "r", "a", "w"))
+        d.stiffness = t.scalar(float(rec["stiffness"]))
         for k in ("p", "n0", "n1", "h", "u", "pivot"):
             setattr(d, k, t.vec(*rec[k]))
         d.window = wp.types.vector(2, t.scalar)(*rec["window"])

@@ -75,8 +75,12 @@ RIGID = "rigid"
 """the key the kernels add where a scene has rigid bodies (mpm.rigid): the
 rotation is compiled with each record's current pose, and each collider's
 angular impulse about its centre is summed"""
-BOUNDARIES = ("sticky", "slip", "separate")
-"""what a node inside a collider does (Collider.boundary; module docstring)"""
+ELASTIC = "elastic"
+"""the key the kernels add where a collider acts through springs (mpm.elastic_contact): only
+then does the grid rule skip such colliders"""
+BOUNDARIES = ("sticky", "slip", "separate", ELASTIC)
+"""what a node inside a collider does (Collider.boundary; module docstring); elastic: the
+particles that touch it, through springs (mpm.elastic_contact)"""
 INSIDE_DEPTH = 1.0
 """a particle counts as inside a collider when deeper than this many cells:
 under the surface rule none is inside at all after a step (mpm.keep_out);
@@ -143,9 +147,13 @@ class Collider:
     type: str
     """the shape: half_space, wedge, box, sphere, cylinder, cup, bowl or mesh (KINDS)"""
     boundary: str = "slip"
-    """what a node inside does: sticky, slip or separate (BOUNDARIES; module docstring)"""
+    """what a node inside does: sticky, slip or separate (BOUNDARIES; module docstring); elastic:
+    it acts on the particles that touch it, through springs (mpm.elastic_contact)"""
     friction: float = 0.0
-    """Coulomb coefficient mu [-] of slip and separate"""
+    """Coulomb coefficient mu [-] of slip, separate and elastic"""
+    stiffness: float = 0.5
+    """an elastic collider's springs: this times the body's P-wave modulus times dx^(d-2) per particle
+    (mpm.elastic_contact)"""
     name: str = ""
     """a name for the recording (default: the type and index)"""
     inside: bool = False
@@ -250,6 +258,9 @@ class Collider:
             out.append(("type", f"mesh in {dim}D; accepted: mesh colliders in 3D only"))
         if not (self.friction >= 0.0):
             out.append(("friction", f"{self.friction}; accepted: a number >= 0"))
+        if not (0.0 < self.stiffness <= 4.0):
+            out.append(("stiffness", f"{self.stiffness}; accepted: 0 < stiffness <= 4 (the springs' step "
+                                     "stays within the wave's)"))
         return out + self._motion_problems(dim)
 
     def _motion_problems(self, dim: int) -> list[tuple[str, str]]:
@@ -331,7 +342,7 @@ class Collider:
         """The packed fields of mpm.collider_device.make_collider_data (numbers only)."""
         z = (0.0,) * dim
         r = dict(kind=KINDS.index(self.type), boundary=BOUNDARIES.index(self.boundary),
-                 friction=self.friction, invert=int(self.inside), p=z, n0=z, n1=z, h=z,
+                 friction=self.friction, stiffness=self.stiffness, invert=int(self.inside), p=z, n0=z, n1=z, h=z,
                  r=self.radius, a=0.0, w=self.thickness, u=tuple(self.velocity or z),
                  window=(self.start, min(self.end, 1e30)), omega=tuple(self.omega(dim)), pivot=self.rest_pivot(dim))
         if self.type in ("half_space", "wedge"):

@@ -31,8 +31,8 @@ def needs_gradients(scene) -> bool:
     """Whether the boundary conditions read the nodes' velocity gradients
     (summed in P2G): the surface rule with a collider that holds a body's
     surface tangentially (friction, or sticky), mpm.surface."""
-    return scene.boundary_rule == "surface" and any(c.friction > 0 or c.boundary == "sticky"
-                                                     for c in solids(scene))
+    return scene.boundary_rule == "surface" and any((c.friction > 0 and c.boundary != "elastic")
+                                                     or c.boundary == "sticky" for c in solids(scene))
 
 
 class Conditions:

@@ -33,6 +33,7 @@ from .reference_update import References
 from .contact.passes import Contact
 from .stepping.criterion import Criterion
 from .diagnostics import Diagnostics, diagnostic_names
+from .elastic_contact import elastic
 from .fracture import FractureMeasure
 from .implicit.solve import ImplicitSolve, NewtonReport
 from .integrators import Explicit, Implicit
@@ -150,6 +151,10 @@ def check_solver_inputs(model, scheme, options) -> None:
         raise ValueError("options.integrator: joints and rigid contact (mpm.joints, mpm.rigid_contact) are "
                          "advanced under the explicit integrator only; accepted: mpm.Explicit(), or no joints "
                          "and rigid_contact 'none'")
+    if options is not None and isinstance(options.integrator, Implicit) and elastic(scene):
+        raise ValueError("options.integrator: elastic colliders (boundary 'elastic', mpm.elastic_contact) act "
+                         "under the explicit integrator only; accepted: mpm.Explicit(), or boundary sticky, "
+                         "slip or separate")
     if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
             scene.solution, "has_body_force", False)):
         raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "
@@ -325,8 +330,9 @@ class Solver:
         self.grid.clear(self.layout.n_nodes, positions=not isinstance(self.scheme, EMPM))
 
     def _apply_forcing(self, state: State) -> None:
-        """The external loads' body force (mpm.loads), or a manufactured solution's, at the step's start."""
-        if self.transfers.forcing is not None or self.transfers.loads is not None:
+        """The external loads' body force (mpm.loads), or a manufactured solution's, and the elastic
+        colliders' springs (mpm.elastic_contact), at the step's start."""
+        if self.transfers.forcing is not None or self.transfers.loads is not None or self.transfers.springs is not None:
             self.transfers.apply_forcing(state, cast(np.ndarray, self.X0), self.time)  # (set by prepare)
 
     def _rasterize(self, state: State, write: bool = True) -> None:

@@ -17,6 +17,7 @@ import warp as wp
 
 from .collider_device import scene_kinds
 from .g2p import make_g2p
+from .elastic_contact import Springs, elastic
 from .loads import Loads
 from .p2g import make_p2g
 from .scene import WALL_TYPES
@@ -77,7 +78,8 @@ class Transfers:
         self.rigid = rigid  # the rigid bodies, advanced after G2P (mpm.rigid_coupling.Coupler; None: none)
         self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
         self.forcing = forcing
-        body_force = forcing is not None or model.loads is not None
+        springs = elastic(model.scene)  # colliders acting through springs on the particles (mpm.elastic_contact)
+        body_force = forcing is not None or model.loads is not None or springs
         # the factor of F whose sum G2P compensates (mpm.g2p): F^0s with the commit of an unprojected
         # F^0s, F^sn without a commit, none with a projected commit
         compensated = "" if not compensate else ("sn" if not commit else ("0s" if project is None else ""))
@@ -104,19 +106,30 @@ class Transfers:
             # or of the external loads, set at every step's start
             self.body_force = wp.zeros(model.n_particles if body_force else 1, dtype=t.vec)
         self.loads = Loads(model, launch, buffer, self.body_force) if model.loads is not None else None
+        self.springs = None  # the elastic colliders' springs (their records: the conditions')
+        if springs:
+            assert boundary is not None, "a scene with colliders packs them (mpm.conditions)"
+            self.springs = Springs(model, launch, buffer, self.body_force, scene_kinds(model.scene), boundary.colliders)
 
     def kernels(self) -> list:
-        return [k for k, _ in self.p2g] + [self.g2p] + (self.loads.kernels() if self.loads else [])
+        return ([k for k, _ in self.p2g] + [self.g2p] + (self.loads.kernels() if self.loads else [])
+                + (self.springs.kernels() if self.springs else []))
 
     def apply_forcing(self, state, X0: np.ndarray, time: float) -> None:
         """The body force of the step: the external loads' at the device's
         step start, or the manufactured solution's at the initial positions
         ``X0`` [m] and ``time`` [s] (host)."""
         if self.loads is not None:
+            if self.springs is not None:  # the loads write their particles only; the springs add to them
+                self.body_force.zero_()
             self.loads.apply(state)
         if self.forcing is not None:
             b = self.forcing.body_force(X0, time)
             self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
+        if self.springs is not None:
+            if self.rigid is not None:  # the bodies where they are at the step's start (mpm.rigid_coupling)
+                self.rigid.place(self.buffer.status)
+            self.springs.apply(state)
 
     def rasterize(self, state, grid, layout, const, write: bool) -> None:
         """P2G over the device's step: the plastic return mapping (stored when

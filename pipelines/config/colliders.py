@@ -79,8 +79,10 @@ class _Collider:
     geometry: ClassVar[tuple[str, ...]]  # each type's keys of its shape (build)
     type: str = setting("half_space", "the kind of collider")
     name: str = setting("", "a name for the recording")
-    boundary: str = setting("slip", "sticky, slip or separate (mpm.colliders)", choices=BOUNDARIES)
-    friction: float = setting(0.0, "Coulomb friction coefficient of slip and separate", ge=0.0)
+    boundary: str = setting("slip", "sticky, slip, separate or elastic (mpm.colliders)", choices=BOUNDARIES)
+    friction: float = setting(0.0, "Coulomb friction coefficient of slip, separate and elastic", ge=0.0)
+    stiffness: float = setting(0.5, "an elastic collider's springs, times the body's P-wave modulus "
+                                    "(mpm.elastic_contact)", gt=0.0, le=4.0)
     inside: bool = setting(False, "the solid is the outside of the shape (a container)")
     velocity: Optional[List[float]] = setting(None, "[m/s] moves the collider while start <= t < end; "
                                                     "null: static", size="dim")
@@ -99,7 +101,7 @@ class _Collider:
 
     def common(self) -> dict:
         return dict(type=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
-                    inside=self.inside, velocity=self.velocity, start=self.start,
+                    stiffness=self.stiffness, inside=self.inside, velocity=self.velocity, start=self.start,
                     end=float("inf") if self.end is None else self.end,
                     angular_velocity=self.angular_velocity, pivot=self.pivot)
 

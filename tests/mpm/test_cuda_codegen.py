@@ -80,7 +80,7 @@ import pytest
 import warp as wp
 
 import mpm
-from mpm.colliders import KINDS, TURNING, Collider
+from mpm.colliders import ELASTIC, KINDS, RIGID, TURNING, Collider
 from mpm.kernels import Kernel
 from mpm.loads import Load
 from mpm.launch import kernel_name
@@ -196,13 +196,14 @@ class Case:
     measure: bool = False  # the driver measures the diagnostics every step
     compensate: bool | None = None  # compensated sums of x and F in G2P (None: where the estimate flags the scene)
     rule: str = "surface"  # where walls and colliders act (mpm.scene.BOUNDARY_RULES)
+    elastic: bool = False  # the first collider acts through springs on the particles (mpm.elastic_contact)
 
     def label(self) -> str:
         default = Case()
         return ",".join(f"{k}={v}" for k, v in vars(self).items() if v != getattr(default, k)) or "base"
 
 
-def _collider(kind: str, dim: int, friction: float, turning: bool = False) -> Collider:
+def _collider(kind: str, dim: int, friction: float, turning: bool = False, elastic: bool = False) -> Collider:
     def at(*c):
         return tuple(c[:dim])
 
@@ -217,7 +218,8 @@ def _collider(kind: str, dim: int, friction: float, turning: bool = False) -> Co
         "mesh": dict(mesh=MeshShape("warp:cube", (0.5, 0.12, 0.5), 0.08)),
     }
     spin = None if not turning else (1.0 if dim == 2 else (0.0, 1.0, 0.5))
-    return Collider(kind, friction=friction, angular_velocity=spin, **shapes[kind])
+    return Collider(kind, friction=friction, angular_velocity=spin, boundary="elastic" if elastic else "slip",
+                    **shapes[kind])
 
 
 def scene(case: Case, dim: int) -> mpm.Scene:
@@ -232,8 +234,8 @@ def scene(case: Case, dim: int) -> mpm.Scene:
     if case.regions:
         regions = [mpm.KinematicRegion(body=0, select=mpm.Box((centres[0],) + (0.5,) * (dim - 1), (0.05,) * dim),
                                        velocity=(0.1,) + (0.0,) * (dim - 1))]
-    colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0, case.turning and i == 0)
-                 for i, k in enumerate(case.colliders)]
+    colliders = [_collider(k, dim, 0.3 if case.friction and i == 0 else 0.0, case.turning and i == 0,
+                           case.elastic and i == 0) for i, k in enumerate(case.colliders)]
     rigid = []
     if case.rigid:
         at = (lambda *c: tuple(c[:dim]))  # noqa: E731
@@ -352,6 +354,10 @@ def cases(dim: int) -> list[Case]:
             Case(rigid=True), Case(batched=True, rigid=True), Case(rigid=True, joints=True),
             Case(colliders=every, friction=True, rigid=True, implicit=True),
             Case(scheme="tlmpm", colliders=every, friction=True, implicit=True, turning=True)]
+    # an elastic collider among them: its springs on the particles, alone, with loads, turning, with rigid bodies
+    out += [Case(colliders=every, friction=True, elastic=True), Case(colliders=every, elastic=True, loads=True),
+            Case(scheme="tlmpm", colliders=every, friction=True, turning=True, elastic=True, batched=True),
+            Case(colliders=every, friction=True, rigid=True, elastic=True)]
     # the node rule of earlier versions (walls and colliders on the nodes inside them)
     out += [Case(rule="nodes", colliders=every, friction=True), Case(rule="nodes", materials=two, colliders=every),
             Case(rule="nodes", scheme="tlmpm", colliders=every, friction=True, implicit=True),
@@ -423,6 +429,8 @@ def required(factory: str, parameter: inspect.Parameter, t: Types) -> set:
         return {None} | {cls.project for cls in mpm.MATERIALS.values() if cls.project is not None}
     if name == "colliders":
         return {(), kinds(t.dim), kinds(t.dim) + (TURNING,)}
+    if name == "elastic_kinds":  # the springs of elastic colliders (mpm.elastic_contact)
+        return {kinds(t.dim) + (ELASTIC,), kinds(t.dim) + (TURNING, ELASTIC), kinds(t.dim) + (TURNING, ELASTIC, RIGID)}
     if name == "kinds":
         return {kinds(t.dim), kinds(t.dim) + (TURNING,)} | {(k,) for k in kinds(t.dim)}
     if name == "n_grids":

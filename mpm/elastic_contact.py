@@ -1,0 +1,142 @@
+"""Colliders whose ``boundary`` is ``elastic``: they act on the particles
+that touch them, through springs, instead of on the grid's nodes.
+
+A particle p of half spacing r_p (half the distance between neighbouring
+particles at sampling, dx / (2 ppc^(1/d))) whose centre lies phi < r_p from
+the solid's surface (mpm.collider_motion: signed distance phi, outward
+normal n, the solid's velocity u there) has its material overlapping the
+solid by d = r_p - phi. The collider pushes it out with the normal force
+
+    f_n = k d n,    k = stiffness M_b dx^(d-2)   [N/m; 2D: N/m per m],
+
+M_b = rho c^2 its body's P-wave modulus at rest (mpm.materials) and
+``stiffness`` the collider's factor (1: a layer as stiff as the body one
+cell thick, spread over a cell's face), and holds it by Coulomb friction as
+a tangential spring: the particle's tangential travel relative to the solid
+while it touches, w (reset when it leaves), gives f_t = -k w, capped at
+mu |f_n| (w then shortened to the cap: the particle slides). The force
+enters P2G as a body force f / m_p (mpm.p2g), and its impulse f dt, with
+its angular impulse about the collider's centre (taken at the surface point
+x_p - phi n), goes to the collider's rows of the step's status, which give
+it back to a rigid body (mpm.rigid_coupling).
+
+Why: the grid rule (mpm.surface) stops the material's approach at the nodes
+within half a cell of the surface, a band of the kernel's width wider than
+a rolling body's contact patch, and each step's P2G brings back the
+approach it took out; the loss is per step, so a body rolling on a collider
+lost more at shorter steps (RESULTS.md, "Why contact resists rolling").
+A spring stores what it takes and gives it back. Its cost: a stiffness to
+choose (the step rule is unchanged: the spring's frequency, 2 sqrt(k / m_p),
+stays below the wave's at stiffness <= 1), an overlap of f / k, and no
+contact before the particles reach the surface. Explicit integrator only:
+an implicit step would need the springs in its system (mpm.implicit).
+"""
+
+import functools
+
+import numpy as np
+import warp as wp
+
+from .collider_device import make_add_impulse, make_add_torque
+from .collider_motion import make_centre, make_place
+from .collider_shapes import make_collider_data
+from .colliders import BOUNDARIES, ELASTIC, RIGID
+from .launch import warp_kernel
+from .stepping.status import StepControl, StepStatus
+from .types import Types
+
+SPRINGS = BOUNDARIES.index(ELASTIC)
+
+
+@functools.cache
+def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
+    """Kernel: every particle's spring force from the elastic colliders, as
+    the body force of P2G (added to the external loads' with ``loads``:
+    they wrote it first), the tangential travel ``w`` kept per particle,
+    the impulses into the colliders' rows (module docstring).
+    ``elastic_kinds``: the scene's collider kinds (mpm.collider_device.kinds_of; ELASTIC among them)."""
+    S, vec, Data = t.scalar, t.vec, make_collider_data(t)
+    kinds = elastic_kinds
+    place, centre = make_place(t, kinds), make_centre(t)
+    add_impulse, add_torque = make_add_impulse(t), make_add_torque(t)
+
+    @warp_kernel
+    def springs(x: wp.array(dtype=vec), v: wp.array(dtype=vec), C: wp.array(dtype=t.mat),
+                Fsn: wp.array(dtype=t.mat), mass: wp.array(dtype=S),
+                body: wp.array(dtype=wp.int32), modulus: wp.array(dtype=S), half: wp.array(dtype=S),
+                colliders: wp.array(dtype=Data), w: wp.array(dtype=vec), control: StepControl,
+                status: StepStatus, body_force: wp.array(dtype=vec)):
+        p = wp.tid()
+        if control.skip[0] != wp.float64(0.0):
+            return
+        m = mass[p]
+        if m <= S(0.0):
+            return
+        time = S(control.t[0])
+        dt = S(control.dt[0])
+        b = vec()
+        if wp.static(loads):
+            b = body_force[p]
+        xp, vp, bp = x[p], v[p], body[p]
+        travel = vec()
+        for k in range(colliders.shape[0]):
+            c = colliders[k]
+            if c.boundary == SPRINGS:
+                phi, n, u = place(c, xp, time)
+                d = half[bp] - phi
+                if d > S(0.0):
+                    kp = c.stiffness * modulus[bp]
+                    fn = kp * d
+                    vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
+                    s = w[p] + (vr - wp.dot(vr, n) * n) * dt
+                    s = s - wp.dot(s, n) * n
+                    ft = -kp * s
+                    cap = c.friction * fn
+                    lt = wp.length(ft)
+                    if lt > cap:
+                        ft = ft * (cap / lt)
+                        s = -ft / kp
+                    travel = s
+                    f = fn * n + ft
+                    b = b + f / m
+                    add_impulse(status.collider_impulse, k, f * dt)
+                    if wp.static(RIGID in kinds):
+                        add_torque(status.collider_torque, k, xp - phi * n - centre(c, time), f * dt)
+        w[p] = travel
+        body_force[p] = b
+
+    return springs
+
+
+def elastic(scene) -> bool:
+    """Whether any collider or rigid body of ``scene`` is elastic."""
+    from .rigid import solids
+    return any(c.boundary == "elastic" for c in solids(scene))
+
+
+class Springs:
+    """The elastic colliders' pass at a step's start (after the external
+    loads), writing P2G's body force."""
+
+    def __init__(self, model, launch, buffer, body_force, kinds: tuple[str, ...], colliders):
+        t = model.types
+        self.model, self.launch, self.buffer, self.body_force = model, launch, buffer, body_force
+        self.colliders = colliders  # the packed records (mpm.conditions), rewritten for rigid bodies
+        self.kernel = make_springs(t, kinds, model.loads is not None)
+        scene = model.scene
+        dtype = np.float32 if t.precision == "float32" else np.float64
+        moduli = [b.material.rho * b.material.wave_speed() ** 2 * model.dx ** (t.dim - 2) for b in scene.bodies]
+        halves = [0.5 * model.dx / scene.ppc ** (1.0 / t.dim) for _ in scene.bodies]
+        with wp.ScopedDevice(model.device):
+            self.modulus = wp.array(np.array(moduli, dtype), dtype=t.scalar)
+            self.half = wp.array(np.array(halves, dtype), dtype=t.scalar)
+            self.w = wp.zeros(model.n_particles, dtype=t.vec)  # the tangential travel [m]
+
+    def kernels(self) -> list:
+        return [self.kernel]
+
+    def apply(self, state) -> None:
+        b = self.buffer
+        self.launch(self.kernel, self.model.n_particles,
+                    [state.x, state.v, state.C, state.Fsn, self.model.mass, self.model.body, self.modulus, self.half,
+                     self.colliders, self.w, b.control, b.status, self.body_force])
