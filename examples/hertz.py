@@ -88,8 +88,11 @@ class Force(mpm.Observer):
             self.impulse, self.span = 0.0, 0.0
 
 
-def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float = 0.02) -> mpm.Scene:
-    """The scene of the module docstring; the plates approach at ``rate`` [m/s]."""
+def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float = 0.02,
+          boundary: str = "separate") -> mpm.Scene:
+    """The scene of the module docstring; the plates approach at ``rate``
+    [m/s]; their ``boundary``: "separate" (the grid rule) or "elastic"
+    (springs on the particles, mpm.elastic_contact)."""
     centre = (SIDE / 2,) * dim
     up = (0.0, 1.0) + (0.0,) * (dim - 2)
 
@@ -100,11 +103,11 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
         return tuple(sign * rate / 2 * u for u in up)
     ball = mpm.Body(mpm.Sphere(centre, R), mpm.FixedCorotated(E=E, nu=NU), name="ball")
     bodies, regions = [ball], []
-    colliders = [mpm.Collider.half_space(at(SIDE / 2 + R), tuple(-u for u in up), boundary="separate",
+    colliders = [mpm.Collider.half_space(at(SIDE / 2 + R), tuple(-u for u in up), boundary=boundary,
                                          velocity=moving(-1.0), name="upper")]
     bottom = SIDE / 2 - R
     if on == "collider":
-        colliders.append(mpm.Collider.half_space(at(bottom), up, boundary="separate", velocity=moving(1.0),
+        colliders.append(mpm.Collider.half_space(at(bottom), up, boundary=boundary, velocity=moving(1.0),
                                                  name="lower"))
     else:
         dx = SIDE / resolution
@@ -120,11 +123,11 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
 
 
 def press(dim: int = 2, on: str = "collider", scheme: str = "empm", resolution: int = 64, approach: float = 0.008,
-          duration: float = 0.4, device: str = "cpu") -> Pressed:
+          duration: float = 0.4, device: str = "cpu", boundary: str = "separate") -> Pressed:
     """Press the body by ``approach`` [m] over ``duration`` [s] (module docstring)."""
     wall = time.perf_counter()
     rate = approach / duration
-    model, state = mpm.build(scene(dim, on, resolution, rate), mpm.QUADRATIC, "float32", device)
+    model, state = mpm.build(scene(dim, on, resolution, rate, boundary), mpm.QUADRATIC, "float32", device)
     force = Force(model.kernel.n_grids, duration / WINDOWS)
     driver = mpm.Driver(mpm.Solver(model, mpm.SCHEMES[scheme]()), state, mpm.StepPolicy(duration=duration),
                         observers=[force])
@@ -148,12 +151,15 @@ def main(argv=None) -> int:
                         help="the plates' approach at the end [mm]")
     parser.add_argument("--duration", type=bounded(0.05, 10.0, "s"), default=0.4, help="loading time [s]")
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
+    parser.add_argument("--boundary", type=choice(("separate", "elastic")), default="separate",
+                        help="the plates': separate (the grid rule) or elastic (springs on the particles)")
     args = parser.parse_args(argv)
     body = "cylinder [N/m]" if args.dim == "2" else "sphere [N]"
     print(f"a {body} between a rigid plate and a {args.on}, {args.scheme}: approach {args.approach:g} mm "
           f"over {args.duration:g} s")
     for res in args.resolutions:
-        p = press(int(args.dim), args.on, args.scheme, res, args.approach / 1000, args.duration, args.device)
+        p = press(int(args.dim), args.on, args.scheme, res, args.approach / 1000, args.duration, args.device,
+                  args.boundary)
         dx = SIDE / res
         print(f"\n{res} cells (dx = {1000 * dx:.3f} mm, R = {R / dx:.1f} dx), {p.steps} steps, {p.seconds:.0f} s")
         print(f"{'approach [mm]':>14} {'[dx]':>6} {'force':>10} {'closed':>10} {'ratio':>7}")

@@ -34,7 +34,7 @@ from _args import Parser, bounded, choice, device, integer  # noqa: E402 (this f
 
 G = 9.81  # [m/s^2]
 FACE = 0.2  # the piston's face at t = 0 [m]
-RULES = ("surface", "nodes")
+RULES = ("surface", "nodes", "elastic")  # Scene.boundary_rule, or the piston elastic (mpm.elastic_contact)
 TOLERANCE = 1.0e-4  # a particle deeper than this [cells] is inside: above float32's rounding of the face (~1e-7 m)
 
 
@@ -64,9 +64,10 @@ def push(speed: float = 2.0, resolution: int = 64, scheme: str = "empm", K: floa
     dx = 1.0 / resolution
     floor = 3 * dx
     water = mpm.Body(mpm.Box((FACE + 0.25, floor + 0.125), (0.25, 0.125)), mpm.Fluid(K=K, rho=1000.0), name="water")
-    piston = mpm.Collider.box((FACE - 0.1, 0.25), (0.1, 0.5), velocity=(speed, 0.0), boundary="slip", name="piston")
+    piston = mpm.Collider.box((FACE - 0.1, 0.25), (0.1, 0.5), velocity=(speed, 0.0),
+                              boundary="elastic" if rule == "elastic" else "slip", name="piston")
     scene = mpm.Scene(dim=2, domain=(1.0, 0.5), resolution=resolution, ppc=4, bodies=[water], colliders=[piston],
-                      gravity=(0.0, -G), walls=("slip",) * 4, boundary_rule=rule)
+                      gravity=(0.0, -G), walls=("slip",) * 4, boundary_rule="surface" if rule == "elastic" else rule)
     model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
     inside = Inside(speed, model.kernel.n_grids, TOLERANCE * dx)
     driver = mpm.Driver(mpm.Solver(model, mpm.SCHEMES[scheme]()), state, mpm.StepPolicy(duration=duration),

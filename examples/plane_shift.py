@@ -28,7 +28,8 @@ at once): a block
 released with its full weight and no stress bounces on the plane, whose
 reaction then falls below what friction needs to hold it, and it slips;
 loaded slowly it has no reason to. ``--rule nodes`` runs the node rule of
-earlier versions (Scene.boundary_rule). A bad argument ends it with one line
+earlier versions (Scene.boundary_rule), ``--rule elastic`` the plane as
+an elastic collider (springs on the particles, mpm.elastic_contact). A bad argument ends it with one line
 (``error: --option: value; accepted: ...``) and exit code 2.
 """
 
@@ -51,7 +52,7 @@ HALF = 0.05  # the block's half side [m]
 RHO = 1000.0  # the block's density [kg/m^3] (mpm.FixedCorotated's default)
 SETTLE = 0.05  # the velocity fit starts here [s]
 LOADED = 0.1  # the held block's weight is on the plane by then [s]
-RULES = ("surface", "nodes")
+RULES = ("surface", "nodes", "elastic")  # Scene.boundary_rule, or the plane elastic (mpm.elastic_contact)
 
 
 class Motion(mpm.Observer):
@@ -80,13 +81,15 @@ def run(shift: float, theta: float, mu: float | None, scheme: str = "empm", reso
     ``duration`` [s]; its weight at once, or rising over ``ramp`` [s]."""
     top = TOP + shift / resolution
     block = mpm.Body(mpm.Box((0.3, top + HALF), (HALF, HALF)), mpm.FixedCorotated(E=2.0e5, nu=0.3), name="block")
-    plane = mpm.Collider.half_space((0.5, top), (0.0, 1.0), boundary="sticky" if mu is None else "separate",
+    boundary = "sticky" if mu is None else ("elastic" if rule == "elastic" else "separate")
+    plane = mpm.Collider.half_space((0.5, top), (0.0, 1.0), boundary=boundary,
                                     friction=mu or 0.0, name="plane")
     th = math.radians(theta)
     g = (G * math.sin(th), -G * math.cos(th))
     weight = [mpm.Load.body_force(tuple(RHO * gi for gi in g), ramp=ramp, name="weight")] if ramp > 0.0 else []
     scene = mpm.Scene(dim=2, domain=(1.0, 0.5), resolution=resolution, ppc=4, bodies=[block], colliders=[plane],
-                      gravity=(0.0, 0.0) if weight else g, loads=weight, walls=("slip",) * 4, boundary_rule=rule)
+                      gravity=(0.0, 0.0) if weight else g, loads=weight, walls=("slip",) * 4,
+                      boundary_rule="surface" if rule == "elastic" else rule)
     model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
     motion = Motion(model)
     driver = mpm.Driver(mpm.Solver(model, mpm.SCHEMES[scheme]()), state, mpm.StepPolicy(duration=duration),

@@ -44,7 +44,7 @@ HALF = 0.1  # the block's half side [m]
 E, NU, RHO = 1.0e5, 0.3, 1000.0  # the block's material
 LEVEL = 0.25  # the collider's and the slab's top at shift 0 [m]
 SUPPORTS = ("wall", "collider", "body")
-RULES = ("surface", "nodes")
+RULES = ("surface", "nodes", "elastic")  # Scene.boundary_rule, or the collider elastic (mpm.elastic_contact)
 
 
 def csv_of(names):
@@ -84,7 +84,8 @@ def rest(on: str = "wall", scheme: str = "empm", resolution: int = 32, shift: fl
     block = mpm.Body(mpm.Box((0.5, base + HALF), (HALF, HALF)), mpm.FixedCorotated(E=E, nu=NU, rho=RHO), name="block")
     bodies, colliders, regions = [block], [], []
     if on == "collider":
-        colliders = [mpm.Collider.half_space((0.5, base), (0.0, 1.0), boundary="separate", name="plane")]
+        colliders = [mpm.Collider.half_space((0.5, base), (0.0, 1.0), boundary="elastic" if rule == "elastic" else
+                                             "separate", name="plane")]
     elif on == "body":
         slab = mpm.Body(mpm.Box((0.5, base - 0.05), (0.3, 0.05)), mpm.FixedCorotated(E=10 * E, nu=NU, rho=RHO),
                         name="slab")
@@ -92,8 +93,9 @@ def rest(on: str = "wall", scheme: str = "empm", resolution: int = 32, shift: fl
         regions = [mpm.KinematicRegion(body=0, select=mpm.Box((0.5, base - 0.1 + dx / 4), (0.3, dx / 4)),
                                        velocity=(0.0, 0.0))]
     scene = mpm.Scene(dim=2, domain=(1.0, 0.625), resolution=resolution, ppc=4, bodies=bodies, colliders=colliders,
-                      regions=regions, gravity=(0.0, -G), walls=("slip",) * 4, boundary_rule=rule,
-                      contact="frictionless", contact_normal="stiffer")
+                      regions=regions, gravity=(0.0, -G), walls=("slip",) * 4,
+                      boundary_rule="surface" if rule == "elastic" else rule, contact="frictionless",
+                      contact_normal="stiffer")
     model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
     x0 = state.x.numpy().astype(np.float64)
     start, count = model.body_ranges[-1]

@@ -122,16 +122,17 @@ class Run:
 
 
 def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
-          static: bool = False, gap: float = DROP, dim: int = 2) -> mpm.Scene:
+          static: bool = False, gap: float = DROP, dim: int = 2, boundary: str = "separate") -> mpm.Scene:
     """The scene of the module docstring, the body ``gap`` [m] above the
-    slab, ``resolution`` cells across 1 m (``static``: the body a static collider)."""
+    slab, ``resolution`` cells across 1 m (``static``: the body a static
+    collider; ``boundary`` its, "separate" or "elastic": mpm.elastic_contact)."""
     th = math.radians(angle)
     if dim == 3:
         z = 0.125  # the middle of the depth [m]
         if case == "roll":
-            shape = Collider.sphere((0.13, TOP3 + gap + R, z), R, boundary="separate", friction=friction)
+            shape = Collider.sphere((0.13, TOP3 + gap + R, z), R, boundary=boundary, friction=friction)
         else:
-            shape = Collider.box((0.13, TOP3 + gap + HALF[1], z), (HALF[0], HALF[1], HALF[0]), boundary="separate",
+            shape = Collider.box((0.13, TOP3 + gap + HALF[1], z), (HALF[0], HALF[1], HALF[0]), boundary=boundary,
                                  friction=friction)
         slab = mpm.Body(mpm.Box((0.25, TOP3 - 0.05, z), (0.18, 0.05, 0.06)), mpm.FixedCorotated(E=2.0e6, nu=0.3),
                         name="slab")
@@ -143,9 +144,9 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
             colliders=[shape] if static else [],
             rigid_bodies=[] if static else [mpm.RigidBody(shape, density=1000.0, name=case)])
     if case == "roll":
-        shape = Collider.sphere((0.2, TOP + gap + R), R, boundary="separate", friction=friction)
+        shape = Collider.sphere((0.2, TOP + gap + R), R, boundary=boundary, friction=friction)
     else:
-        shape = Collider.box((0.2, TOP + gap + HALF[1]), HALF, boundary="separate", friction=friction)
+        shape = Collider.box((0.2, TOP + gap + HALF[1]), HALF, boundary=boundary, friction=friction)
     slab = mpm.Body(mpm.Box((0.5, TOP - 0.05), (0.4, 0.05)), mpm.FixedCorotated(E=2.0e6, nu=0.3), name="slab")
     held = mpm.Box((0.5, TOP - 0.09), (0.4, 0.011))
     return mpm.Scene(
@@ -158,11 +159,12 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
 
 def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
         duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu",
-        integrator: str = "explicit", static: bool = False, gap: float = DROP, dim: int = 2) -> Run:
+        integrator: str = "explicit", static: bool = False, gap: float = DROP, dim: int = 2,
+        boundary: str = "separate") -> Run:
     """Run the scene for ``duration`` [s] and measure it (module docstring;
     ``static``: the cost only, the figures of the motion nan)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(case, resolution, angle, friction, static, gap, dim), mpm.KERNELS[kernel],
+    model, state = mpm.build(scene(case, resolution, angle, friction, static, gap, dim, boundary), mpm.KERNELS[kernel],
                              "float32", device)
     solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track()
@@ -205,6 +207,8 @@ def main(argv=None) -> int:
                         help="the body's start above the slab [m] (0: flush)")
     parser.add_argument("--dim", type=choice(("2", "3")), default="2", help="2 or 3")
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
+    parser.add_argument("--boundary", type=choice(("separate", "elastic")), default="separate",
+                        help="the body's: separate (the grid rule) or elastic (springs on the slab's particles)")
     args = parser.parse_args(argv)
     dim = int(args.dim)
     odd = [r for r in args.resolutions if dim == 3 and r % 8]
@@ -215,14 +219,14 @@ def main(argv=None) -> int:
     mu = CASES[args.case][1] if args.friction is None else args.friction
     body = ("disk" if dim == 2 else "sphere") if args.case == "roll" else "block"
     body = f"static {body} collider" if args.static else f"rigid {body}"
-    print(f"a {body} ({args.case}) on an elastic slab, {args.scheme}, {args.kernel}, {args.integrator}, "
-          f"theta {angle:g} deg, mu {mu:g}, gap {args.gap:g} m, {args.duration:g} s, {dim}D")
+    print(f"a {body} ({args.case}, {args.boundary}) on an elastic slab, {args.scheme}, {args.kernel}, "
+          f"{args.integrator}, theta {angle:g} deg, mu {mu:g}, gap {args.gap:g} m, {args.duration:g} s, {dim}D")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'travel [cells]':>14} "
           f"{'slip [cells]':>12} {'steps':>6} {'wall [s]':>8}"
           + (f" {'newton/step':>11} {'solves/step':>11}" if args.integrator == "implicit" else ""))
     for res in args.resolutions:
         r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device, args.integrator,
-                args.static, args.gap, dim)
+                args.static, args.gap, dim, args.boundary)
         error = f"{100 * r.error:>+7.2f}%" if r.expected and not args.static else f"{'-':>8}"
         motion = (f"{'-':>10} {'-':>8} {error} {'-':>14} {'-':>12}" if args.static else
                   f"{r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} {r.slip * res:>12.3f}")

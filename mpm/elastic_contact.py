@@ -18,14 +18,24 @@ mu |f_n| (w then shortened to the cap: the particle slides). The force
 enters P2G as a body force f / m_p (mpm.p2g), and its impulse f dt, with
 its angular impulse about the collider's centre (taken at the surface point
 x_p - phi n), goes to the collider's rows of the step's status, which give
-it back to a rigid body (mpm.rigid_coupling).
+it back to a rigid body (mpm.rigid_coupling); the work a moving solid does
+on the springs, f . u dt where positive, joins the boundary conditions'
+(the blow-up detection allows for it, mpm.stepping.detection). The
+springs' stored energy is not in the step's energies.
 
 Why: the grid rule (mpm.surface) stops the material's approach at the nodes
 within half a cell of the surface, a band of the kernel's width wider than
 a rolling body's contact patch, and each step's P2G brings back the
 approach it took out; the loss is per step, so a body rolling on a collider
 lost more at shorter steps (RESULTS.md, "Why contact resists rolling").
-A spring stores what it takes and gives it back. Its cost: a stiffness to
+A spring stores what it takes and gives it back.
+
+A body sampled overlapping an elastic solid (particles laid on the
+lattice, a face between them: up to r_p) would be thrown off by its
+springs' energy at the first step; the overlap each particle has at the
+run's first step is taken as its rest instead (d = r_p - lap - phi), and it
+gives it up as it leaves: lap never grows, and shrinks to the particle's
+overlap as that shrinks. Its cost: a stiffness to
 choose (the step rule is unchanged: the spring's frequency, 2 sqrt(k / m_p),
 stays below the wave's at stiffness <= 1), an overlap of f / k, and no
 contact before the particles reach the surface. Explicit integrator only:
@@ -64,8 +74,8 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
     def springs(x: wp.array(dtype=vec), v: wp.array(dtype=vec), C: wp.array(dtype=t.mat),
                 Fsn: wp.array(dtype=t.mat), mass: wp.array(dtype=S),
                 body: wp.array(dtype=wp.int32), modulus: wp.array(dtype=S), half: wp.array(dtype=S),
-                colliders: wp.array(dtype=Data), w: wp.array(dtype=vec), control: StepControl,
-                status: StepStatus, body_force: wp.array(dtype=vec)):
+                colliders: wp.array(dtype=Data), w: wp.array(dtype=vec), lap: wp.array(dtype=S), first: int, grids: S,
+                control: StepControl, status: StepStatus, body_force: wp.array(dtype=vec)):
         p = wp.tid()
         if control.skip[0] != wp.float64(0.0):
             return
@@ -79,11 +89,21 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
             b = body_force[p]
         xp, vp, bp = x[p], v[p], body[p]
         travel = vec()
+        overlap = S(0.0)  # the deepest overlap with an elastic solid now
         for k in range(colliders.shape[0]):
             c = colliders[k]
             if c.boundary == SPRINGS:
                 phi, n, u = place(c, xp, time)
-                d = half[bp] - phi
+                overlap = wp.max(overlap, half[bp] - phi)
+                if first != 0:
+                    lap[p] = wp.max(lap[p], half[bp] - phi)
+        held = wp.min(lap[p], overlap)  # an overlap it was sampled with, not yet given up (module docstring)
+        lap[p] = held
+        for k in range(colliders.shape[0]):
+            c = colliders[k]
+            if c.boundary == SPRINGS:
+                phi, n, u = place(c, xp, time)
+                d = half[bp] - held - phi
                 if d > S(0.0):
                     kp = c.stiffness * modulus[bp]
                     fn = kp * d
@@ -100,6 +120,9 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                     f = fn * n + ft
                     b = b + f / m
                     add_impulse(status.collider_impulse, k, f * dt)
+                    work = wp.dot(f, u) * dt  # what a moving solid puts in, counted as the grid rule's
+                    if work > S(0.0):
+                        wp.atomic_add(status.boundary_work, 0, wp.float64(grids * work))
                     if wp.static(RIGID in kinds):
                         add_torque(status.collider_torque, k, xp - phi * n - centre(c, time), f * dt)
         w[p] = travel
@@ -131,6 +154,9 @@ class Springs:
             self.modulus = wp.array(np.array(moduli, dtype), dtype=t.scalar)
             self.half = wp.array(np.array(halves, dtype), dtype=t.scalar)
             self.w = wp.zeros(model.n_particles, dtype=t.vec)  # the tangential travel [m]
+            self.lap = wp.zeros(model.n_particles, dtype=t.scalar)  # the overlap sampled, still held [m]
+        self.grids = t.scalar(model.kernel.n_grids)  # the boundary work is summed over every kernel grid
+        self.first = 1  # the next pass is the run's first: it takes the sampled overlaps
 
     def kernels(self) -> list:
         return [self.kernel]
@@ -139,4 +165,5 @@ class Springs:
         b = self.buffer
         self.launch(self.kernel, self.model.n_particles,
                     [state.x, state.v, state.C, state.Fsn, self.model.mass, self.model.body, self.modulus, self.half,
-                     self.colliders, self.w, b.control, b.status, self.body_force])
+                     self.colliders, self.w, self.lap, self.first, self.grids, b.control, b.status, self.body_force])
+        self.first = 0

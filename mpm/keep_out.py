@@ -14,16 +14,17 @@ on every kernel grid; where the scene has rigid bodies, also its angular
 impulse about the collider's centre, r x m (v' - v), mpm.rigid_coupling). A body in
 contact leans on the grid rule and keeps its particles outside, so this
 acts only on those the rule missed. Under the node rule (earlier versions)
-nothing is compiled.
+nothing is compiled. Elastic colliders (mpm.elastic_contact) hold their
+particles by springs, whose rest may lie a little inside: they are left out.
 """
 
 import functools
 
 import warp as wp
 
-from .collider_device import STICKY, make_add_impulse, make_add_torque
+from .collider_device import SPRINGS, STICKY, make_add_impulse, make_add_torque
 from .collider_motion import make_centre, make_place
-from .colliders import RIGID
+from .colliders import ELASTIC, RIGID
 from .grid import make_boundary_data
 from .scene import WALL_TYPES
 from .stepping.status import StepStatus
@@ -69,6 +70,9 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
         if wp.static(len(kinds) > 0):
             for k in range(data.colliders.shape[0]):
                 c = data.colliders[k]
+                if wp.static(ELASTIC in kinds):
+                    if c.boundary == SPRINGS:
+                        continue  # its springs hold the particles (mpm.elastic_contact)
                 phi, n, u = place(c, x, time)
                 if phi < S(0.0):
                     v_in = v
