@@ -17,7 +17,9 @@ while it touches, w (reset when it leaves), gives f_t = -k w, capped at
 mu |f_n| (w then shortened to the cap: the particle slides). The force
 enters P2G as a body force f / m_p (mpm.p2g), and its impulse f dt, with
 its angular impulse about the collider's centre (taken at the surface point
-x_p - phi n), goes to the collider's rows of the step's status, which give
+x_p - phi n), goes to the collider's rows of the step's status (and to the
+conditions' impulse, as the grid rule's; each summed over the kernel's
+grids as theirs are), which give
 it back to a rigid body (mpm.rigid_coupling); the work a moving solid does
 on the springs, f . u dt where positive, joins the boundary conditions'
 (the blow-up detection allows for it, mpm.stepping.detection). The
@@ -103,11 +105,11 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
             c = colliders[k]
             if c.boundary == SPRINGS:
                 phi, n, u = place(c, xp, time)
-                d = half[bp] - held - phi
+                vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
+                d = half[bp] - held - phi - S(0.5) * dt * wp.dot(vr, n)  # at mid-step (module docstring)
                 if d > S(0.0):
                     kp = c.stiffness * modulus[bp]
                     fn = kp * d
-                    vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
                     s = w[p] + (vr - wp.dot(vr, n) * n) * dt
                     s = s - wp.dot(s, n) * n
                     ft = -kp * s
@@ -119,12 +121,15 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                     travel = s
                     f = fn * n + ft
                     b = b + f / m
-                    add_impulse(status.collider_impulse, k, f * dt)
-                    work = wp.dot(f, u) * dt  # what a moving solid puts in, counted as the grid rule's
+                    J = (grids * dt) * f  # the rows sum every kernel grid's, as the grid rule's do
+                    add_impulse(status.collider_impulse, k, J)
+                    for a in range(wp.static(t.dim)):
+                        wp.atomic_add(status.boundary_impulse, a, wp.float64(J[a]))
+                    work = wp.dot(J, u)  # what a moving solid puts in
                     if work > S(0.0):
-                        wp.atomic_add(status.boundary_work, 0, wp.float64(grids * work))
+                        wp.atomic_add(status.boundary_work, 0, wp.float64(work))
                     if wp.static(RIGID in kinds):
-                        add_torque(status.collider_torque, k, xp - phi * n - centre(c, time), f * dt)
+                        add_torque(status.collider_torque, k, xp - phi * n - centre(c, time), J)
         w[p] = travel
         body_force[p] = b
 
@@ -155,7 +160,7 @@ class Springs:
             self.half = wp.array(np.array(halves, dtype), dtype=t.scalar)
             self.w = wp.zeros(model.n_particles, dtype=t.vec)  # the tangential travel [m]
             self.lap = wp.zeros(model.n_particles, dtype=t.scalar)  # the overlap sampled, still held [m]
-        self.grids = t.scalar(model.kernel.n_grids)  # the boundary work is summed over every kernel grid
+        self.grids = t.scalar(model.kernel.n_grids)  # the status rows sum every kernel grid's
         self.first = 1  # the next pass is the run's first: it takes the sampled overlaps
 
     def kernels(self) -> list:

@@ -330,8 +330,7 @@ class Solver:
         self.grid.clear(self.layout.n_nodes, positions=not isinstance(self.scheme, EMPM))
 
     def _apply_forcing(self, state: State) -> None:
-        """The external loads' body force (mpm.loads), or a manufactured solution's, and the elastic
-        colliders' springs (mpm.elastic_contact), at the step's start."""
+        """The body force at the step's start: loads', a manufactured solution's, springs' (mpm.elastic_contact)."""
         if self.transfers.forcing is not None or self.transfers.loads is not None or self.transfers.springs is not None:
             self.transfers.apply_forcing(state, cast(np.ndarray, self.X0), self.time)  # (set by prepare)
 
