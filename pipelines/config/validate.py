@@ -199,6 +199,16 @@ def _known_scale(value, known: dict, key: str = "scale") -> None:
             _known_scale(v, known[k], f"{key}.{k}")
 
 
+def _explicit_only(scene) -> None:
+    """ConfigError naming the first elastic collider or rigid body (its springs act in the explicit step only)."""
+    shapes = [(f"scene.colliders[{i}].boundary", c) for i, c in enumerate(scene.colliders)]
+    shapes += [(f"scene.rigid_bodies[{i}].shape.boundary", b.shape) for i, b in enumerate(scene.rigid_bodies or ())]
+    for key, c in shapes:
+        if c.boundary == "elastic":
+            raise ConfigError(key, "elastic under integrator=implicit (its springs act in the explicit step, "
+                                   "mpm.elastic_contact); accepted: sticky, slip or separate, or integrator=explicit")
+
+
 def resolve(cfg) -> RunSpec:
     """Validate a composed :class:`pipelines.config.schema.Config`."""
     _known_keys(cfg)
@@ -221,6 +231,8 @@ def resolve(cfg) -> RunSpec:
     if scene.contact == "shared" and scheme.name != "empm":
         raise ConfigError("scene.contact", "'shared' (one grid for all bodies) needs scheme=empm; "
                                            "accepted with other schemes: frictionless, none")
+    if not isinstance(integrator, Explicit):
+        _explicit_only(scene)
     if run.graph and (scene.joints or scene.rigid_contact != "none"):
         raise ConfigError("run.graph", "true: a scene with joints or rigid contact reads each step back for "
                                        "Newton's solver (mpm.joints), which a CUDA graph cannot hold; accepted: "

@@ -524,3 +524,18 @@ def test_rigid_contact_is_read_and_its_bad_keys_refused():
     assert err.key == "scene.rigid_contact" and "none, walls, all" in str(err)
     assert refused(["scene=pendulum_jelly_2d", "scene.rigid_contact_stiffness=0"]).key == \
         "scene.rigid_contact_stiffness"
+
+
+def test_an_elastic_collider_is_read_and_refused_under_the_implicit_integrator():
+    """boundary: elastic and its stiffness reach mpm.Collider; the implicit
+    integrator, where its springs do not act, and a stiffness out of
+    range are refused in one line naming the collider's key."""
+    from helpers import spec_for
+
+    elastic = ["scene=drum_2d", "scene.colliders.0.boundary=elastic"]
+    drum = spec_for(elastic + ["scene.colliders.0.stiffness=0.25"]).scene.colliders[0]
+    assert (drum.boundary, drum.stiffness) == ("elastic", 0.25)
+    err = refused(elastic + ["integrator=implicit"])
+    assert err.key == "scene.colliders[0].boundary" and "integrator=explicit" in str(err)
+    assert refused(elastic + ["scene.colliders.0.stiffness=5"]).key == "scene.colliders[0].stiffness"
+    assert refused(["scene=drum_2d", "scene.colliders.0.boundary=springy"]).key == "scene.colliders[0].boundary"
