@@ -203,7 +203,7 @@ def main(argv=None) -> int:
     parser.add_argument("--dt", type=bounded(0.0, 0.01, "s"), default=0.0, help="a fixed step [s]; 0: the step rule")
     args = parser.parse_args(argv)
     shape = "disk" if args.dim == "2" else "sphere"
-    plane = "a slab" if args.on == "body" else {"separate": "a collider", "elastic": "an elastic collider"}[args.boundary]
+    plane = "a slab" if args.on == "body" else ("an elastic collider" if args.boundary == "elastic" else "a collider")
     print(f"a {shape} rolling on {plane}, {args.scheme}, {args.integrator}, {args.kernel}, "
           f"theta {args.angle:g} deg, mu {args.friction:g}, {args.duration:g} s")
     print(f"{'cells':>5} {'a [m/s^2]':>10} {'closed':>8} {'error':>8} {'slip [cells]':>12} "
