@@ -250,7 +250,7 @@ class Coupler:
         the fastest point of their surfaces in the step's largest speed
         (``status.max_v2``, which the step rule reads as it reads the particles')."""
         data = self.conditions.data
-        wp.launch(self.place_kernel, self.n, device=self.model.device, inputs=[
+        self.conditions.launch(self.place_kernel, self.n, [
             self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders, self.reach,
             status.max_v2])
 
@@ -267,7 +267,7 @@ class Coupler:
         read back (none where the driver skips it)."""
         nm = self.newton
         if self.joints is not None:
-            wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
+            self.conditions.launch(self.push_kernel, self.n, [
                 self.control, self.first, float(self.model.kernel.n_grids), status.collider_impulse,
                 status.collider_torque, self.state.body_f, self.clock])
             dt = float(self.clock.numpy()[0])
@@ -275,7 +275,7 @@ class Coupler:
             if dt > 0.0:
                 self.joints.step(dt)
             return
-        wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
+        self.conditions.launch(self.push_kernel, self.n, [
             self.state.body_q, self.state.body_qd, nm.body_com, nm.body_inertia, nm.body_inv_mass,
             nm.body_inv_inertia, nm.gravity, self.control, self.first, float(self.model.kernel.n_grids),
             status.collider_impulse, status.collider_torque, self.state.body_f])
