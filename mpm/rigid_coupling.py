@@ -103,6 +103,7 @@ def make_place_bodies(t: Types):
             angle = 2.0 * wp.atan2(s, r[3]) / s  # pyright: ignore[reportIndexIssue]
             frame = V3(S(axis[0] * angle), S(axis[1] * angle), S(axis[2] * angle))
         c.frame = frame
+        c.reach = S(reach[b])
         colliders[k] = c
 
     return place_bodies
