@@ -14,7 +14,8 @@ device and with no read-back:
   (mpm.collider_motion places it at any time of the step from them), and
   the fastest point of each body's surface, |v| + |omega| reach, enters
   the step's largest speed (``status.max_v2``) that the step rule reads
-  for the next step;
+  for the next step, and its reach (``reach`` in the record, for
+  mpm.collider_motion.make_beyond);
 * the grid rule (mpm.collider_device) and the keep-out (mpm.keep_out) then
   sum the impulse J they give the material at each body's surface
   (``status.collider_impulse``, all grids) and its angular impulse about
@@ -200,7 +201,9 @@ class Coupler:
     couple them to the material (module docstring): :meth:`place` before the
     grid update (mpm.conditions.Conditions.update_grid), :meth:`push` after
     G2P (mpm.transfer.Transfers.interpolate); ``conditions`` holds the
-    packed records and the angular impulses, ``control`` the step's clock.
+    packed records, the angular impulses and the step's recorded launches
+    (``conditions.launch``, mpm.launch.Launches, which both stages use),
+    ``control`` the step's clock.
     ``newton``: the Newton model; ``state``: its state (``body_q``,
     ``body_qd``, also named here for checkpoints; ``body_f`` the wrench the
     material applied over the last step). A scene with joints (mpm.joints)
