@@ -10,7 +10,7 @@ import functools
 import numpy as np
 import warp as wp
 
-from .collider_motion import make_box_face, make_centre, make_place
+from .collider_motion import make_beyond, make_box_face, make_centre, make_place
 from .collider_shapes import make_collider_data
 from .colliders import BOUNDARIES, ELASTIC, KINDS, RIGID, TURNING, Collider
 from .launch import warp_kernel
@@ -203,6 +203,7 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
     reach = make_reach(t, rule, gradients)
     edge = make_edge(t, rule, gradients)
     add_impulse, add_torque, centre = make_add_impulse(t), make_add_torque(t), make_centre(t)
+    beyond = make_beyond(t)
     Profile = make_profile_type(t)
 
     @wp.func
@@ -213,6 +214,10 @@ def make_collide(t: Types, kinds: tuple[str, ...], rule: str = "surface", gradie
             if wp.static(ELASTIC in kinds):
                 if c.boundary == SPRINGS:
                     continue  # it acts on the particles (mpm.elastic_contact)
+            if wp.static(RIGID in kinds):
+                if c.body != 0:  # a rigid body: a node half a cell beyond its reach is apart (make_beyond)
+                    if beyond(c, q, time, S(0.5) / profile.inv_dx):
+                        continue
             phi, n, u = place(c, q, time)
             state, vs = reach(phi, n, V, G, v, profile)
             if state == CONTACT:

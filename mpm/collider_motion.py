@@ -190,3 +190,30 @@ def make_centre(t: Types):
         return c.pivot + c.origin + shift
 
     return centre
+
+
+FAR = 1.01
+"""a rigid body's bound, in its reach (mpm.rigid.RigidBody.reach), with a margin for rounding"""
+
+
+@functools.cache
+def make_beyond(t: Types):
+    """``beyond(c, q, time, margin) -> bool``: whether the point ``q`` lies
+    farther than :data:`FAR` times rigid body ``c``'s reach (``c.reach``,
+    mpm.rigid_coupling) plus ``margin`` [m] from its centre of mass at
+    ``time``: its signed distance from the body's closed surface, all
+    within the reach of that centre, then exceeds ``margin``, and a kernel
+    that acts only closer (the keep-out: phi < 0; the grid rule: phi below
+    half a cell) need not place it (the four rotations of a turning body's
+    :func:`make_place` skipped, no result changed)."""
+    S, Data = t.scalar, make_collider_data(t)
+    centre = make_centre(t)
+    far = S(FAR)
+
+    @wp.func
+    def beyond(c: Data, q: t.vec, time: S, margin: S):
+        r = q - centre(c, time)
+        bound = far * c.reach + margin
+        return wp.dot(r, r) > bound * bound
+
+    return beyond

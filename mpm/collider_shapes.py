@@ -37,6 +37,7 @@ def make_collider_data(t: Types):
         origin: t.vec  # rigid bodies: the pivot's displacement from rest at the window's start [m] (else 0)
         frame: wp.types.vector(3, t.scalar)  # rigid bodies: the rotation vector from rest then [rad] (else 0)
         body: int  # 1: a rigid body's shape (mpm.rigid; a box's edges: mpm.collider_device.make_edge)
+        reach: t.scalar  # rigid bodies: the surface's reach from the pivot [m] (collider_motion.make_beyond; else 0)
 
     return ColliderData
 

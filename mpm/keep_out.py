@@ -16,6 +16,13 @@ contact leans on the grid rule and keeps its particles outside, so this
 acts only on those the rule missed. Under the node rule (earlier versions)
 nothing is compiled. Elastic colliders (mpm.elastic_contact) hold their
 particles by springs, whose rest may lie a little inside: they are left out.
+
+A particle farther from a rigid body's centre of mass than 1.01 times the
+body's reach (its surface's farthest point from there, ``reach`` in its
+record, mpm.rigid.RigidBody.reach; mpm.collider_motion.make_beyond) is
+outside the body: it is not placed against it (a turning body's placement
+costs four rotations a particle), which changes no result, since only a
+particle inside (phi < 0) is acted on.
 """
 
 import functools
@@ -23,7 +30,7 @@ import functools
 import warp as wp
 
 from .collider_device import SPRINGS, STICKY, make_add_impulse, make_add_torque
-from .collider_motion import make_centre, make_place
+from .collider_motion import make_beyond, make_centre, make_place
 from .colliders import ELASTIC, RIGID
 from .grid import make_boundary_data
 from .scene import WALL_TYPES
@@ -45,6 +52,7 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
     Data = make_boundary_data(t)
     place = make_place(t, kinds)
     add_impulse, add_torque, centre = make_add_impulse(t), make_add_torque(t), make_centre(t)
+    beyond = make_beyond(t)
 
     @wp.func
     def put_back(x: vec, v: vec, phi: S, n: vec, u: vec, sticky: bool):
@@ -73,6 +81,10 @@ def make_keep_out(t: Types, kinds: tuple[str, ...], n_grids: int):
                 if wp.static(ELASTIC in kinds):
                     if c.boundary == SPRINGS:
                         continue  # its springs hold the particles (mpm.elastic_contact)
+                if wp.static(RIGID in kinds):
+                    if c.body != 0:  # a rigid body: a particle beyond its reach is outside (module docstring)
+                        if beyond(c, x, time, S(0.0)):
+                            continue
                 phi, n, u = place(c, x, time)
                 if phi < S(0.0):
                     v_in = v

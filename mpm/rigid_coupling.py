@@ -14,7 +14,8 @@ device and with no read-back:
   (mpm.collider_motion places it at any time of the step from them), and
   the fastest point of each body's surface, |v| + |omega| reach, enters
   the step's largest speed (``status.max_v2``) that the step rule reads
-  for the next step;
+  for the next step, and its reach (``reach`` in the record, for
+  mpm.collider_motion.make_beyond);
 * the grid rule (mpm.collider_device) and the keep-out (mpm.keep_out) then
   sum the impulse J they give the material at each body's surface
   (``status.collider_impulse``, all grids) and its angular impulse about
@@ -103,6 +104,7 @@ def make_place_bodies(t: Types):
             angle = 2.0 * wp.atan2(s, r[3]) / s  # pyright: ignore[reportIndexIssue]
             frame = V3(S(axis[0] * angle), S(axis[1] * angle), S(axis[2] * angle))
         c.frame = frame
+        c.reach = S(reach[b])
         colliders[k] = c
 
     return place_bodies
@@ -199,7 +201,9 @@ class Coupler:
     couple them to the material (module docstring): :meth:`place` before the
     grid update (mpm.conditions.Conditions.update_grid), :meth:`push` after
     G2P (mpm.transfer.Transfers.interpolate); ``conditions`` holds the
-    packed records and the angular impulses, ``control`` the step's clock.
+    packed records, the angular impulses and the step's recorded launches
+    (``conditions.launch``, mpm.launch.Launches, which both stages use),
+    ``control`` the step's clock.
     ``newton``: the Newton model; ``state``: its state (``body_q``,
     ``body_qd``, also named here for checkpoints; ``body_f`` the wrench the
     material applied over the last step). A scene with joints (mpm.joints)
@@ -250,7 +254,7 @@ class Coupler:
         the fastest point of their surfaces in the step's largest speed
         (``status.max_v2``, which the step rule reads as it reads the particles')."""
         data = self.conditions.data
-        wp.launch(self.place_kernel, self.n, device=self.model.device, inputs=[
+        self.conditions.launch(self.place_kernel, self.n, [
             self.state.body_q, self.state.body_qd, self.control, self.first, data.colliders, self.reach,
             status.max_v2])
 
@@ -267,7 +271,7 @@ class Coupler:
         read back (none where the driver skips it)."""
         nm = self.newton
         if self.joints is not None:
-            wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
+            self.conditions.launch(self.push_kernel, self.n, [
                 self.control, self.first, float(self.model.kernel.n_grids), status.collider_impulse,
                 status.collider_torque, self.state.body_f, self.clock])
             dt = float(self.clock.numpy()[0])
@@ -275,7 +279,7 @@ class Coupler:
             if dt > 0.0:
                 self.joints.step(dt)
             return
-        wp.launch(self.push_kernel, self.n, device=self.model.device, inputs=[
+        self.conditions.launch(self.push_kernel, self.n, [
             self.state.body_q, self.state.body_qd, nm.body_com, nm.body_inertia, nm.body_inv_mass,
             nm.body_inv_inertia, nm.gravity, self.control, self.first, float(self.model.kernel.n_grids),
             status.collider_impulse, status.collider_torque, self.state.body_f])
