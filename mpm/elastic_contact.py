@@ -2,42 +2,47 @@
 that touch them, through springs, instead of on the grid's nodes.
 
 A particle p of half spacing r_p (half the distance between neighbouring
-particles at sampling, dx / (2 ppc^(1/d))) whose centre lies phi < r_p from
-the solid's surface (mpm.collider_motion: signed distance phi, outward
-normal n, the solid's velocity u there) has its material overlapping the
-solid by d = r_p - phi. The collider pushes it out with the normal force
+particles at sampling, dx / (2 ppc^(1/d))) at the signed distance phi from
+the solid's surface (mpm.collider_motion: outward normal n, the solid's
+velocity u at the surface point) overlaps it, at mid-step, by
+
+    d = r_p - lap - phi - (dt / 2) v_r . n,
+
+v_r its velocity relative to the solid at the surface point (extrapolated
+by C, as mpm.surface does at a node; taken at mid-step, a strike gained
+energy with the overlap of the step's start). Where d > 0 the collider
+pushes it out with the normal force
 
     f_n = k d n,    k = stiffness M_b dx^(d-2)   [N/m; 2D: N/m per m],
 
 M_b = rho c^2 its body's P-wave modulus at rest (mpm.materials) and
-``stiffness`` the collider's factor (1: a layer as stiff as the body one
-cell thick, spread over a cell's face), and holds it by Coulomb friction as
-a tangential spring: the particle's tangential travel relative to the solid
+``stiffness`` the collider's factor, and holds it by Coulomb friction as a
+tangential spring: the particle's tangential travel relative to the solid
 while it touches, w (reset when it leaves), gives f_t = -k w, capped at
 mu |f_n| (w then shortened to the cap: the particle slides). The force
-enters P2G as a body force f / m_p (mpm.p2g), and its impulse f dt, with
-its angular impulse about the collider's centre (taken at the surface point
-x_p - phi n), goes to the collider's rows of the step's status (and to the
-conditions' impulse, as the grid rule's; each summed over the kernel's
-grids as theirs are), which give
-it back to a rigid body (mpm.rigid_coupling); the work a moving solid does
-on the springs, f . u dt where positive, joins the boundary conditions'
-(the blow-up detection allows for it, mpm.stepping.detection). The
-springs' stored energy is not in the step's energies.
+enters P2G as a body force f / m_p (mpm.p2g). Its impulse f dt goes to the
+collider's row of the step's status, with its angular impulse about the
+collider's centre (taken at the surface point x_p - phi n), and to the
+conditions' impulse, each summed over the kernel's grids as the grid rule's
+are; a rigid body takes them back (mpm.rigid_coupling). The work a moving
+solid does on the springs, f . u dt where positive, joins the boundary
+conditions' (the blow-up detection allows for it,
+mpm.stepping.detection). The springs' stored energy is not in the step's
+energies.
+
+lap: a body sampled overlapping an elastic solid (particles laid on the
+lattice, a face between them: up to r_p) would be thrown off by its
+springs' energy at the first step; the overlap each particle has at its
+first pass (lap < 0 until then) is taken as its rest instead, and it
+gives it up as it leaves: lap never grows, and shrinks to the particle's
+overlap as that shrinks.
 
 Why: the grid rule (mpm.surface) stops the material's approach at the nodes
 within half a cell of the surface, a band of the kernel's width wider than
 a rolling body's contact patch, and each step's P2G brings back the
 approach it took out; the loss is per step, so a body rolling on a collider
-lost more at shorter steps (RESULTS.md, "Why contact resists rolling").
-A spring stores what it takes and gives it back.
-
-A body sampled overlapping an elastic solid (particles laid on the
-lattice, a face between them: up to r_p) would be thrown off by its
-springs' energy at the first step; the overlap each particle has at the
-run's first step is taken as its rest instead (d = r_p - lap - phi), and it
-gives it up as it leaves: lap never grows, and shrinks to the particle's
-overlap as that shrinks. Its cost: a stiffness to
+lost more at shorter steps (RESULTS.md, "Why contact resists rolling"). A
+spring stores what it takes and gives it back. Its cost: a stiffness to
 choose (the step rule is unchanged: the spring's frequency, 2 sqrt(k / m_p),
 stays below the wave's at stiffness <= 1), an overlap of f / k, and no
 contact before the particles reach the surface. Explicit integrator only:
@@ -76,7 +81,7 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
     def springs(x: wp.array(dtype=vec), v: wp.array(dtype=vec), C: wp.array(dtype=t.mat),
                 Fsn: wp.array(dtype=t.mat), mass: wp.array(dtype=S),
                 body: wp.array(dtype=wp.int32), modulus: wp.array(dtype=S), half: wp.array(dtype=S),
-                colliders: wp.array(dtype=Data), w: wp.array(dtype=vec), lap: wp.array(dtype=S), first: int, grids: S,
+                colliders: wp.array(dtype=Data), w: wp.array(dtype=vec), lap: wp.array(dtype=S), grids: S,
                 control: StepControl, status: StepStatus, body_force: wp.array(dtype=vec)):
         p = wp.tid()
         if control.skip[0] != wp.float64(0.0):
@@ -97,8 +102,8 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
             if c.boundary == SPRINGS:
                 phi, n, u = place(c, xp, time)
                 overlap = wp.max(overlap, half[bp] - phi)
-                if first != 0:
-                    lap[p] = wp.max(lap[p], half[bp] - phi)
+        if lap[p] < S(0.0):  # the particle's first pass: it takes the overlap it was sampled with
+            lap[p] = overlap
         held = wp.min(lap[p], overlap)  # an overlap it was sampled with, not yet given up (module docstring)
         lap[p] = held
         for k in range(colliders.shape[0]):
@@ -159,9 +164,9 @@ class Springs:
             self.modulus = wp.array(np.array(moduli, dtype), dtype=t.scalar)
             self.half = wp.array(np.array(halves, dtype), dtype=t.scalar)
             self.w = wp.zeros(model.n_particles, dtype=t.vec)  # the tangential travel [m]
-            self.lap = wp.zeros(model.n_particles, dtype=t.scalar)  # the overlap sampled, still held [m]
+            # the overlap sampled, still held [m] (-1: not seen yet)
+            self.lap = wp.full(model.n_particles, -1.0, dtype=t.scalar)
         self.grids = t.scalar(model.kernel.n_grids)  # the status rows sum every kernel grid's
-        self.first = 1  # the next pass is the run's first: it takes the sampled overlaps
 
     def kernels(self) -> list:
         return [self.kernel]
@@ -170,5 +175,4 @@ class Springs:
         b = self.buffer
         self.launch(self.kernel, self.model.n_particles,
                     [state.x, state.v, state.C, state.Fsn, self.model.mass, self.model.body, self.modulus, self.half,
-                     self.colliders, self.w, self.lap, self.first, self.grids, b.control, b.status, self.body_force])
-        self.first = 0
+                     self.colliders, self.w, self.lap, self.grids, b.control, b.status, self.body_force])
