@@ -4,6 +4,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import mpm
@@ -57,3 +58,20 @@ def test_a_stiffness_out_of_range_is_named(stiffness):
     plane = rolling.scene(resolution=64, boundary="elastic").colliders[0]
     problems = dataclasses.replace(plane, stiffness=stiffness).problems(2)
     assert [field for field, _ in problems] == ["stiffness"]
+
+
+def test_the_rolling_scene_is_the_examples_disk_on_an_elastic_collider():
+    """conf/scene/rolling_2d.yaml builds the scene examples/rolling.py runs
+    (the disk, the 20 degree gravity, the elastic plane), so its figures
+    are the example's."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from helpers import spec_for  # tests/helpers.py
+
+    scene, expected = spec_for(["scene=rolling_2d"]).scene, rolling.scene(resolution=64, boundary="elastic")
+    assert (scene.domain, scene.resolution, scene.ppc) == (tuple(expected.domain), 64, expected.ppc)
+    assert scene.gravity == pytest.approx(expected.gravity, rel=1e-7)
+    plane, reference = scene.colliders[0], expected.colliders[0]
+    for key in ("type", "boundary", "friction", "stiffness", "point", "normal"):
+        assert tuple(np.atleast_1d(getattr(plane, key))) == tuple(np.atleast_1d(getattr(reference, key))), key
+    assert scene.bodies[0].shape == expected.bodies[0].shape
+    assert scene.bodies[0].material == expected.bodies[0].material
