@@ -72,6 +72,10 @@ CASES = {  # name: (scene, scheme, options, sync_every)
     "rigid": (lambda: ball(rigid_bodies=[mpm.RigidBody(mpm.Collider.sphere((0.5, 0.52), 0.05), density=800.0,
                                                        velocity=(0.0, -3.0), angular_velocity=1.0)]),
               mpm.EMPM, {}, 1),
+    # the ball rolling on an elastic plane (mpm.elastic_contact): its springs' travel and sampled overlap are
+    # the run's too
+    "elastic": (lambda: ball(colliders=[mpm.Collider.half_space((0.5, 0.252), (0.0, 1.0), boundary="elastic",
+                                                                friction=0.5)]), mpm.EMPM, {}, 1),
     # the disc hinged (mpm.joints): Newton's generalized state (joint_q, joint_qd) is the run's too
     "hinged": (lambda: ball(rigid_bodies=[mpm.RigidBody(mpm.Collider.sphere((0.5, 0.52), 0.05), density=800.0,
                                                         angular_velocity=-8.0, name="disc")],
@@ -123,6 +127,11 @@ def test_a_resumed_run_ends_where_the_whole_run_ends_bit_for_bit(case, tmp_path)
         assert coupler.poses()["velocity"][0][1] > -3.0 + 9.81 * first.time + 1e-3
     if case == "hinged":  # the disc turned about its hinge before the save
         assert first.solver.conditions.rigid.joint_q.numpy()[0] < -0.01
+    if case == "elastic":  # the ball touched the plane before the save, and its springs' state ends the same
+        assert np.any(first.solver.transfers.springs.w.numpy() != 0.0)
+        for name in ("w", "lap"):
+            a, b = (getattr(d.solver.transfers.springs, name).numpy() for d in (whole, fresh))
+            assert np.array_equal(a, b), f"elastic: springs.{name} differs after the resume"
     if case in ("rigid", "hinged"):  # the disc ends where the whole run's does
         for name in ("body_q", "body_qd") + (("joint_q", "joint_qd") if case == "hinged" else ()):
             a, b = (getattr(d.solver.conditions.rigid, name).numpy() for d in (whole, fresh))
