@@ -118,12 +118,15 @@ class Conditions:
         return max([self.collider_speed] + regions)
 
     # ------------------------------------------------------------ passes
-    def update_grid(self, grid, layout, const, status) -> None:
-        """Grid momentum to velocity, gravity over the device's step, and
-        (unless separate) the conditions at the nodes' current positions;
-        first the rigid bodies' colliders placed at their pose (mpm.rigid_coupling)."""
+    def place(self, status) -> None:
+        """The rigid bodies' colliders at their pose (mpm.rigid_coupling), at the step's start: the elastic
+        colliders' springs (mpm.elastic_contact), the grid rule and the keep-out read them."""
         if self.rigid is not None:
             self.rigid.place(status)
+
+    def update_grid(self, grid, layout, const, status) -> None:
+        """Grid momentum to velocity, gravity over the device's step, and
+        (unless separate) the conditions at the nodes' current positions."""
         self.launch(self.grid_update, layout.n_nodes, [
             grid.lattice, const.gravity, const.grid_offsets, self.control, self.data, status])
 

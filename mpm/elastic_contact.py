@@ -2,7 +2,7 @@
 that touch them, through springs, instead of on the grid's nodes.
 
 A particle p of half spacing r_p (half the distance between neighbouring
-particles at sampling, dx / (2 ppc^(1/d))) at the signed distance phi from
+particles at sampling, mpm.scene.Scene.spacings) at the signed distance phi from
 the solid's surface (mpm.collider_motion: outward normal n, the solid's
 velocity u at the surface point) overlaps it, at mid-step, by
 
@@ -35,7 +35,8 @@ lattice, a face between them: up to r_p) would be thrown off by its
 springs' energy at the first step; the overlap each particle has at its
 first pass (lap < 0 until then) is taken as its rest instead, and it
 gives it up as it leaves: lap never grows, and shrinks to the particle's
-overlap as that shrinks.
+overlap as that shrinks (against each solid, the smaller of lap and its
+overlap with that solid is its rest).
 
 Why: the grid rule (mpm.surface) stops the material's approach at the nodes
 within half a cell of the surface, a band of the kernel's width wider than
@@ -59,6 +60,7 @@ from .collider_motion import make_centre, make_place
 from .collider_shapes import make_collider_data
 from .colliders import BOUNDARIES, ELASTIC, RIGID
 from .launch import warp_kernel
+from .rigid import solids
 from .stepping.status import StepControl, StepStatus
 from .types import Types
 
@@ -96,20 +98,16 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
             b = body_force[p]
         xp, vp, bp = x[p], v[p], body[p]
         travel = vec()
+        sampled = lap[p]  # the overlap it was sampled with, still held (module docstring; < 0: its first pass)
         overlap = S(0.0)  # the deepest overlap with an elastic solid now
         for k in range(colliders.shape[0]):
             c = colliders[k]
             if c.boundary == SPRINGS:
                 phi, n, u = place(c, xp, time)
                 overlap = wp.max(overlap, half[bp] - phi)
-        if lap[p] < S(0.0):  # the particle's first pass: it takes the overlap it was sampled with
-            lap[p] = overlap
-        held = wp.min(lap[p], overlap)  # an overlap it was sampled with, not yet given up (module docstring)
-        lap[p] = held
-        for k in range(colliders.shape[0]):
-            c = colliders[k]
-            if c.boundary == SPRINGS:
-                phi, n, u = place(c, xp, time)
+                held = wp.max(S(0.0), half[bp] - phi)
+                if sampled >= S(0.0):
+                    held = wp.min(sampled, held)
                 vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
                 d = half[bp] - held - phi - S(0.5) * dt * wp.dot(vr, n)  # at mid-step (module docstring)
                 if d > S(0.0):
@@ -135,6 +133,9 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                         wp.atomic_add(status.boundary_work, 0, wp.float64(work))
                     if wp.static(RIGID in kinds):
                         add_torque(status.collider_torque, k, xp - phi * n - centre(c, time), J)
+        if sampled >= S(0.0):
+            overlap = wp.min(sampled, overlap)
+        lap[p] = overlap
         w[p] = travel
         body_force[p] = b
 
@@ -143,7 +144,6 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
 
 def elastic(scene) -> bool:
     """Whether any collider or rigid body of ``scene`` is elastic."""
-    from .rigid import solids
     return any(c.boundary == "elastic" for c in solids(scene))
 
 
@@ -159,7 +159,7 @@ class Springs:
         scene = model.scene
         dtype = np.float32 if t.precision == "float32" else np.float64
         moduli = [b.material.rho * b.material.wave_speed() ** 2 * model.dx ** (t.dim - 2) for b in scene.bodies]
-        halves = [0.5 * model.dx / scene.ppc ** (1.0 / t.dim) for _ in scene.bodies]
+        halves = [0.5 * s for s in scene.spacings()]
         with wp.ScopedDevice(model.device):
             self.modulus = wp.array(np.array(moduli, dtype), dtype=t.scalar)
             self.half = wp.array(np.array(halves, dtype), dtype=t.scalar)

@@ -403,7 +403,7 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     if precision not in PRECISIONS:
         raise SceneError("precision", f"{precision!r}; accepted: {', '.join(PRECISIONS)}")
     t = make_types(scene.dim, precision)
-    d, dx, dxp = scene.dim, scene.dx, scene.particle_dx
+    d, dx = scene.dim, scene.dx
 
     # material models in order of first appearance; bodies grouped by model
     models = list(dict.fromkeys(type(b.material) for b in scene.bodies))
@@ -452,9 +452,8 @@ def build(scene: Scene, kernel: Kernel, precision: str = "float32", device: str 
     V = np.concatenate(Vs)
     loads = None
     if scene.loads:
-        spacing = [(dxp**d / (b.ppc or scene.ppc)) ** (1.0 / d) for b in scene.bodies]
         try:
-            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, spacing, dx,
+            loads = resolve(scene.loads, x, V, np.concatenate(ids), body_ranges, scene.spacings(), dx,
                             [b.name or f"body{i}" for i, b in enumerate(scene.bodies)])
         except LoadError as e:
             raise SceneError(f"loads[{e.index}].{e.key}", e.message) from None

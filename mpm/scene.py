@@ -404,6 +404,10 @@ class Scene:
         """Sampling cell [m]: each particle stands for particle_dx^dim / ppc."""
         return self.domain[0] / (self.particle_resolution or self.resolution)
 
+    def spacings(self) -> list[float]:
+        """Per body, the distance between neighbouring particles at sampling [m], (particle_dx^d / ppc)^(1/d)."""
+        return [(self.particle_dx**self.dim / (b.ppc or self.ppc)) ** (1.0 / self.dim) for b in self.bodies]
+
     @property
     def cells(self) -> tuple[int, ...]:
         return tuple(int(round(L / self.dx)) for L in self.domain)

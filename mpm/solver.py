@@ -295,11 +295,11 @@ class Solver:
 
     # ------------------------------------------------------------------ a step on the device
     def attempt(self, state: State) -> NewtonReport | None:
-        """Advance the grid of ``state`` by the device's step (``control.dt``,
-        from ``control.t``) in the current reference configurations, up to the
-        grid velocities; the implicit solve's report, or None (explicit)."""
+        """Advance the grid of ``state`` by the device's step (``control.dt``, from ``control.t``) in the current
+        reference configurations, up to the grid velocities; the implicit solve's report, or None (explicit)."""
         self.step_time = self.model.types.scalar(self.time)  # the implicit constraints' clock [s]
         self.buffer.reset()
+        self.conditions.place(self.buffer.status)  # the rigid bodies at their pose
         self._clear()
         self._apply_forcing(state)
         self._rasterize(state)

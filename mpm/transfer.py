@@ -127,8 +127,6 @@ class Transfers:
             b = self.forcing.body_force(X0, time)
             self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
         if self.springs is not None:
-            if self.rigid is not None:  # the bodies where they are at the step's start (mpm.rigid_coupling)
-                self.rigid.place(self.buffer.status)
             self.springs.apply(state)
 
     def rasterize(self, state, grid, layout, const, write: bool) -> None:
