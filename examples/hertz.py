@@ -92,7 +92,8 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
           boundary: str = "separate") -> mpm.Scene:
     """The scene of the module docstring; the plates approach at ``rate``
     [m/s]; their ``boundary``: "separate" (the grid rule) or "elastic"
-    (springs on the particles, mpm.elastic_contact)."""
+    (springs on the particles, mpm.elastic_contact; on the slab, the contact
+    between the bodies too, mpm.body_springs)."""
     centre = (SIDE / 2,) * dim
     up = (0.0, 1.0) + (0.0,) * (dim - 2)
 
@@ -118,7 +119,8 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
         regions = [mpm.KinematicRegion(body=0, select=strip, velocity=moving(1.0))]
     return mpm.Scene(dim=dim, domain=(SIDE,) * dim, resolution=resolution, ppc=4 if dim == 2 else 8,
                      bodies=bodies, colliders=colliders, regions=regions, gravity=(0.0,) * dim,
-                     walls=("slip",) * (2 * dim), contact="frictionless", contact_normal="stiffer",
+                     walls=("slip",) * (2 * dim), contact="elastic" if boundary == "elastic" else "frictionless",
+                     contact_normal="stiffer",
                      contact_share=0.1, contact_fill=1.0)
 
 

@@ -11,7 +11,9 @@ the support: the floor wall's face (wall_cells = 3 cells above the domain's
 bottom, on a node row), a frictionless half-space collider at
 y = 0.25 m + shift dx, or the top of a slab ten times stiffer (E = 1e6 Pa,
 0.1 m thick, its bottom strip held still, frictionless contact) at that
-height. Its lowest particles, a layer one sampling spacing s = dx / 2 thick,
+height. ``--rule elastic`` makes the collider elastic and the contact with
+the slab ``elastic`` (springs on the particles: mpm.elastic_contact,
+mpm.body_springs). Its lowest particles, a layer one sampling spacing s = dx / 2 thick,
 start s / 2 above the support. On a frictionless rigid support the bottom
 face stays on it and the sides are free (sigma_xx = 0, plane strain), so
 the layer's centre comes down by the shortening of the material below it,
@@ -44,7 +46,7 @@ HALF = 0.1  # the block's half side [m]
 E, NU, RHO = 1.0e5, 0.3, 1000.0  # the block's material
 LEVEL = 0.25  # the collider's and the slab's top at shift 0 [m]
 SUPPORTS = ("wall", "collider", "body")
-RULES = ("surface", "nodes", "elastic")  # Scene.boundary_rule, or the collider elastic (mpm.elastic_contact)
+RULES = ("surface", "nodes", "elastic")  # Scene.boundary_rule, or springs (mpm.elastic_contact, mpm.body_springs)
 
 
 def csv_of(names):
@@ -94,7 +96,8 @@ def rest(on: str = "wall", scheme: str = "empm", resolution: int = 32, shift: fl
                                        velocity=(0.0, 0.0))]
     scene = mpm.Scene(dim=2, domain=(1.0, 0.625), resolution=resolution, ppc=4, bodies=bodies, colliders=colliders,
                       regions=regions, gravity=(0.0, -G), walls=("slip",) * 4,
-                      boundary_rule="surface" if rule == "elastic" else rule, contact="frictionless",
+                      boundary_rule="surface" if rule == "elastic" else rule,
+                      contact="elastic" if rule == "elastic" else "frictionless",
                       contact_normal="stiffer")
     model, state = mpm.build(scene, mpm.QUADRATIC, "float32", device)
     x0 = state.x.numpy().astype(np.float64)

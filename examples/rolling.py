@@ -15,7 +15,9 @@ leave it) or the top of a slab 0.1 m thick (``--on body``, E = 2e6 Pa,
 0.8 m long, its bottom strip held still, friction mu between the bodies, contact
 normal "stiffer", fill 1). The collider acts on the grid (``--boundary
 separate``) or through springs on the particles that touch it (``elastic``,
-``--stiffness``, mpm.elastic_contact). Rolling without slip, a solid disk accelerates
+``--stiffness``, mpm.elastic_contact); on the slab, ``elastic`` makes the
+bodies meet through springs on their particles too (``contact="elastic"``,
+mpm.body_springs) instead of the grid's contact. Rolling without slip, a solid disk accelerates
 at (2/3) g sin theta and a sphere at (5/7) g sin theta while mu is above
 (1/3) tan theta and (2/7) tan theta (mpm.inclines.rolling).
 
@@ -136,7 +138,8 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float
         dim=dim, domain=(1.0, 0.625) + ((0.5,) if dim == 3 else ()), resolution=resolution,
         ppc=4 if dim == 2 else 8, bodies=bodies, colliders=colliders, regions=regions,
         gravity=(G * math.sin(th), -G * math.cos(th)) + (0.0,) * (dim - 2), walls=("slip",) * (2 * dim),
-        contact="friction" if on == "body" else "frictionless", contact_friction=friction if on == "body" else 0.0,
+        contact=("frictionless" if on == "collider" else ("elastic" if boundary == "elastic" else "friction")),
+        contact_stiffness=stiffness, contact_friction=friction if on == "body" else 0.0,
         contact_normal="stiffer", contact_share=0.1, contact_fill=1.0)
 
 

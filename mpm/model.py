@@ -206,9 +206,11 @@ def check_contact(scene: Scene) -> None:
                                                     f"0 to {n - 1}")
         if not (np.isfinite(p.friction) and p.friction >= 0.0):
             raise SceneError(f"contact_pairs[{i}].friction", f"{p.friction}; accepted: a finite number >= 0")
-    if (scene.contact_pairs or scene.contact_friction > 0.0) and scene.contact != "friction":
-        raise SceneError("contact", f"{scene.contact!r} with a friction coefficient set; accepted: friction "
-                                    "(or contact_friction 0 and no contact_pairs)")
+    if (scene.contact_pairs or scene.contact_friction > 0.0) and scene.contact not in ("friction", "elastic"):
+        raise SceneError("contact", f"{scene.contact!r} with a friction coefficient set; accepted: friction, "
+                                    "elastic (or contact_friction 0 and no contact_pairs)")
+    if not 0.0 < scene.contact_stiffness <= 4.0:
+        raise SceneError("contact_stiffness", f"{scene.contact_stiffness}; accepted: 0 < contact_stiffness <= 4")
 
 
 def _numbers(value, count: int) -> np.ndarray | None:

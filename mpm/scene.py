@@ -16,11 +16,12 @@ from .joints import Joint
 from .rigid import RigidBody
 from .materials import Material
 
-CONTACT_TYPES = ("frictionless", "friction", "none", "shared")
+CONTACT_TYPES = ("frictionless", "friction", "none", "shared", "elastic")
 """between bodies (Scene.contact): frictionless (mpm.contact), friction
 (Coulomb, ``Scene.contact_friction`` and ``Scene.contact_pairs``), none
-(they pass through each other) or shared (EMPM only: one grid for all
-bodies)"""
+(they pass through each other), shared (EMPM only: one grid for all
+bodies) or elastic (springs on the particles that touch, with Coulomb
+friction as ``friction``'s: mpm.body_springs)"""
 CONTACT_NORMALS = ("difference", "max_gradient", "stiffer")
 """How a body's outward normal at a lattice node is taken (``Scene.contact_normal``):
 "difference", normalize(grad(M_others - M_b)), the bisector of the bodies'
@@ -352,6 +353,8 @@ class Scene:
     """between bodies: "frictionless" (mpm.contact), "none" (they pass through)
     or "shared" (Eulerian scheme only: all bodies on one grid, as in standard
     MPM, where bodies whose stencils overlap move together)"""
+    contact_stiffness: float = 0.5
+    """``contact="elastic"``: the springs' stiffness over the softer body's P-wave modulus (mpm.body_springs)"""
     contact_fill: float = 0.5
     """volume fraction of a global node that the bodies present must fill for contact"""
     contact_friction: float = 0.0

@@ -151,10 +151,11 @@ def check_solver_inputs(model, scheme, options) -> None:
         raise ValueError("options.integrator: joints and rigid contact (mpm.joints, mpm.rigid_contact) are "
                          "advanced under the explicit integrator only; accepted: mpm.Explicit(), or no joints "
                          "and rigid_contact 'none'")
-    if options is not None and isinstance(options.integrator, Implicit) and elastic(scene):
-        raise ValueError("options.integrator: elastic colliders (boundary 'elastic', mpm.elastic_contact) act "
-                         "under the explicit integrator only; accepted: mpm.Explicit(), or boundary sticky, "
-                         "slip or separate")
+    if options is not None and isinstance(options.integrator, Implicit) and (elastic(scene)
+                                                                             or scene.contact == "elastic"):
+        raise ValueError("options.integrator: elastic colliders and contact (boundary or contact 'elastic', "
+                         "mpm.elastic_contact, mpm.body_springs) act under the explicit integrator only; accepted: "
+                         "mpm.Explicit(), or no boundary or contact 'elastic'")
     if options is not None and options.batched and (isinstance(options.integrator, Implicit) or getattr(
             scene.solution, "has_body_force", False)):
         raise ValueError("options.batched: batched steps need the explicit integrator and no host-side body "
@@ -331,7 +332,7 @@ class Solver:
 
     def _apply_forcing(self, state: State) -> None:
         """The body force at the step's start: loads', a manufactured solution's, springs' (mpm.elastic_contact)."""
-        if self.transfers.forcing is not None or self.transfers.loads is not None or self.transfers.springs is not None:
+        if self.transfers.forced:
             self.transfers.apply_forcing(state, cast(np.ndarray, self.X0), self.time)  # (set by prepare)
 
     def _rasterize(self, state: State, write: bool = True) -> None:

@@ -17,6 +17,7 @@ import warp as wp
 
 from .collider_device import scene_kinds
 from .g2p import make_g2p
+from .body_springs import BodySprings
 from .elastic_contact import Springs, elastic
 from .loads import Loads
 from .p2g import make_p2g
@@ -79,7 +80,8 @@ class Transfers:
         self.flip = t.scalar(flip if transfer == "flip" else 0.0)  # the FLIP share of G2P's velocity
         self.forcing = forcing
         springs = elastic(model.scene)  # colliders acting through springs on the particles (mpm.elastic_contact)
-        body_force = forcing is not None or model.loads is not None or springs
+        touching = model.scene.contact == "elastic" and len(model.scene.bodies) > 1  # mpm.body_springs
+        body_force = forcing is not None or model.loads is not None or springs or touching
         # the factor of F whose sum G2P compensates (mpm.g2p): F^0s with the commit of an unprojected
         # F^0s, F^sn without a commit, none with a projected commit
         compensated = "" if not compensate else ("sn" if not commit else ("0s" if project is None else ""))
@@ -110,17 +112,19 @@ class Transfers:
         if springs:
             assert boundary is not None, "a scene with colliders packs them (mpm.conditions)"
             self.springs = Springs(model, launch, buffer, self.body_force, scene_kinds(model.scene), boundary.colliders)
+        self.touching = BodySprings(model, launch, buffer, self.body_force) if touching else None  # between bodies
+        self.forced = body_force  # a body force at each step's start (apply_forcing)
 
     def kernels(self) -> list:
         return ([k for k, _ in self.p2g] + [self.g2p] + (self.loads.kernels() if self.loads else [])
-                + (self.springs.kernels() if self.springs else []))
+                + (self.springs.kernels() if self.springs else []) + (self.touching.kernels() if self.touching else []))
 
     def apply_forcing(self, state, X0: np.ndarray, time: float) -> None:
         """The body force of the step: the external loads' at the device's
         step start, or the manufactured solution's at the initial positions
         ``X0`` [m] and ``time`` [s] (host)."""
         if self.loads is not None:
-            if self.springs is not None:  # the loads write their particles only; the springs add to them
+            if self.springs is not None or self.touching is not None:  # the loads write their particles only
                 self.body_force.zero_()
             self.loads.apply(state)
         if self.forcing is not None:
@@ -128,6 +132,10 @@ class Transfers:
             self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
         if self.springs is not None:
             self.springs.apply(state)
+        elif self.touching is not None and self.loads is None and self.forcing is None:
+            self.body_force.zero_()  # the bodies' springs add theirs
+        if self.touching is not None:
+            self.touching.apply(state)
 
     def rasterize(self, state, grid, layout, const, write: bool) -> None:
         """P2G over the device's step: the plastic return mapping (stored when

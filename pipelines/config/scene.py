@@ -289,11 +289,14 @@ class SceneConfig:
                                             "equally; its cells' where the shape has no closed form) or cells "
                                             "(dx^d / ppc each)", choices=PARTICLE_VOLUMES)
     contact: str = setting("frictionless", "between bodies: frictionless, friction (Coulomb: contact_friction, "
-                                           "contact_pairs), none, or shared (one grid; EMPM)", choices=CONTACT_TYPES)
+                                           "contact_pairs), none, shared (one grid; EMPM) or elastic (springs on the "
+                                           "particles that touch, Coulomb as friction's)", choices=CONTACT_TYPES)
+    contact_stiffness: float = setting(0.5, "contact=elastic: the springs' stiffness over the softer body's "
+                                            "P-wave modulus", gt=0.0, le=4.0)
     contact_fill: float = setting(0.5, "the node volume fraction the bodies must fill for contact",
                                   gt=0.0, le=1.0)
-    contact_friction: float = setting(0.0, "Coulomb mu between bodies (contact=friction): every pair's unless "
-                                           "contact_pairs names it", ge=0.0)
+    contact_friction: float = setting(0.0, "Coulomb mu between bodies (contact=friction or elastic): every "
+                                           "pair's unless contact_pairs names it", ge=0.0)
     contact_pairs: List[ContactPairConfig] = setting([], "pairs of bodies with their own Coulomb mu "
                                                          "(contact=friction): [{bodies: [a, b], friction: mu}]")
     contact_normal: str = setting("difference", "the bodies' normals at a contact node: difference (the bisector "
@@ -392,6 +395,7 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
                       jitter=sc.jitter,
                       lattice_offset=sc.lattice_offset, particle_volume=sc.particle_volume, contact=sc.contact,
                       contact_fill=sc.contact_fill, contact_friction=sc.contact_friction,
+                      contact_stiffness=sc.contact_stiffness,
                       contact_normal=sc.contact_normal, contact_share=sc.contact_share,
                       contact_pairs=[_pair(f"{key}.contact_pairs[{i}]", p, body_index)
                                      for i, p in enumerate(sc.contact_pairs)],

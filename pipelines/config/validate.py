@@ -200,7 +200,12 @@ def _known_scale(value, known: dict, key: str = "scale") -> None:
 
 
 def _explicit_only(scene) -> None:
-    """ConfigError naming the first elastic collider or rigid body (its springs act in the explicit step only)."""
+    """ConfigError naming the first elastic collider or rigid body, or elastic contact between bodies (their
+    springs act in the explicit step only)."""
+    if scene.contact == "elastic":
+        raise ConfigError("scene.contact", "elastic under integrator=implicit (its springs act in the explicit step, "
+                                           "mpm.body_springs); accepted: frictionless, friction, none or shared, or "
+                                           "integrator=explicit")
     shapes = [(f"scene.colliders[{i}].boundary", c) for i, c in enumerate(scene.colliders)]
     shapes += [(f"scene.rigid_bodies[{i}].shape.boundary", b.shape) for i, b in enumerate(scene.rigid_bodies or ())]
     for key, c in shapes:

@@ -47,12 +47,12 @@ def droplet():
     return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, gravity=(0.0, -9.81), bodies=[body])
 
 
-def two_blocks():
+def two_blocks(contact="friction"):
     """A block dropped onto another with Coulomb friction between them."""
     low = mpm.Body(mpm.Box((0.5, 0.3), (0.15, 0.06)), mpm.NeoHookean(E=1e5, nu=0.3))
     high = mpm.Body(mpm.Box((0.45, 0.43), (0.06, 0.06)), mpm.NeoHookean(E=1e5, nu=0.3), velocity=(0.5, -1.0))
     return mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, gravity=(0.0, -9.81), bodies=[low, high],
-                     contact="friction", contact_friction=0.4)
+                     contact=contact, contact_friction=0.4)
 
 
 CASES = {  # name: (scene, scheme, options, sync_every)
@@ -76,6 +76,9 @@ CASES = {  # name: (scene, scheme, options, sync_every)
     # the run's too
     "elastic": (lambda: ball(colliders=[mpm.Collider.half_space((0.5, 0.252), (0.0, 1.0), boundary="elastic",
                                                                 friction=0.5)]), mpm.EMPM, {}, 1),
+    # the blocks meeting through springs on their particles (mpm.body_springs): their travel and sampled
+    # overlap are the run's too
+    "elastic_bodies": (lambda: two_blocks("elastic"), mpm.AULMPM, {}, 1),
     # the disc hinged (mpm.joints): Newton's generalized state (joint_q, joint_qd) is the run's too
     "hinged": (lambda: ball(rigid_bodies=[mpm.RigidBody(mpm.Collider.sphere((0.5, 0.52), 0.05), density=800.0,
                                                         angular_velocity=-8.0, name="disc")],
@@ -132,6 +135,11 @@ def test_a_resumed_run_ends_where_the_whole_run_ends_bit_for_bit(case, tmp_path)
         for name in ("w", "lap"):
             a, b = (getattr(d.solver.transfers.springs, name).numpy() for d in (whole, fresh))
             assert np.array_equal(a, b), f"elastic: springs.{name} differs after the resume"
+    if case == "elastic_bodies":  # the blocks touched before the save, and their springs' state ends the same
+        assert np.any(first.solver.transfers.touching.w.numpy() != 0.0)
+        for name in ("w", "lap"):
+            a, b = (getattr(d.solver.transfers.touching, name).numpy() for d in (whole, fresh))
+            assert np.array_equal(a, b), f"elastic_bodies: touching.{name} differs after the resume"
     if case in ("rigid", "hinged"):  # the disc ends where the whole run's does
         for name in ("body_q", "body_qd") + (("joint_q", "joint_qd") if case == "hinged" else ()):
             a, b = (getattr(d.solver.conditions.rigid, name).numpy() for d in (whole, fresh))

@@ -316,6 +316,9 @@ def cases(dim: int) -> list[Case]:
         Case(scheme="tlmpm", materials=two, contact="friction", contact_friction=0.3, normal="stiffer"),
         Case(materials=two, implicit=True, contact="friction", contact_friction=0.3, normal="stiffer"),
         Case(batched=True, materials=two, contact="friction", contact_friction=0.3),
+        # springs between the bodies' particles (mpm.body_springs), with loads, in batches
+        Case(materials=two, contact="elastic", contact_friction=0.3, loads=True),
+        Case(batched=True, scheme="tlmpm", materials=two, contact="elastic"),
         # kinematic regions
         Case(regions=True), Case(scheme="tlmpm", regions=True), Case(materials=two, regions=True),
         Case(scheme="tlmpm", regions=True, implicit=True),

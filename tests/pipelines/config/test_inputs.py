@@ -539,3 +539,17 @@ def test_an_elastic_collider_is_read_and_refused_under_the_implicit_integrator()
     assert err.key == "scene.colliders[0].boundary" and "integrator=explicit" in str(err)
     assert refused(elastic + ["scene.colliders.0.stiffness=5"]).key == "scene.colliders[0].stiffness"
     assert refused(["scene=drum_2d", "scene.colliders.0.boundary=springy"]).key == "scene.colliders[0].boundary"
+
+
+def test_elastic_contact_between_bodies_is_read_and_refused_under_the_implicit_integrator():
+    """scene.contact=elastic and its stiffness and friction reach mpm.Scene;
+    the implicit integrator, where its springs do not act (mpm.body_springs),
+    and a stiffness out of range are refused in one line naming the key."""
+    from helpers import spec_for
+
+    elastic = ["scene=two_disks", "scene.contact=elastic"]
+    scene = spec_for(elastic + ["scene.contact_stiffness=0.25", "scene.contact_friction=0.3"]).scene
+    assert (scene.contact, scene.contact_stiffness, scene.contact_friction) == ("elastic", 0.25, 0.3)
+    err = refused(elastic + ["integrator=implicit"])
+    assert err.key == "scene.contact" and "integrator=explicit" in str(err)
+    assert refused(elastic + ["scene.contact_stiffness=5"]).key == "scene.contact_stiffness"
