@@ -22,7 +22,7 @@ STICKY, SLIP, SEPARATE, SPRINGS = range(len(BOUNDARIES))
 OUTSIDE, BEHIND = 0.3, 0.1
 """make_edge: a node farther than OUTSIDE [cells] outside one face's plane
 is acted on by no face whose plane it lies more than BEHIND [cells] behind
-(RESULTS.md: both bounds measured, 0.22-0.35 and 0.05-0.2 kept every case)."""
+(RESULTS.md: 0.22-0.35 and 0.05-0.2 kept the incline's compact and cubic cases)."""
 BOX = KINDS.index("box")
 
 
