@@ -19,6 +19,10 @@ from .surface import APART, CONTACT, make_profile_type, make_surface
 from .types import Types
 
 STICKY, SLIP, SEPARATE, SPRINGS = range(len(BOUNDARIES))
+OUTSIDE, BEHIND = 0.3, 0.1
+"""make_edge: a node farther than OUTSIDE [cells] outside one face's plane
+is acted on by no face whose plane it lies more than BEHIND [cells] behind
+(RESULTS.md: 0.22-0.35 and 0.05-0.2 kept the incline's compact and cubic cases)."""
 BOX = KINDS.index("box")
 
 
@@ -88,10 +92,13 @@ def make_edge(t: Types, rule: str, gradients: bool):
     material at a box's edge may go round it: the nearest face alone, at a
     box resting on a slab with its bottom on a row of nodes, took the slab's
     top node at the box's front corner as touching the front face and swept
-    it along, and the box stayed caught. Its known fault: a node just under
-    the bottom near an edge that moves away from the side face loses the
-    bottom's support (with the compact kernel a block dropped onto a slab
-    at 32 cells tipped over; RESULTS.md)."""
+    it along, and the box stayed caught. A node more than OUTSIDE cells
+    outside one face's plane passes over the faces whose planes it lies
+    more than BEHIND cells behind: it lies in the first face's region (the
+    compact kernel's nodes sit a quarter cell off a box resting on a row;
+    one 0.4 cells under a dropped block's bottom and 0.25 inside its side
+    took the side face, from which it moved away, lost the bottom's
+    support, and the block tipped over; RESULTS.md)."""
     S, vec, Data = t.scalar, t.vec, make_collider_data(t)
     Profile = make_profile_type(t)
     solid_share, touching, surface_velocity = make_surface(t)
@@ -103,13 +110,20 @@ def make_edge(t: Types, rule: str, gradients: bool):
         if wp.static(rule == "nodes"):
             return dv
         half = S(0.5) / profile.inv_dx
+        clear, behind = S(OUTSIDE) / profile.inv_dx, S(BEHIND) / profile.inv_dx
         d = rest(c, q, time)
         best = wp.dot(dv, dv)
+        outside = False  # the node clearly outside a face's plane
+        for j in range(wp.static(t.dim)):
+            if wp.abs(d[j]) - c.h[j] > clear:
+                outside = True
         for j in range(wp.static(t.dim)):
             near = wp.abs(wp.abs(d[j]) - c.h[j]) < half
             for i in range(wp.static(t.dim)):
                 if i != j and wp.abs(d[i]) - c.h[i] >= half:
                     near = False
+            if outside and wp.abs(d[j]) - c.h[j] < -behind:
+                near = False  # clearly behind this face's plane, clearly outside another's
             if near:
                 phi, n, u = face(c, q, time, d, j)
                 if touching(phi, V, solid_share(phi, profile), profile) == CONTACT:

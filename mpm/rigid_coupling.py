@@ -292,3 +292,24 @@ class Coupler:
         mass = self.newton.body_mass.numpy().astype(np.float64)  # pyright: ignore[reportOptionalMemberAccess]
         return dict(position=q[:, :3], quaternion=q[:, 3:], velocity=qd[:, :3], angular_velocity=qd[:, 3:],
                     mass=mass, momentum=mass[:, None] * qd[:, :3])
+
+    def energies(self, poses: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """Per body, from its Newton state (``poses``: :meth:`poses`, read
+        now where None) [J; 2D: J/m, the body one metre deep]: ``kinetic``,
+        the translation's 1/2 m |v|^2; ``rotational``, 1/2 w . I w with w the
+        angular velocity in the body's frame (R^T omega, R its orientation)
+        and I its inertia about the centre of mass there (Newton's
+        ``body_inertia``); ``potential``, -m g . x (x the centre of mass:
+        zero at the origin, as the material's, mpm.diagnostics)."""
+        p = self.poses() if poses is None else poses
+        g = np.zeros(3)
+        g[:self.model.dim] = self.model.scene.gravity
+        inertia = self.newton.body_inertia.numpy().astype(np.float64)  # pyright: ignore[reportOptionalMemberAccess]
+        u, w = -p["quaternion"][:, :3], p["quaternion"][:, 3:]  # the inverse rotation's (x, y, z) and w
+        omega = p["angular_velocity"]
+        t = 2.0 * np.cross(u, omega)
+        body = omega + w * t + np.cross(u, t)  # R^T omega
+        m = p["mass"]
+        return dict(kinetic=0.5 * m * np.sum(p["velocity"] ** 2, axis=1),
+                    rotational=0.5 * np.einsum("bi,bij,bj->b", body, inertia, body),
+                    potential=-m * (p["position"] @ g))

@@ -31,7 +31,8 @@ TIMELINE = "sim_time"  # the timeline the viewer opens on
 # unit of each scalar (2D: per metre of depth); a name "a/b" takes the unit of "a"
 _UNITS = {
     "mass": ("kg", "kg/m"), "kinetic_energy": ("J", "J/m"), "elastic_energy": ("J", "J/m"),
-    "potential_energy": ("J", "J/m"), "total_energy": ("J", "J/m"),
+    "potential_energy": ("J", "J/m"), "total_energy": ("J", "J/m"), "rigid_energy": ("J", "J/m"),
+    "system_energy": ("J", "J/m"),
     "momentum": ("kg m/s", "kg/s"), "angular_momentum": ("kg m²/s", "kg m/s"),
     "boundary_impulse": ("N s", "N s/m"),
     "contact_work": ("J", "J/m"),
@@ -57,6 +58,7 @@ WORDS = {"dt": "time step", "dt_fresh": "time step allowed now", "config_updates
 _RIGID_UNITS = {
     "position": ("m", "m"), "velocity": ("m/s", "m/s"), "angular_velocity": ("rad/s", "rad/s"),
     "angle": ("rad", "rad"), "rotation": ("rad", "rad"), "force": ("N", "N/m"), "torque": ("N m", "N m/m"),
+    "kinetic_energy": ("J", "J/m"), "rotational_energy": ("J", "J/m"), "potential_energy": ("J", "J/m"),
 }
 
 

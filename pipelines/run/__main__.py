@@ -129,8 +129,9 @@ def run(cfg: DictConfig) -> dict:
     print(summary if not metrics["reason"] else f"{summary}\n{metrics['reason']}", file=sys.stderr)
     change = metrics.get("energy_change")
     if change is not None and change < -ENERGY_LOSS_NOTE:
-        what, work = (("the material's energy", "the work the boundaries and the rigid bodies did on it")
-                      if metrics.get("rigid_bodies") else ("the total energy", "the boundaries' work"))
+        what, work = (("the energy of the material and the rigid bodies", "the boundaries' work (the bodies' "
+                       "pushes on the material among it)") if metrics.get("rigid_bodies") else
+                      ("the total energy", "the boundaries' work"))
         print(f"note: {what} fell by {-change:.2g} of its scale (metrics.json: energy_change), beyond "
               f"{work}: dissipated by the scheme, its transfers or contact", file=sys.stderr)
     return metrics

@@ -10,14 +10,18 @@ from ..recording.sinks import RunMeta
 IMPLICIT_SCALARS = ["newton_iterations", "cg_iterations", "newton_residual", "solve_rounds", "unsettled"]
 
 
-def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False) -> dict:
+def scalar_groups(dim: int, marked: list[str], error: bool = False, implicit: bool = False,
+                  rigid: bool = False) -> dict:
     """Time-series views of the recording's blueprint: scalar names, or entity
-    paths (the wall-clock timings, in the timings file)."""
+    paths (the wall-clock timings, in the timings file); ``rigid``: the
+    scene has rigid bodies, whose energy joins the energy view
+    (pipelines.run.rigid_track)."""
     momentum = (["momentum_x", "momentum_y", "angular_momentum"] if dim == 2 else
                 ["momentum_x", "momentum_y", "momentum_z", "angular_momentum_x",
                  "angular_momentum_y", "angular_momentum_z"])
     groups = {
-        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"],
+        "energy": ["kinetic_energy", "elastic_energy", "potential_energy", "total_energy"]
+        + (["rigid_energy", "system_energy"] if rigid else []),
         "momentum": momentum + [f"boundary_impulse_{a}" for a in "xyz"[:dim]],
         "step": ["dt", "dt_fresh", "max_speed"],
         "wall clock [ms]": ["/timings/step_time_ms", "/timings/update_ms"],
@@ -36,7 +40,8 @@ def rigid_groups(dim: int, names: list[str]) -> dict:
     turn = ["angle", "angular_velocity", "torque"] if dim == 2 else [
         f"{q}_{a}" for q in ("rotation", "angular_velocity", "torque") for a in axes]
     return {f"rigid {n}": [f"rigid/{n}/{q}_{a}" for q in ("position", "velocity", "force") for a in axes]
-            + [f"rigid/{n}/{q}" for q in turn] for n in names}
+            + [f"rigid/{n}/{q}" for q in turn]
+            + [f"rigid/{n}/{q}_energy" for q in ("kinetic", "rotational", "potential")] for n in names}
 
 
 def opening_events(scheme, integrator=None, dt: float | None = None) -> list[tuple[str, dict]]:
@@ -76,7 +81,7 @@ def run_meta(run) -> RunMeta:
     groups = scalar_groups(
         scene.dim, (run.marked_names if run.scheme.tracks_marks() else [])
         + (run.stretch_names if run.scheme.name != "empm" else []),
-        run.solution is not None or spec.run.reference is not None, run.implicit)
+        run.solution is not None or spec.run.reference is not None, run.implicit, bool(scene.rigid_bodies))
     groups.update(rigid_groups(scene.dim, rigid_track.names(scene)))
     return RunMeta(
         name=f"{spec.scene_name} / {run.scheme.name} / {spec.kernel.name} ({spec.transfer})",

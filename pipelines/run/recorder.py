@@ -245,7 +245,9 @@ class Recorder(mpm.Observer):
         d[self.names.index("elastic_energy")] = elastic_energy
         self.drift.add(d)
         if self.spec.log.scalars:
-            row = {**dict(zip(self.names, d.tolist())), "total_energy": self.drift.energy(d), **extra}
+            E = self.drift.energy(d)  # [J] the material's; with the rigid bodies' at a frame (rigid_track)
+            row = {**dict(zip(self.names, d.tolist())), "total_energy": E, **extra,
+                   **(self.rigid.system(step, E) if self.rigid is not None else {})}
             self.sink.scalars(step, t, row)
         self._pending.clear()
 
@@ -304,7 +306,7 @@ class Recorder(mpm.Observer):
         if self.rigid is None:
             self.sink.particles(self.step, self.t, x, dJ, fields, index)
             return
-        poses, row = self.rigid.frame(self.rigid.state())  # the rigid bodies' state at the frame
+        poses, row = self.rigid.frame(self.rigid.state(), self.step)  # the rigid bodies' state at the frame
         if log.scalars:
             self.sink.scalars(self.step, self.t, row)
         self.sink.particles(self.step, self.t, x, dJ, fields, index, rigid=poses)
@@ -435,6 +437,8 @@ class Recorder(mpm.Observer):
         if self.implicit:
             m["implicit"] = run_metrics.implicit_summary(self.spec.integrator, self.newton, self.driver.halved)
         m.update(self.drift.summary())
+        if self.rigid is not None and "energy_final" in m:  # the bodies' energy in the balance (rigid_track)
+            m.update(self.rigid.balance(m["energy_initial"], m["energy_final"]))
         if self.solver.conditions.open:  # particles that left through open walls take their mass along
             kept = self.solver.removals.kept if self.solver.removals.kept is not None else slice(None)
             lost = float(self.mass0.sum() - self.mass0[kept].sum())
@@ -443,10 +447,8 @@ class Recorder(mpm.Observer):
             if self.drift.first is not None and self.drift.last is not None and self.drift.first[0]:
                 m["mass_drift"] = abs(self.drift.last[0] + lost - self.drift.first[0]) / self.drift.first[0]
         if self.driver.detector is not None:
-            d = m["detect"] = self.driver.detector.summary()
-            if d["energy_growth_max"] is not None and d["energy_scale"] > 0 and "energy_final" in m:
-                # the energy the run lost (< 0) or made, beyond the boundaries' work, in units of its scale
-                m["energy_change"] = (m["energy_final"] - m["energy_initial"] - d["boundary_work"]) / d["energy_scale"]
+            m["detect"] = self.driver.detector.summary()
+            m.update(run_metrics.energy_change(m))
 
     def _final_state(self) -> None:
         """The last state reached: its scalar row (elastic energy by one more

@@ -15,8 +15,17 @@ Per body ``<name>`` (its name, else ``rigid<i>``):
   ``rigid/<name>/position_<axis>`` (centre of mass) [m],
   ``velocity_<axis>`` [m/s], ``angular_velocity`` [rad/s] (2D: about z;
   3D: ``angular_velocity_<axis>``) and ``angle`` [rad] (2D: about z; 3D:
-  ``rotation_<axis>``, the rotation vector);
-* in ``metrics.json`` (``rigid_bodies``) its final pose and velocities.
+  ``rotation_<axis>``, the rotation vector), and its energies
+  (mpm.rigid_coupling.Coupler.energies) ``kinetic_energy`` (translation),
+  ``rotational_energy`` and ``potential_energy`` (-m g . x) [J; 2D: J/m];
+  with them the scalar ``rigid_energy``, all bodies' sum, and
+  ``system_energy``, the material's ``total_energy`` plus that, at the
+  frame's step (the material's row is complete one step later);
+* in ``metrics.json`` (``rigid_bodies``) its final pose, velocities and
+  energies, and (:meth:`RigidTrack.balance`) ``rigid_energy_initial``,
+  ``rigid_energy_final`` and the material's and the bodies' together,
+  ``total_energy_initial`` and ``total_energy_final``, which the run's
+  ``energy_change`` then weighs (pipelines.run.recorder).
 """
 
 from __future__ import annotations
@@ -55,6 +64,9 @@ class RigidTrack:
         self.coupler = coupler
         self.first = len(scene.colliders)
         self.rest = [np.pad(b.center(), (0, 3 - scene.dim)) for b in scene.rigid_bodies]  # initial centres
+        self.initial = self.energy(self.state())  # [J] all bodies' (kept by a checkpoint: pipelines.run.checkpoints)
+        self.final = self.initial
+        self.at: tuple[int, float] | None = None  # (step, all bodies' energy [J]) of the last frame
 
     def forces(self, report) -> dict:
         """A step's report: its force and torque scalars, by name."""
@@ -80,12 +92,36 @@ class RigidTrack:
         out["torque"] = self.coupler.state.body_f.numpy().astype(np.float64)[:, 3:]
         return out
 
-    def frame(self, s: dict[str, np.ndarray]) -> tuple[list, dict]:
-        """Of a state ``s`` (:meth:`state`): each body's pose as (R, b), a point q of its shape at rest
-        drawn at R q + b, and the frame's scalars, by name."""
+    def energies(self, s: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Per body, the energies of a state ``s`` (:meth:`state`), by their scalars' names [J]."""
+        e = self.coupler.energies(s)
+        return {f"{k}_energy": e[k] for k in ("kinetic", "rotational", "potential")}
+
+    def energy(self, s: dict[str, np.ndarray]) -> float:
+        """[J] All bodies' energy in a state ``s`` (:meth:`state`)."""
+        return float(sum(np.sum(v) for v in self.energies(s).values()))
+
+    def system(self, step: int, material: float) -> dict:
+        """The scalar ``system_energy`` [J] at ``step``: the material's total energy ``material`` plus the
+        bodies' at the frame of that step (none where no frame was taken there)."""
+        return {"system_energy": material + self.at[1]} if self.at is not None and self.at[0] == step else {}
+
+    def balance(self, initial: float, final: float) -> dict:
+        """metrics.json: the bodies' energy at the start and at the end (:meth:`summary`'s state), and with the
+        material's ``initial`` and ``final`` energy [J]."""
+        return {"rigid_energy_initial": self.initial, "rigid_energy_final": self.final,
+                "total_energy_initial": initial + self.initial, "total_energy_final": final + self.final}
+
+    def frame(self, s: dict[str, np.ndarray], step: int = 0) -> tuple[list, dict]:
+        """Of a state ``s`` (:meth:`state`) at ``step``: each body's pose as (R, b), a point q of its shape at
+        rest drawn at R q + b, and the frame's scalars, by name."""
         poses, row = [], {}
         d = self.dim
+        energies = self.energies(s)
+        self.at = (step, self.energy(s))
+        row["rigid_energy"] = self.at[1]
         for i, name in enumerate(self.names):
+            row.update({f"rigid/{name}/{k}": float(v[i]) for k, v in energies.items()})
             R = rotation(s["quaternion"][i])
             poses.append((R, s["position"][i] - R @ self.rest[i]))
             p = f"rigid/{name}/"
@@ -103,9 +139,13 @@ class RigidTrack:
     def summary(self, s: dict[str, np.ndarray]) -> dict:
         """Per body its final state: ``position`` [m], ``quaternion`` (x, y, z, w), ``angle`` [rad] (2D,
         about z) or ``rotation`` (3D, the rotation vector), ``velocity`` [m/s], ``angular_velocity``
-        [rad/s] (2D: about z), ``torque`` [N m] (over the last step; 2D: about z, N m/m), ``mass`` [kg]."""
+        [rad/s] (2D: about z), ``torque`` [N m] (over the last step; 2D: about z, N m/m), ``mass`` [kg], and its
+        ``kinetic_energy`` (translation), ``rotational_energy`` and ``potential_energy`` [J; 2D: J/m]; the
+        bodies' energy is kept for :meth:`balance`."""
         out = {}
         d = self.dim
+        energies = self.energies(s)
+        self.final = self.energy(s)
         for i, name in enumerate(self.names):
             turn = rotation_vector(s["quaternion"][i])
             w, tau = s["angular_velocity"][i], s["torque"][i]
@@ -115,5 +155,5 @@ class RigidTrack:
                          "velocity": [float(c) for c in s["velocity"][i, :d]],
                          "angular_velocity": float(w[2]) if d == 2 else [float(c) for c in w],
                          "torque": float(tau[2]) if d == 2 else [float(c) for c in tau],
-                         "mass": float(s["mass"][i])}
+                         "mass": float(s["mass"][i]), **{k: float(v[i]) for k, v in energies.items()}}
         return out

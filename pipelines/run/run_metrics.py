@@ -75,6 +75,20 @@ class Drift:
         }
 
 
+def energy_change(m: dict) -> dict:
+    """metrics.json ``energy_change``: the energy the run lost (< 0) or made beyond the boundaries' work
+    (``detect``'s ``boundary_work``), in units of the detection's energy scale, from the metrics ``m``: the
+    material's ``energy_initial`` and ``energy_final``, or, where the scene has rigid bodies, the material's
+    and the bodies' together (``total_energy_initial``, ``total_energy_final``: pipelines.run.rigid_track;
+    the work the bodies did on the material is in the boundaries' work too, which bounds it from above)."""
+    d = m["detect"]
+    if d["energy_growth_max"] is None or not d["energy_scale"] > 0 or "energy_final" not in m:
+        return {}
+    pre = "total_" if "total_energy_final" in m else ""
+    return {"energy_change": (m[pre + "energy_final"] - m[pre + "energy_initial"] - d["boundary_work"])
+                             / d["energy_scale"]}
+
+
 def peak_rss_mb() -> float | None:
     """The process's peak resident memory [MB] so far (None where the OS does not say)."""
     try:

@@ -98,6 +98,62 @@ def test_the_body_series_and_final_state(floating):
     assert final["angle"] == pytest.approx(2 * np.arctan2(q[0, 5], q[0, 6]), abs=1e-12)
 
 
+def test_the_body_energy_in_the_series_and_the_balance(floating):
+    """The box's energies at each frame from its Newton state (1/2 m |v|^2,
+    1/2 I w^2 with I = m (a^2 + b^2) / 12 for the 0.1 x 0.06 m box, -m g . x
+    with g = 9.81 m/s^2 down), ``rigid_energy`` their sum, ``system_energy``
+    the material's total plus that at the frames' steps; metrics.json: the
+    body's final energies, ``total_energy_*`` the material's plus the body's,
+    and ``energy_change`` weighing the totals against the boundaries' work."""
+    out, seen = floating
+    rec = recordings.read(out / "recording.rrd", particles=False)
+    frames = sorted(seen)
+    mass = 500.0 * 0.1 * 0.06
+    inertia = mass * (0.1**2 + 0.06**2) / 12.0
+    expected = {"kinetic_energy": [0.5 * mass * seen[s][2][0, :3] @ seen[s][2][0, :3] for s in frames],
+                "rotational_energy": [0.5 * inertia * seen[s][2][0, 5] ** 2 for s in frames],
+                "potential_energy": [mass * 9.81 * seen[s][1][0, 1] for s in frames]}
+    total = np.zeros(len(frames))
+    for q, values in expected.items():
+        steps, logged = rec.scalars[f"rigid/box/{q}"]
+        assert list(steps) == frames and layout.unit(f"rigid/box/{q}", 2) == "J/m"
+        np.testing.assert_allclose(logged, values, rtol=1e-5, atol=1e-12)  # (the inertia float32 in Newton)
+        total += logged
+    steps, rigid = rec.scalars["rigid_energy"]
+    assert list(steps) == frames and layout.unit("rigid_energy", 2) == "J/m"
+    np.testing.assert_allclose(rigid, total, rtol=1e-12)
+    steps, system = rec.scalars["system_energy"]
+    material_steps, material = rec.scalars["total_energy"]
+    assert list(steps) == frames
+    np.testing.assert_allclose(system, material[np.searchsorted(material_steps, frames)] + rigid, rtol=1e-12)
+    m = json.loads((out / "metrics.json").read_text())
+    final = m["rigid_bodies"]["box"]
+    assert m["rigid_energy_final"] == pytest.approx(rigid[-1], rel=1e-12)
+    assert m["rigid_energy_final"] == pytest.approx(
+        final["kinetic_energy"] + final["rotational_energy"] + final["potential_energy"], rel=1e-12)
+    assert m["rigid_energy_initial"] == pytest.approx(rigid[0], rel=1e-12)
+    assert m["rigid_energy_initial"] == pytest.approx(mass * 9.81 * CENTRE[1], rel=1e-6)  # released at rest
+    for k in ("initial", "final"):
+        assert m[f"total_energy_{k}"] == m[f"energy_{k}"] + m[f"rigid_energy_{k}"]
+    d = m["detect"]
+    assert m["energy_change"] == pytest.approx(
+        (m["total_energy_final"] - m["total_energy_initial"] - d["boundary_work"]) / d["energy_scale"], rel=1e-12)
+
+
+def test_a_scene_without_rigid_bodies_reports_no_body_energy(tmp_path):
+    """A scene without rigid bodies (the default, 40 steps): none of the bodies' energy keys or series, and
+    ``energy_change`` the material's alone, as before."""
+    out = tmp_path / "plain"
+    m = execute(spec_for(["run.steps=40", "log.every=20", "log.progress=false"]), out)
+    assert m["status"] == "completed"
+    assert not [k for k in m if k.startswith(("rigid", "total_energy"))]
+    d = m["detect"]
+    assert m["energy_change"] == (m["energy_final"] - m["energy_initial"] - d["boundary_work"]) / d["energy_scale"]
+    rec = recordings.read(out / "recording.rrd", particles=False)
+    assert "total_energy" in rec.scalars
+    assert not [k for k in rec.scalars if k.startswith("rigid") or k == "system_energy"]
+
+
 def test_the_body_is_drawn_and_exported_where_it_is(floating, tmp_path):
     pytest.importorskip("vtkmodules.vtkIOXML")
     from test_export import pvd, read_vtp
