@@ -4,7 +4,7 @@ Newton, against the closed forms, at one or several resolutions (2D or 3D).
 
     python examples/rigid_incline.py [--case slide] [--resolutions 32,64] [--angle 30] [--friction 0.3]
         [--gap 0.005] [--dim 2] [--duration 0.4] [--scheme empm] [--kernel quadratic]
-        [--integrator explicit] [--static] [--device cpu]
+        [--integrator explicit] [--static] [--device cpu] [--boundary separate] [--damping 0]
 
 The slab (0.8 x 0.1 m, fixed-corotated E = 2e6 Pa, nu = 0.3, rho = 1000
 kg/m^3, its bottom strip held still by a kinematic region, as in
@@ -15,8 +15,9 @@ dropped from ``--gap`` above (default DROP = 5 mm; 0: flush with the
 slab's top, which lies on a grid line, where a block once stayed caught,
 mpm.collider_device.make_edge): a box
 0.1 x 0.05 m (``--case slide`` or ``--case hold``) or a disk of radius
-0.05 m (``--case roll``), its boundary "separate" with Coulomb friction mu
-against the material. Closed forms (mpm.inclines): a block slides at
+0.05 m (``--case roll``), its boundary "separate" (``--boundary elastic``:
+springs on the slab's particles, with the normal dashpot ``--damping``,
+mpm.elastic_contact) with Coulomb friction mu against the material. Closed forms (mpm.inclines): a block slides at
 g (sin theta - mu cos theta) and is held where tan theta <= mu; a solid
 disk rolls without slip at (2/3) g sin theta while mu >= (1/3) tan theta.
 Defaults per case: slide 30 deg, mu 0.3; hold 20 deg, mu 0.5; roll 20 deg,
@@ -122,18 +123,20 @@ class Run:
 
 
 def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
-          static: bool = False, gap: float = DROP, dim: int = 2, boundary: str = "separate") -> mpm.Scene:
+          static: bool = False, gap: float = DROP, dim: int = 2, boundary: str = "separate",
+          damping: float = Collider.damping) -> mpm.Scene:
     """The scene of the module docstring, the body ``gap`` [m] above the
     slab, ``resolution`` cells across 1 m (``static``: the body a static
-    collider; ``boundary`` its, "separate" or "elastic": mpm.elastic_contact)."""
+    collider; ``boundary`` its, "separate" or "elastic", with the springs'
+    normal dashpot ``damping``: mpm.elastic_contact)."""
     th = math.radians(angle)
+    keys = dict(boundary=boundary, friction=friction, damping=damping)
     if dim == 3:
         z = 0.125  # the middle of the depth [m]
         if case == "roll":
-            shape = Collider.sphere((0.13, TOP3 + gap + R, z), R, boundary=boundary, friction=friction)
+            shape = Collider.sphere((0.13, TOP3 + gap + R, z), R, **keys)
         else:
-            shape = Collider.box((0.13, TOP3 + gap + HALF[1], z), (HALF[0], HALF[1], HALF[0]), boundary=boundary,
-                                 friction=friction)
+            shape = Collider.box((0.13, TOP3 + gap + HALF[1], z), (HALF[0], HALF[1], HALF[0]), **keys)
         slab = mpm.Body(mpm.Box((0.25, TOP3 - 0.05, z), (0.18, 0.05, 0.06)), mpm.FixedCorotated(E=2.0e6, nu=0.3),
                         name="slab")
         held = mpm.Box((0.25, TOP3 - 0.09, z), (0.18, 0.011, 0.06))
@@ -144,9 +147,9 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
             colliders=[shape] if static else [],
             rigid_bodies=[] if static else [mpm.RigidBody(shape, density=1000.0, name=case)])
     if case == "roll":
-        shape = Collider.sphere((0.2, TOP + gap + R), R, boundary=boundary, friction=friction)
+        shape = Collider.sphere((0.2, TOP + gap + R), R, **keys)
     else:
-        shape = Collider.box((0.2, TOP + gap + HALF[1]), HALF, boundary=boundary, friction=friction)
+        shape = Collider.box((0.2, TOP + gap + HALF[1]), HALF, **keys)
     slab = mpm.Body(mpm.Box((0.5, TOP - 0.05), (0.4, 0.05)), mpm.FixedCorotated(E=2.0e6, nu=0.3), name="slab")
     held = mpm.Box((0.5, TOP - 0.09), (0.4, 0.011))
     return mpm.Scene(
@@ -160,12 +163,12 @@ def scene(case: str = "slide", resolution: int = 64, angle: float = 30.0, fricti
 def run(case: str = "slide", resolution: int = 64, angle: float = 30.0, friction: float = 0.3,
         duration: float = 0.4, scheme: str = "empm", kernel: str = "quadratic", device: str = "cpu",
         integrator: str = "explicit", static: bool = False, gap: float = DROP, dim: int = 2,
-        boundary: str = "separate") -> Run:
+        boundary: str = "separate", damping: float = Collider.damping) -> Run:
     """Run the scene for ``duration`` [s] and measure it (module docstring;
     ``static``: the cost only, the figures of the motion nan)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(case, resolution, angle, friction, static, gap, dim, boundary), mpm.KERNELS[kernel],
-                             "float32", device)
+    model, state = mpm.build(scene(case, resolution, angle, friction, static, gap, dim, boundary, damping),
+                             mpm.KERNELS[kernel], "float32", device)
     solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track()
     driver = mpm.Driver(solver, state, mpm.StepPolicy(duration=duration), observers=[track])
@@ -209,6 +212,8 @@ def main(argv=None) -> int:
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     parser.add_argument("--boundary", type=choice(("separate", "elastic")), default="separate",
                         help="the body's: separate (the grid rule) or elastic (springs on the slab's particles)")
+    parser.add_argument("--damping", type=bounded(0.0, 1.0, "-"), default=Collider.damping,
+                        help="an elastic body's normal dashpot, a fraction of a particle's critical damping")
     args = parser.parse_args(argv)
     dim = int(args.dim)
     odd = [r for r in args.resolutions if dim == 3 and r % 8]
@@ -226,7 +231,7 @@ def main(argv=None) -> int:
           + (f" {'newton/step':>11} {'solves/step':>11}" if args.integrator == "implicit" else ""))
     for res in args.resolutions:
         r = run(args.case, res, angle, mu, args.duration, args.scheme, args.kernel, args.device, args.integrator,
-                args.static, args.gap, dim, args.boundary)
+                args.static, args.gap, dim, args.boundary, args.damping)
         error = f"{100 * r.error:>+7.2f}%" if r.expected and not args.static else f"{'-':>8}"
         motion = (f"{'-':>10} {'-':>8} {error} {'-':>14} {'-':>12}" if args.static else
                   f"{r.acceleration:>10.4f} {r.expected:>8.4f} {error} {r.travel * res:>14.3f} {r.slip * res:>12.3f}")

@@ -4,7 +4,7 @@ against the closed form, at one or several resolutions.
 
     python examples/rolling.py [--dim 2] [--on collider] [--scheme empm] [--resolutions 32,48,64]
         [--angle 20] [--friction 0.5] [--duration 0.4] [--integrator explicit] [--kernel quadratic]
-        [--device cpu] [--boundary separate] [--stiffness 0.5] [--dt 0]
+        [--device cpu] [--boundary separate] [--stiffness 0.5] [--damping 0] [--dt 0]
 
 The body (radius R = 0.1 m, fixed-corotated E = 2e5 Pa, nu = 0.3,
 rho = 1000 kg/m^3) starts at rest, touching the plane y = 0.25 m, in a box
@@ -15,11 +15,12 @@ leave it) or the top of a slab 0.1 m thick (``--on body``, E = 2e6 Pa,
 0.8 m long, its bottom strip held still, friction mu between the bodies, contact
 normal "stiffer", fill 1). The collider acts on the grid (``--boundary
 separate``) or through springs on the particles that touch it (``elastic``,
-``--stiffness``, mpm.elastic_contact); on the slab, ``elastic`` makes the
-bodies meet through springs on their particles too (``contact="elastic"``,
-mpm.body_springs) instead of the grid's contact. Rolling without slip, a solid disk accelerates
-at (2/3) g sin theta and a sphere at (5/7) g sin theta while mu is above
-(1/3) tan theta and (2/7) tan theta (mpm.inclines.rolling).
+``--stiffness``, with a normal dashpot ``--damping``, mpm.elastic_contact);
+on the slab, ``elastic`` makes the bodies meet through springs on their
+particles too (``contact="elastic"``, mpm.body_springs) instead of the
+grid's contact. Rolling without slip, a solid disk accelerates at (2/3) g
+sin theta and a sphere at (5/7) g sin theta while mu is above (1/3) tan
+theta and (2/7) tan theta (mpm.inclines.rolling).
 
 Per resolution (cells across 1 m) it prints the acceleration (twice the
 t^2 coefficient of a parabola fitted to the centre of mass along the plane
@@ -117,7 +118,8 @@ class Rolled:
 
 
 def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float = 20.0,
-          friction: float = 0.5, boundary: str = "separate", stiffness: float = 0.5) -> mpm.Scene:
+          friction: float = 0.5, boundary: str = "separate", stiffness: float = 0.5,
+          damping: float = mpm.Collider.damping) -> mpm.Scene:
     """The scene of the module docstring."""
     th = math.radians(angle)
     depth = (0.25,) if dim == 3 else ()  # the 3D box is 0.5 m deep; the body in its middle
@@ -126,6 +128,7 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float
     if on == "collider":
         colliders = [mpm.Collider.half_space((0.5, TOP) + depth, (0.0, 1.0) + (0.0,) * (dim - 2),
                                              boundary=boundary, friction=friction, stiffness=stiffness,
+                                             damping=damping,
                                              name="plane")]
     else:
         across = (0.13,) if dim == 3 else ()
@@ -145,12 +148,13 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, angle: float
 
 def roll(dim: int = 2, on: str = "collider", scheme: str = "empm", resolution: int = 64, angle: float = 20.0,
          friction: float = 0.5, duration: float = 0.4, integrator: str = "explicit", kernel: str = "quadratic",
-         device: str = "cpu", boundary: str = "separate", stiffness: float = 0.5, dt: float = 0.0) -> Rolled:
+         device: str = "cpu", boundary: str = "separate", stiffness: float = 0.5, dt: float = 0.0,
+         damping: float = mpm.Collider.damping) -> Rolled:
     """Run the scene for ``duration`` [s] (steps of ``dt`` [s]; 0: the step
     rule's) and measure it (module docstring)."""
     wall = time.perf_counter()
-    model, state = mpm.build(scene(dim, on, resolution, angle, friction, boundary, stiffness), mpm.KERNELS[kernel],
-                             "float32", device)
+    model, state = mpm.build(scene(dim, on, resolution, angle, friction, boundary, stiffness, damping),
+                             mpm.KERNELS[kernel], "float32", device)
     solver = mpm.Solver(model, mpm.SCHEMES[scheme](), mpm.SolverOptions(integrator=mpm.INTEGRATORS[integrator]()))
     track = Track(model, len(model.body_ranges) - 1)
     policy = mpm.StepPolicy(duration=duration, dt=dt) if dt else mpm.StepPolicy(duration=duration)
@@ -203,6 +207,8 @@ def main(argv=None) -> int:
                         help="the collider's: separate (the grid rule) or elastic (springs on the particles)")
     parser.add_argument("--stiffness", type=bounded(0.01, 4.0, "-"), default=0.5,
                         help="an elastic collider's springs, times the body's P-wave modulus")
+    parser.add_argument("--damping", type=bounded(0.0, 1.0, "-"), default=mpm.Collider.damping,
+                        help="an elastic collider's normal dashpot, a fraction of a particle's critical damping")
     parser.add_argument("--dt", type=bounded(0.0, 0.01, "s"), default=0.0, help="a fixed step [s]; 0: the step rule")
     args = parser.parse_args(argv)
     shape = "disk" if args.dim == "2" else "sphere"
@@ -214,7 +220,8 @@ def main(argv=None) -> int:
     runs = []
     for res in args.resolutions:
         r = roll(int(args.dim), args.on, args.scheme, res, args.angle, args.friction, args.duration,
-                 args.integrator, args.kernel, args.device, args.boundary, args.stiffness, args.dt)
+                 args.integrator, args.kernel, args.device, args.boundary, args.stiffness, args.dt,
+                 args.damping)
         runs.append(r)
         print(f"{res:>5} {r.acceleration:>10.4f} {r.expected:>8.4f} {100 * r.error:>+7.2f}% "
               f"{r.slip * res:>12.3f} {r.sink * res:>12.3f} {r.flattening * res:>8.3f} {r.steps:>6} {r.seconds:>8.1f}")

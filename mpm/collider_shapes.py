@@ -21,6 +21,7 @@ def make_collider_data(t: Types):
         boundary: int  # BOUNDARIES
         friction: t.scalar
         stiffness: t.scalar  # an elastic collider's spring factor (mpm.elastic_contact)
+        damping: t.scalar  # an elastic collider's dashpot, a fraction of the critical (mpm.elastic_contact)
         invert: int  # 1: a container (the solid is outside the shape)
         p: t.vec  # point, centre
         n0: t.vec  # normal or axis (unit)
@@ -56,6 +57,7 @@ def pack(colliders: list[Collider], t: Types, meshes: dict, device, bodies: int 
         d.kind, d.boundary, d.invert = rec["kind"], rec["boundary"], rec["invert"]
         d.friction, d.r, d.a, d.w = (t.scalar(float(rec[k])) for k in ("friction", "r", "a", "w"))
         d.stiffness = t.scalar(float(rec["stiffness"]))
+        d.damping = t.scalar(float(rec["damping"]))
         for k in ("p", "n0", "n1", "h", "u", "pivot"):
             setattr(d, k, t.vec(*rec[k]))
         d.window = wp.types.vector(2, t.scalar)(*rec["window"])

@@ -154,6 +154,9 @@ class Collider:
     stiffness: float = 0.5
     """an elastic collider's springs: this times the body's P-wave modulus times dx^(d-2) per particle
     (mpm.elastic_contact)"""
+    damping: float = 0.0
+    """an elastic collider's normal dashpot: this fraction zeta [-] of a particle's critical damping on its
+    spring, 2 zeta sqrt(k m_p) (mpm.elastic_contact)"""
     name: str = ""
     """a name for the recording (default: the type and index)"""
     inside: bool = False
@@ -261,6 +264,8 @@ class Collider:
         if not (0.0 < self.stiffness <= 4.0):
             out.append(("stiffness", f"{self.stiffness}; accepted: 0 < stiffness <= 4 (the springs' step "
                                      "stays within the wave's)"))
+        if not (0.0 <= self.damping <= 1.0):
+            out.append(("damping", f"{self.damping}; accepted: 0 <= damping <= 1 (a fraction of the critical)"))
         return out + self._motion_problems(dim)
 
     def _motion_problems(self, dim: int) -> list[tuple[str, str]]:
@@ -342,7 +347,8 @@ class Collider:
         """The packed fields of mpm.collider_device.make_collider_data (numbers only)."""
         z = (0.0,) * dim
         r = dict(kind=KINDS.index(self.type), boundary=BOUNDARIES.index(self.boundary),
-                 friction=self.friction, stiffness=self.stiffness, invert=int(self.inside), p=z, n0=z, n1=z, h=z,
+                 friction=self.friction, stiffness=self.stiffness, damping=self.damping, invert=int(self.inside),
+                 p=z, n0=z, n1=z, h=z,
                  r=self.radius, a=0.0, w=self.thickness, u=tuple(self.velocity or z),
                  window=(self.start, min(self.end, 1e30)), omega=tuple(self.omega(dim)), pivot=self.rest_pivot(dim))
         if self.type in ("half_space", "wedge"):

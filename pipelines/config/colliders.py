@@ -83,6 +83,8 @@ class _Collider:
     friction: float = setting(0.0, "Coulomb friction coefficient of slip, separate and elastic", ge=0.0)
     stiffness: float = setting(0.5, "an elastic collider's springs, times the body's P-wave modulus "
                                     "(mpm.elastic_contact)", gt=0.0, le=4.0)
+    damping: float = setting(0.0, "an elastic collider's normal dashpot, a fraction of a particle's critical "
+                                  "damping on its spring (mpm.elastic_contact)", ge=0.0, le=1.0)
     inside: bool = setting(False, "the solid is the outside of the shape (a container)")
     velocity: Optional[List[float]] = setting(None, "[m/s] moves the collider while start <= t < end; "
                                                     "null: static", size="dim")
@@ -101,7 +103,8 @@ class _Collider:
 
     def common(self) -> dict:
         return dict(type=self.type, name=self.name, boundary=self.boundary, friction=self.friction,
-                    stiffness=self.stiffness, inside=self.inside, velocity=self.velocity, start=self.start,
+                    stiffness=self.stiffness, damping=self.damping, inside=self.inside, velocity=self.velocity,
+                    start=self.start,
                     end=float("inf") if self.end is None else self.end,
                     angular_velocity=self.angular_velocity, pivot=self.pivot)
 

@@ -246,6 +246,7 @@ BAD = [(name, "--duration", value) for name in SCRIPTS for value in DURATIONS] +
     ("stiffness_study", "--E", "1e12"), ("stiffness_study", "--out", "FILE"), ("stiffness_study", "--out", "FILE/sub"),
     ("rolling", "--dim", "1"), ("rolling", "--on", "wall"), ("rolling", "--resolutions", "32,8"),
     ("rolling", "--resolutions", "32,,64"), ("rolling", "--friction", "-1"), ("rolling", "--kernel", "sinc"),
+    ("rolling", "--damping", "1.5"), ("rolling", "--damping", "-0.1"), ("rigid_incline", "--damping", "2"),
     ("plane_shift", "--shifts", "0,2"), ("plane_shift", "--slide", "10,0.5"), ("plane_shift", "--hold", "40,0.5"),
     ("plane_shift", "--slide", "30"), ("plane_shift", "--rule", "cells"),
     ("resting", "--on", "wall,floor"), ("resting", "--schemes", "empm,mls"), ("resting", "--shift", "1.5"),

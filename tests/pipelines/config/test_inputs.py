@@ -527,17 +527,23 @@ def test_rigid_contact_is_read_and_its_bad_keys_refused():
 
 
 def test_an_elastic_collider_is_read_and_refused_under_the_implicit_integrator():
-    """boundary: elastic and its stiffness reach mpm.Collider; the implicit
-    integrator, where its springs do not act, and a stiffness out of
-    range are refused in one line naming the collider's key."""
+    """boundary: elastic, its stiffness and its damping reach mpm.Collider;
+    the implicit integrator, where its springs do not act, and a stiffness
+    or a damping out of range are refused in one line naming the
+    collider's key (a rigid body's shape's too) and the accepted range."""
     from helpers import spec_for
 
     elastic = ["scene=drum_2d", "scene.colliders.0.boundary=elastic"]
-    drum = spec_for(elastic + ["scene.colliders.0.stiffness=0.25"]).scene.colliders[0]
-    assert (drum.boundary, drum.stiffness) == ("elastic", 0.25)
+    drum = spec_for(elastic + ["scene.colliders.0.stiffness=0.25", "scene.colliders.0.damping=0.5"]).scene.colliders[0]
+    assert (drum.boundary, drum.stiffness, drum.damping) == ("elastic", 0.25, 0.5)
     err = refused(elastic + ["integrator=implicit"])
     assert err.key == "scene.colliders[0].boundary" and "integrator=explicit" in str(err)
     assert refused(elastic + ["scene.colliders.0.stiffness=5"]).key == "scene.colliders[0].stiffness"
+    for bad in ("-0.5", "1.5"):
+        err = refused(elastic + [f"scene.colliders.0.damping={bad}"])
+        assert err.key == "scene.colliders[0].damping" and "1" in str(err), str(err)
+    err = refused(["scene=pendulum_jelly_2d", "scene.rigid_bodies.0.shape.damping=2"])
+    assert err.key == "scene.rigid_bodies[0].shape.damping", str(err)
     assert refused(["scene=drum_2d", "scene.colliders.0.boundary=springy"]).key == "scene.colliders[0].boundary"
 
 
