@@ -32,7 +32,8 @@ w_q / sum w: the two sides' forces cancel exactly, so the contact keeps
 momentum. The forces enter P2G as body forces. The springs' energy at the
 step's start, (1/2) k d^2 a particle (d without the mid-step term), joins
 the step's elastic energy (mpm.stepping.status ``elastic``), so that the
-run's total energy holds what the contact stores. ``lap`` is the overlap a
+step's total energy holds what the contact stores (a P2G pass over a state
+alone, mpm.Solver.measure, leaves it out). ``lap`` is the overlap a
 particle was sampled with (mpm.elastic_contact).
 
 The neighbours come from a hash grid of the particles rebuilt at each

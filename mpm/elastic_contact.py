@@ -34,8 +34,11 @@ conditions' impulse, each summed over the kernel's grids as the grid rule's
 are; a rigid body takes them back (mpm.rigid_coupling). The work a moving
 solid does on the springs, f . u dt where positive, joins the boundary
 conditions' (the blow-up detection allows for it,
-mpm.stepping.detection). The springs' stored energy is not in the step's
-energies.
+mpm.stepping.detection). The springs' normal energy at the step's start,
+(1/2) k (max(0, r_p - phi) - lap)^2 a particle, joins the step's elastic
+energy (mpm.stepping.status ``elastic``), so the run's total holds what the
+springs store (the tangential springs' is left out, and so is all of it
+from a P2G pass over a state alone, mpm.Solver.measure).
 
 lap: a body sampled overlapping an elastic solid (particles laid on the
 lattice, a face between them: up to r_p) would be thrown off by its
@@ -132,8 +135,11 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                     held = wp.min(sampled, held)
                 vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
                 d = half[bp] - held - phi - S(0.5) * dt * wp.dot(vr, n)  # at mid-step (module docstring)
+                kp = c.stiffness * modulus[bp]
+                stored = wp.max(S(0.0), half[bp] - phi) - held  # at the step's start (module docstring)
+                if stored > S(0.0):
+                    wp.atomic_add(status.elastic, 0, wp.float64(S(0.5) * kp * stored * stored))
                 if d > S(0.0):
-                    kp = c.stiffness * modulus[bp]
                     # the dashpot: 2 zeta sqrt(k m_p), at most m_p / dt (module docstring); never pulls
                     eta = wp.min(S(2.0) * c.damping * wp.sqrt(kp * m), m / dt)
                     fn = wp.max(S(0.0), kp * d - eta * wp.dot(vr, n))

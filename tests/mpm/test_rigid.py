@@ -279,7 +279,8 @@ def test_sphere_rolls_down_an_elastic_slab_in_3d():
     assert abs(run.slip) * 48 < 0.5 and run.travel * 48 > 5.0, (run.slip, run.travel)
 
 
-def _disc_strike(kernel: str, scheme: str, options, steps: int, advance, boundary: str = "separate"):
+def _disc_strike(kernel: str, scheme: str, options, steps: int, advance, boundary: str = "separate",
+                 gain: float = 1e-9):
     """A rigid disc (r = 0.06 m, density 2000, 2 m/s) strikes an elastic
     block head-on in float64, no gravity, 48 cells, ``steps`` steps each
     taken by ``advance(solver, state, report) -> report``; asserts that the
@@ -287,7 +288,8 @@ def _disc_strike(kernel: str, scheme: str, options, steps: int, advance, boundar
     never grows. Returns the largest drift of the momentum of disc and block
     together over its scale, and the disc's and the block's x momentum at
     the end over the initial total. ``boundary``: the disc's (an elastic one
-    acts through springs on the particles, mpm.elastic_contact)."""
+    acts through springs on the particles, mpm.elastic_contact). ``gain``:
+    the relative growth of the energy allowed at a step."""
     ball = mpm.RigidBody(Collider.sphere((0.3, 0.5), 0.06, boundary=boundary), density=2000.0,
                          velocity=(2.0, 0.0))
     block = mpm.Body(mpm.Box((0.55, 0.5), (0.08, 0.08)), FixedCorotated(E=2e5, nu=0.3, rho=1000.0))
@@ -314,7 +316,7 @@ def _disc_strike(kernel: str, scheme: str, options, steps: int, advance, boundar
         report = advance(solver, state, report)
         E = kinetic + solver.step_energy() + E_body  # (the state the step started from)
         E0 = E if E0 is None else E0
-        assert E <= E0 * (1.0 + 1e-9), (E, E0)
+        assert E <= E0 * (1.0 + gain), (E, E0)
         P_body, E_body = momentum_and_body_energy()
         drift = max(drift, float(np.linalg.norm(P_body + m @ state.v.numpy() - P0)))
     return drift / np.linalg.norm(P0), P_body[0] / P0[0], (m @ state.v.numpy())[0] / P0[0]
@@ -341,11 +343,16 @@ def test_momentum_is_kept_when_a_ball_strikes_a_block(scheme, kernel):
 def test_momentum_is_kept_when_an_elastic_ball_strikes_a_block(scheme, kernel):
     """The strike above with the disc's boundary elastic: its springs push
     the block's particles and their impulse, f dt, is the body's
-    (mpm.elastic_contact): momentum kept to 1e-6 of its scale, the energy
-    the springs hold not counted (the tracked energy never grows)."""
+    (mpm.elastic_contact): momentum kept to 1e-6 of its scale. The energy
+    the springs hold at a step's start is counted in the step's; a spring
+    whose force is taken at mid-step keeps (1/2) k d^2 + (1/2) m v^2 only
+    to O((omega dt)^2) of what it holds, omega^2 = k / m_p, so the energy
+    may grow by that much at a step: allowed 2e-4 of the total (measured
+    at most 6.4e-5 over the four schemes and kernels)."""
     drift, disc, block = _disc_strike(kernel, scheme, mpm.SolverOptions(), 500,
                                       lambda solver, state, report: solver.advance(
-                                          state, solver.timestep.stable_dt(0.4, report)), boundary="elastic")
+                                          state, solver.timestep.stable_dt(0.4, report)), boundary="elastic",
+                                      gain=2e-4)
     assert drift < 1e-6, drift
     assert disc < 0.9 and block > 0.1
 
