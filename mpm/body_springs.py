@@ -38,7 +38,8 @@ particle was sampled with (mpm.elastic_contact).
 
 The neighbours come from a hash grid of the particles rebuilt at each
 step's start (``wp.HashGrid``, grouped by body so that a query visits one
-body's particles). Explicit integrator only.
+body's particles); a particle queries a body only within the reach of its
+bounding box (taken in the same pass). Explicit integrator only.
 
 Why: the grid's contact between bodies (mpm.contact) stops the approach at
 the nodes of a band as wide as the kernel, wider than a rolling body's
@@ -62,16 +63,21 @@ REACH = 2.0
 
 @functools.cache
 def make_points(t: Types):
-    """Kernel: the particles' positions as 3-vectors (2D: z = 0), for the hash grid."""
+    """Kernel: the particles' positions as 3-vectors (2D: z = 0), for the hash grid, and
+    each body's bounding box ``lo``, ``hi`` (reset to +-inf before)."""
     vec3 = wp.types.vector(3, t.scalar)
 
     @warp_kernel
-    def points(x: wp.array(dtype=t.vec), out: wp.array(dtype=vec3)):
+    def points(x: wp.array(dtype=t.vec), mass: wp.array(dtype=t.scalar), body: wp.array(dtype=wp.int32),
+               out: wp.array(dtype=vec3), lo: wp.array(dtype=t.vec), hi: wp.array(dtype=t.vec)):
         p = wp.tid()
         q = vec3()
         for a in range(wp.static(t.dim)):
             q[a] = x[p][a]
         out[p] = q
+        if mass[p] > t.scalar(0.0):
+            wp.atomic_min(lo, body[p], x[p])
+            wp.atomic_max(hi, body[p], x[p])
 
     return points
 
@@ -83,11 +89,19 @@ def make_body_springs(t: Types):
     S, vec = t.scalar, t.vec
     vec3 = wp.types.vector(3, S)
 
+    @wp.func
+    def inside(x: vec, a: vec, b: vec):
+        for i in range(wp.static(t.dim)):
+            if x[i] < a[i] or x[i] > b[i]:
+                return False
+        return True
+
     @warp_kernel
     def body_springs(grid: wp.uint64, points: wp.array(dtype=vec3), x: wp.array(dtype=vec), v: wp.array(dtype=vec),
                      mass: wp.array(dtype=S), body: wp.array(dtype=wp.int32), n_bodies: int,
                      share: wp.array(dtype=S), friction: wp.array(dtype=S), modulus: wp.array(dtype=S),
-                     half: wp.array(dtype=S), spacing: wp.array(dtype=S), w: wp.array(dtype=vec),
+                     half: wp.array(dtype=S), spacing: wp.array(dtype=S), lo: wp.array(dtype=vec),
+                     hi: wp.array(dtype=vec), w: wp.array(dtype=vec),
                      lap: wp.array(dtype=S), control: StepControl, status: StepStatus,
                      body_force: wp.array(dtype=vec)):
         p = wp.tid()
@@ -104,8 +118,9 @@ def make_body_springs(t: Types):
         bb = int(-1)
         q = int(0)
         for b in range(n_bodies):
-            if share[a * n_bodies + b] > S(0.0):
-                reach = S(REACH) * spacing[b]
+            reach = S(REACH) * spacing[b]
+            margin = vec(reach)
+            if share[a * n_bodies + b] > S(0.0) and inside(xp, lo[b] - margin, hi[b] + margin):
                 query = wp.hash_grid_query(grid, P, reach, b)
                 while wp.hash_grid_query_next(query, q):
                     if mass[q] > S(0.0):
@@ -224,6 +239,8 @@ class BodySprings:
             self.w = wp.zeros(model.n_particles, dtype=t.vec)  # the tangential travel [m]
             self.lap = wp.full(model.n_particles, -1.0, dtype=t.scalar)  # the overlap sampled, still held [m]
             self.points = wp.zeros(model.n_particles, dtype=wp.types.vector(3, t.scalar))
+            self.lo = wp.zeros(nb, dtype=t.vec)  # each body's bounding box [m], at each step's start
+            self.hi = wp.zeros(nb, dtype=t.vec)
             cell = REACH * max(spacings)
             self.grid = wp.HashGrid(*[max(1, int(np.ceil(L / cell))) for L in (list(model.domain) + [cell])[:3]],
                                     dtype=t.scalar)
@@ -234,9 +251,12 @@ class BodySprings:
 
     def apply(self, state) -> None:
         m = self.model
-        self.launch(self.points_kernel, m.n_particles, [state.x, self.points])
+        self.lo.fill_(np.inf)
+        self.hi.fill_(-np.inf)
+        self.launch(self.points_kernel, m.n_particles, [state.x, m.mass, m.body, self.points, self.lo, self.hi])
         self.grid.build(self.points, self.cell, groups=m.body)
         self.launch(self.kernel, m.n_particles,
                     [self.grid.id, self.points, state.x, state.v, m.mass, m.body, self.n_bodies, self.share,
-                     self.friction, self.modulus, self.half, self.spacing, self.w, self.lap, self.buffer.control,
+                     self.friction, self.modulus, self.half, self.spacing, self.lo, self.hi, self.w, self.lap,
+                     self.buffer.control,
                      self.buffer.status, self.body_force])

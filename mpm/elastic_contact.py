@@ -136,7 +136,8 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                 vr = vp - phi * (C[p] * (wp.inverse(Fsn[p]) * n)) - u  # at the surface point
                 d = half[bp] - held - phi - S(0.5) * dt * wp.dot(vr, n)  # at mid-step (module docstring)
                 kp = c.stiffness * modulus[bp]
-                stored = wp.max(S(0.0), half[bp] - phi) - held  # at the step's start (module docstring)
+                # the overlap at the step's start, beyond its rest (module docstring)
+                stored = wp.max(S(0.0), half[bp] - phi) - held  # pyright: ignore[reportOperatorIssue]
                 if stored > S(0.0):
                     wp.atomic_add(status.elastic, 0, wp.float64(S(0.5) * kp * stored * stored))
                 if d > S(0.0):
