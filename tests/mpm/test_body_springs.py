@@ -100,3 +100,23 @@ def test_elastic_contact_is_refused_under_the_implicit_integrator():
     model, _ = mpm.build(disks(), mpm.QUADRATIC)
     with pytest.raises(ValueError, match="options.integrator: elastic colliders and contact"):
         mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(integrator=mpm.Implicit()))
+
+
+def test_the_rolling_slab_scene_is_the_examples_disk_on_the_slab():
+    """conf/scene/rolling_slab_2d.yaml builds the scene examples/rolling.py
+    runs on the slab (the disk, the slab and its held strip, the 20 degree
+    gravity, elastic contact at mu = 0.5), so its figures are the example's."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from helpers import spec_for  # tests/helpers.py
+
+    scene, expected = spec_for(["scene=rolling_slab_2d"]).scene, rolling.scene(on="body", boundary="elastic")
+    assert (scene.domain, scene.resolution, scene.ppc) == (tuple(expected.domain), 64, expected.ppc)
+    assert scene.gravity == pytest.approx(expected.gravity, rel=1e-7)
+    for key in ("contact", "contact_friction", "contact_stiffness", "contact_normal", "contact_share",
+                "contact_fill"):
+        assert getattr(scene, key) == getattr(expected, key), key
+    for body, reference in zip(scene.bodies, expected.bodies, strict=True):
+        assert body.shape == reference.shape and body.material == reference.material
+    (region,), (reference,) = scene.regions, expected.regions
+    assert (region.body, region.select, tuple(region.velocity)) == (reference.body, reference.select,
+                                                                   tuple(reference.velocity))
