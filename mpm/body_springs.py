@@ -9,8 +9,8 @@ goes to the particles of b under it. Of two bodies in contact, the softer
 (a slave against a master); bodies of equal modulus meet each other's, each
 at half the stiffness.
 
-b's surface under p is taken from b's particles near p (within the reach,
-two of b's spacings s_b): its outward normal
+b's surface under p is taken from b's particles near p (within the reach
+R = 2 s_b, s_b b's spacing): its outward normal
 
     n = normalize(sum_q (R - |x_pq|) x_pq / |x_pq|),    x_pq = x_p - x_q,
 
@@ -19,8 +19,8 @@ and, among b's particles whose column along n passes within s_b of p
 layer (x_pq . n within s_b / 2 of the smallest), the height of p over
 their centres h = sum_q w_q x_pq . n / sum_q w_q with w_q = s_b - l_q:
 a flat face of b is flat wherever p lies over it (the distance to the
-nearest particle would have bumps of a quarter of r_b between them, that
-a rolling body rolls over). p's overlap at mid-step is
+nearest particle would dip by (2 - sqrt 3) r_b, about a quarter of r_b,
+between two of them, bumps that a rolling body rolls over). p's overlap at mid-step is
 
     d = r_a + r_b - lap - h - (dt / 2) (v_p - u) . n,    u = sum_q w_q v_q / sum_q w_q,
 
