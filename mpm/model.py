@@ -18,12 +18,12 @@ from .kernels.registry import kernel_problem
 from .loads import LoadError, LoadTable, resolve
 from .materials import Material
 from .params import instance_problem, refusal, violations
-from .sampling import PARTICLE_VOLUMES, SAMPLINGS, SHELL_SHAPES, sample_shape, sample_shells, shape_volume
+from .sampling import PARTICLE_VOLUMES, sample_body, sampling_problem, shape_volume
 from .joints import scene_problems as joint_problems
 from .rigid_contact import scene_problems as rigid_contact_problems
 from .rigid import scene_problems as rigid_problems
 from .stencil import stencil_cache
-from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, Sphere, skew
+from .scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES, Scene, skew
 from .types import PRECISIONS, Types, make_types
 
 
@@ -250,11 +250,8 @@ def check_body(i: int, b, d: int) -> None:
                              + ("one finite number [rad/s]" if d == 2 else "3 finite numbers [rad/s]"))
     if b.ppc is not None and (not isinstance(b.ppc, (int, np.integer)) or isinstance(b.ppc, bool) or b.ppc < 1):
         raise SceneError(f"{key}.ppc", f"{_one_line(b.ppc)}; accepted: an integer >= 1, or None (the scene's)")
-    if b.sampling not in SAMPLINGS:
-        raise SceneError(f"{key}.sampling", f"{_one_line(b.sampling)}; accepted: {', '.join(SAMPLINGS)}")
-    if b.sampling == "shells" and type(b.shape) is not Sphere:
-        raise SceneError(f"{key}.sampling", f"shells for a {type(b.shape).__name__}; accepted: lattice (any shape), "
-                         f"shells for {SHELL_SHAPES}")
+    if (problem := sampling_problem(b.sampling, b.shape)) is not None:
+        raise SceneError(f"{key}.sampling", problem)
     if b.deformation is not None:
         try:
             F = np.asarray(b.deformation, float)
@@ -380,17 +377,14 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
     hold none (:func:`build` refuses it)."""
     d, dxp = scene.dim, scene.particle_dx
     rng = np.random.default_rng(seed)
-    raw = [sample_shells(b.shape, d, s)[0] if b.sampling == "shells" else
-           sample_shape(b.shape, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
-           for b, s in zip(scene.bodies, scene.spacings())]
+    raw = [sample_body(b.shape, b.sampling, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
+           for b in scene.bodies]
     out = []
-    for b, x, s in zip(scene.bodies, raw, scene.spacings()):
+    for b, (x, layered) in zip(scene.bodies, raw):
         n, cell = len(x), dxp**d / (b.ppc or scene.ppc)
         V = shape_volume(b.shape, d)
-        used = "shape" if V is not None and scene.particle_volume == "shape" else "cells"
-        each = V / n if V is not None and used == "shape" and n else cell
-        if b.sampling == "shells":  # each layer's volume over its count: the shape's in all
-            each, used = sample_shells(b.shape, d, s)[1], "shape"
+        used = "shape" if V is not None and (scene.particle_volume == "shape" or layered is not None) else "cells"
+        each = layered if layered is not None else V / n if V is not None and used == "shape" and n else cell
         F = np.eye(d)
         if b.deformation is not None:
             F = np.asarray(b.deformation, float)

@@ -62,6 +62,26 @@ def sample_shape(shape, dim: int, dx: float, ppc: int, jitter: float,
     return pts[shape.contains(pts)]
 
 
+def sampling_problem(sampling, shape) -> str | None:
+    """What is wrong with a body's ``sampling`` for its ``shape`` (one line
+    ending in the accepted values), or None."""
+    if sampling not in SAMPLINGS:
+        return f"{sampling!r}; accepted: {', '.join(SAMPLINGS)}"
+    if sampling == "shells" and type(shape) is not Sphere:
+        return f"shells for a {type(shape).__name__}; accepted: lattice (any shape), shells for {SHELL_SHAPES}"
+    return None
+
+
+def sample_body(shape, sampling: str, dim: int, dx: float, ppc: int, jitter: float, rng: np.random.Generator,
+                offset=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """A body's particle positions [m] by its ``sampling``, and their volumes
+    [m^d] where the sampling sets them (shells), else None (the caller
+    shares the shape's volume or the cells')."""
+    if sampling == "shells" and isinstance(shape, Sphere):
+        return sample_shells(shape, dim, (dx**dim / ppc) ** (1.0 / dim))
+    return sample_shape(shape, dim, dx, ppc, jitter, rng, offset), None
+
+
 def sample_shells(shape: Sphere, dim: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Particle positions [m] (n, dim) and volumes [m^d] (n,) filling the ball
     (disc) ``shape`` on concentric layers, about ``spacing`` [m] apart.
