@@ -296,8 +296,9 @@ class Body:
     """how its particles are placed (mpm.sampling.SAMPLINGS): "lattice", the
     grid's sub-lattice cut by the shape; "shells", concentric layers one
     sampling spacing (dx^d / ppc)^(1/d) apart for a Sphere (a ball in 3D, a
-    disc in 2D), the outermost half a spacing inside its surface (no
-    jitter, no lattice offset)"""
+    disc in 2D), the outermost half a spacing inside its surface, each
+    particle its layer's exact volume over its count (no jitter, no lattice
+    offset, whatever ``particle_volume``)"""
 
 
 @dataclass(frozen=True)
