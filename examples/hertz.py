@@ -4,7 +4,8 @@ approach, at one or several resolutions, against the closed forms
 (mpm.hertz).
 
     python examples/hertz.py [--dim 2] [--on collider] [--scheme empm] [--resolutions 64,128]
-        [--approach 8] [--duration 0.4] [--device cpu]
+        [--approach 8] [--duration 0.4] [--device cpu] [--boundary separate] [--sampling lattice]
+        [--stiffness 0.5]
 
 The body (radius R = 0.08 m, fixed-corotated E = 1e5 Pa, nu = 0.3,
 rho = 1000 kg/m^3, no gravity) starts at rest in the middle of a box
@@ -22,6 +23,12 @@ the plates' (the body against a rigid plate, and against the slab with
 their combined modulus E*). Hertz's law holds while the contact is small
 (the contact half-width at the default 8 mm is about 0.19 R in 2D): its
 own error at the largest approach is a few per cent.
+
+``--sampling shells`` places the body's particles on concentric layers
+(mpm.sampling.sample_shells) instead of the grid's sub-lattice, whose top
+layer is a flat facet that meets a plate all at once. ``--stiffness``
+sets the elastic plates' spring factor (mpm.Collider.stiffness: k =
+stiffness M dx^(d-2), M the body's P-wave modulus).
 
 Per resolution it prints the table of windows (approach, force, closed
 form, ratio) and then the ratios' range over the second half of the
@@ -89,11 +96,13 @@ class Force(mpm.Observer):
 
 
 def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float = 0.02,
-          boundary: str = "separate") -> mpm.Scene:
+          boundary: str = "separate", sampling: str = "lattice", stiffness: float = 0.5) -> mpm.Scene:
     """The scene of the module docstring; the plates approach at ``rate``
     [m/s]; their ``boundary``: "separate" (the grid rule) or "elastic"
     (springs on the particles, mpm.elastic_contact; on the slab, the contact
-    between the bodies too, mpm.body_springs)."""
+    between the bodies too, mpm.body_springs); the ball's ``sampling``
+    (mpm.sampling.SAMPLINGS); the elastic plates' spring ``stiffness``
+    factor (mpm.Collider.stiffness)."""
     centre = (SIDE / 2,) * dim
     up = (0.0, 1.0) + (0.0,) * (dim - 2)
 
@@ -102,14 +111,14 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
 
     def moving(sign):
         return tuple(sign * rate / 2 * u for u in up)
-    ball = mpm.Body(mpm.Sphere(centre, R), mpm.FixedCorotated(E=E, nu=NU), name="ball")
+    ball = mpm.Body(mpm.Sphere(centre, R), mpm.FixedCorotated(E=E, nu=NU), name="ball", sampling=sampling)
     bodies, regions = [ball], []
     colliders = [mpm.Collider.half_space(at(SIDE / 2 + R), tuple(-u for u in up), boundary=boundary,
-                                         velocity=moving(-1.0), name="upper")]
+                                         velocity=moving(-1.0), name="upper", stiffness=stiffness)]
     bottom = SIDE / 2 - R
     if on == "collider":
         colliders.append(mpm.Collider.half_space(at(bottom), up, boundary=boundary, velocity=moving(1.0),
-                                                 name="lower"))
+                                                 name="lower", stiffness=stiffness))
     else:
         dx = SIDE / resolution
         half = (SIDE / 2 - 4 * dx, THICK / 2) + (SIDE / 2 - 4 * dx,) * (dim - 2)
@@ -125,11 +134,13 @@ def scene(dim: int = 2, on: str = "collider", resolution: int = 64, rate: float 
 
 
 def press(dim: int = 2, on: str = "collider", scheme: str = "empm", resolution: int = 64, approach: float = 0.008,
-          duration: float = 0.4, device: str = "cpu", boundary: str = "separate") -> Pressed:
+          duration: float = 0.4, device: str = "cpu", boundary: str = "separate",
+          sampling: str = "lattice", stiffness: float = 0.5) -> Pressed:
     """Press the body by ``approach`` [m] over ``duration`` [s] (module docstring)."""
     wall = time.perf_counter()
     rate = approach / duration
-    model, state = mpm.build(scene(dim, on, resolution, rate, boundary), mpm.QUADRATIC, "float32", device)
+    model, state = mpm.build(scene(dim, on, resolution, rate, boundary, sampling, stiffness), mpm.QUADRATIC, "float32",
+                             device)
     force = Force(model.kernel.n_grids, duration / WINDOWS)
     driver = mpm.Driver(mpm.Solver(model, mpm.SCHEMES[scheme]()), state, mpm.StepPolicy(duration=duration),
                         observers=[force])
@@ -155,13 +166,17 @@ def main(argv=None) -> int:
     parser.add_argument("--device", type=device, default="cpu", help="cpu, or cuda[:N] where there is one")
     parser.add_argument("--boundary", type=choice(("separate", "elastic")), default="separate",
                         help="the plates': separate (the grid rule) or elastic (springs on the particles)")
+    parser.add_argument("--sampling", type=choice(mpm.sampling.SAMPLINGS), default="lattice",
+                        help="the ball's particles: " + ", ".join(mpm.sampling.SAMPLINGS))
+    parser.add_argument("--stiffness", type=bounded(0.05, 4.0, "-"), default=0.5,
+                        help="the elastic plates' spring factor (mpm.Collider.stiffness)")
     args = parser.parse_args(argv)
     body = "cylinder [N/m]" if args.dim == "2" else "sphere [N]"
     print(f"a {body} between a rigid plate and a {args.on}, {args.scheme}: approach {args.approach:g} mm "
-          f"over {args.duration:g} s")
+          f"over {args.duration:g} s, {args.sampling} sampling")
     for res in args.resolutions:
         p = press(int(args.dim), args.on, args.scheme, res, args.approach / 1000, args.duration, args.device,
-                  args.boundary)
+                  args.boundary, args.sampling, args.stiffness)
         dx = SIDE / res
         print(f"\n{res} cells (dx = {1000 * dx:.3f} mm, R = {R / dx:.1f} dx), {p.steps} steps, {p.seconds:.0f} s")
         print(f"{'approach [mm]':>14} {'[dx]':>6} {'force':>10} {'closed':>10} {'ratio':>7}")

@@ -18,7 +18,7 @@ from .kernels.registry import kernel_problem
 from .loads import LoadError, LoadTable, resolve
 from .materials import Material
 from .params import instance_problem, refusal, violations
-from .sampling import PARTICLE_VOLUMES, sample_shape, shape_volume
+from .sampling import PARTICLE_VOLUMES, sample_body, sampling_problem, shape_volume
 from .joints import scene_problems as joint_problems
 from .rigid_contact import scene_problems as rigid_contact_problems
 from .rigid import scene_problems as rigid_problems
@@ -250,6 +250,8 @@ def check_body(i: int, b, d: int) -> None:
                              + ("one finite number [rad/s]" if d == 2 else "3 finite numbers [rad/s]"))
     if b.ppc is not None and (not isinstance(b.ppc, (int, np.integer)) or isinstance(b.ppc, bool) or b.ppc < 1):
         raise SceneError(f"{key}.ppc", f"{_one_line(b.ppc)}; accepted: an integer >= 1, or None (the scene's)")
+    if (problem := sampling_problem(b.sampling, b.shape)) is not None:
+        raise SceneError(f"{key}.sampling", problem)
     if b.deformation is not None:
         try:
             F = np.asarray(b.deformation, float)
@@ -361,8 +363,8 @@ class BodySample:
 
     x: np.ndarray
     """positions [m], the initial deformation applied"""
-    volume: float
-    """each particle's volume [m^d]"""
+    volume: float | np.ndarray
+    """each particle's volume [m^d] (per particle (n,) for shells sampling)"""
     F: np.ndarray
     """the initial deformation gradient (d, d)"""
     volumes: dict
@@ -375,19 +377,20 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
     hold none (:func:`build` refuses it)."""
     d, dxp = scene.dim, scene.particle_dx
     rng = np.random.default_rng(seed)
-    raw = [sample_shape(b.shape, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
+    raw = [sample_body(b.shape, b.sampling, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
            for b in scene.bodies]
     out = []
-    for b, x in zip(scene.bodies, raw):
+    for b, (x, layered) in zip(scene.bodies, raw):
         n, cell = len(x), dxp**d / (b.ppc or scene.ppc)
         V = shape_volume(b.shape, d)
-        used = "shape" if V is not None and scene.particle_volume == "shape" else "cells"
+        used = "shape" if V is not None and (scene.particle_volume == "shape" or layered is not None) else "cells"
+        each = layered if layered is not None else V / n if V is not None and used == "shape" and n else cell
         F = np.eye(d)
         if b.deformation is not None:
             F = np.asarray(b.deformation, float)
             c = 0.5 * (np.asarray(b.shape.bounds()[0], float) + np.asarray(b.shape.bounds()[1], float))
             x = c + (x - c) @ F.T
-        out.append(BodySample(x, V / n if V is not None and used == "shape" and n else cell, F,
+        out.append(BodySample(x, each, F,
                               {"volume": V if used == "shape" else n * cell, "shape": V, "cells": n * cell,
                                "used": used}))
     return out

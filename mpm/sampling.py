@@ -1,5 +1,12 @@
 """Fill shapes with particles at a chosen number of particles per cell, and
-the shapes' exact volumes that the particles share (mpm.model)."""
+the shapes' exact volumes that the particles share (mpm.model).
+
+Two samplings (``Body.sampling``, :data:`SAMPLINGS`): "lattice", a regular
+sub-lattice of the grid cut by the shape (:func:`sample_shape`; a ball's
+top layer is then a flat facet); "shells", body-fitted for balls and discs
+(:func:`sample_shells`): concentric layers about one sampling spacing apart,
+the outermost half a layer inside the surface, so that the particles'
+surface is a sphere (a circle) at their own scale."""
 
 from __future__ import annotations
 
@@ -9,6 +16,12 @@ import numpy as np
 
 from .meshes import MeshShape
 from .scene import Bowl, Box, Compound, Cylinder, Rotated, Sphere
+
+SAMPLINGS = ("lattice", "shells")
+"""lattice: the grid's sub-lattice cut by the shape (any shape); shells:
+concentric layers (mpm.Sphere only: a ball in 3D, a disc in 2D, hollow or
+not), each particle the volume of its layer over the layer's count."""
+SHELL_SHAPES = "mpm.Sphere (a ball in 3D, a disc in 2D)"
 
 PARTICLE_VOLUMES = ("shape", "cells")
 """shape: the particles of a body share its shape's exact volume equally
@@ -47,6 +60,63 @@ def sample_shape(shape, dim: int, dx: float, ppc: int, jitter: float,
         pts = (cells[:, None, :] + rng.random((len(cells), ppc, dim))).reshape(-1, dim)
     pts *= dx
     return pts[shape.contains(pts)]
+
+
+def sampling_problem(sampling, shape) -> str | None:
+    """What is wrong with a body's ``sampling`` for its ``shape`` (one line
+    ending in the accepted values), or None."""
+    if sampling not in SAMPLINGS:
+        return f"{sampling!r}; accepted: {', '.join(SAMPLINGS)}"
+    if sampling == "shells" and type(shape) is not Sphere:
+        return f"shells for a {type(shape).__name__}; accepted: lattice (any shape), shells for {SHELL_SHAPES}"
+    return None
+
+
+def sample_body(shape, sampling: str, dim: int, dx: float, ppc: int, jitter: float, rng: np.random.Generator,
+                offset=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """A body's particle positions [m] by its ``sampling``, and their volumes
+    [m^d] where the sampling sets them (shells), else None (the caller
+    shares the shape's volume or the cells')."""
+    if sampling == "shells" and isinstance(shape, Sphere):
+        return sample_shells(shape, dim, (dx**dim / ppc) ** (1.0 / dim))
+    return sample_shape(shape, dim, dx, ppc, jitter, rng, offset), None
+
+
+def sample_shells(shape: Sphere, dim: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Particle positions [m] (n, dim) and volumes [m^d] (n,) filling the ball
+    (disc) ``shape`` on concentric layers, about ``spacing`` [m] apart.
+
+    The radial span R - r_i is cut into n = max(1, round((R - r_i) / s))
+    shells of equal thickness h = (R - r_i) / n; shell k holds
+    N_k = max(1, round(V_k / s^d)) particles on the sphere (circle) of its
+    mid radius, V_k its exact volume, each particle V_k / N_k (so the
+    volumes add up to the shape's exactly). In 2D the ring's angles are
+    evenly spaced, each ring turned by the golden angle from the last; in 3D
+    a Fibonacci spiral about the z axis spreads them over equal areas.
+    """
+    c = np.asarray(shape.center, float)
+    R, ri = float(shape.radius), float(shape.inner_radius)
+    n = max(1, round((R - ri) / spacing))
+    h = (R - ri) / n
+    golden = math.pi * (3.0 - math.sqrt(5.0))  # [rad]
+    xs, vs = [], []
+    for k in range(n):
+        a, b = ri + k * h, ri + (k + 1) * h
+        r = 0.5 * (a + b)
+        V = math.pi * (b * b - a * a) if dim == 2 else 4.0 / 3.0 * math.pi * (b**3 - a**3)
+        N = max(1, round(V / spacing**dim))
+        i = np.arange(N, dtype=float)
+        if dim == 2:
+            t = 2.0 * math.pi * i / N + golden * k
+            u = np.stack([np.cos(t), np.sin(t)], -1)
+        else:
+            z = 1.0 - (2.0 * i + 1.0) / N
+            t = golden * i + golden * k
+            w = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+            u = np.stack([w * np.cos(t), w * np.sin(t), z], -1)
+        xs.append(c + r * u)
+        vs.append(np.full(N, V / N))
+    return np.concatenate(xs), np.concatenate(vs)
 
 
 def _ball_below(r: float, h: float, dim: int) -> float:

@@ -292,6 +292,13 @@ class Body:
     ppc: int | None = None
     """particles per cell of this body (default: the scene's ``ppc``)"""
     deformation: Sequence[Sequence[float]] | None = None
+    sampling: str = "lattice"
+    """how its particles are placed (mpm.sampling.SAMPLINGS): "lattice", the
+    grid's sub-lattice cut by the shape; "shells", concentric layers one
+    sampling spacing (dx^d / ppc)^(1/d) apart for a Sphere (a ball in 3D, a
+    disc in 2D), the outermost half a spacing inside its surface, each
+    particle its layer's exact volume over its count (no jitter, no lattice
+    offset, whatever ``particle_volume``)"""
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ import mpm
 from mpm.loads import LOAD_KINDS, Load
 from mpm.materials import Material
 from mpm.responses import QUANTITIES, REDUCTIONS
-from mpm.sampling import PARTICLE_VOLUMES
+from mpm.sampling import PARTICLE_VOLUMES, SAMPLINGS
 from mpm.scene import BOUNDARY_RULES, CONTACT_NORMALS, CONTACT_TYPES, WALL_TYPES
 
 from .colliders import ColliderConfig, COLLIDERS, JointConfig, RigidBodyConfig
@@ -105,6 +105,8 @@ class BodyConfig:
     ppc: Optional[int] = setting(None, "particles per cell; null: the scene's", ge=1)
     deformation: Optional[Any] = setting(None, "initial deformation gradient F, d rows of d numbers (det F < 0: "
                                                "inverted)", parse=matrix)
+    sampling: str = setting("lattice", "how the particles are placed: lattice (the grid's sub-lattice, any shape) or "
+                                       "shells (concentric layers, a sphere shape only)", choices=SAMPLINGS)
 
 
 @dataclass
@@ -368,7 +370,8 @@ def make_scene(node, default_material: Material, key: str = "scene", seed: int =
     bodies = [mpm.Body(shape=b.shape.build(f"{key}.bodies[{i}].shape", ctx),
                        material=default_material if b.material is None else b.material,
                        name=b.name or f"body{i}", velocity=b.velocity, angular_velocity=b.angular_velocity,
-                       ppc=b.ppc, deformation=b.deformation) for i, b in enumerate(sc.bodies)]
+                       ppc=b.ppc, deformation=b.deformation, sampling=b.sampling)
+              for i, b in enumerate(sc.bodies)]
     names = [b.name for b in bodies]
     def body_index(key: str, body):
         if body is None:

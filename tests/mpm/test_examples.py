@@ -251,6 +251,7 @@ BAD = [(name, "--duration", value) for name in SCRIPTS for value in DURATIONS] +
     ("plane_shift", "--slide", "30"), ("plane_shift", "--rule", "cells"),
     ("resting", "--on", "wall,floor"), ("resting", "--schemes", "empm,mls"), ("resting", "--shift", "1.5"),
     ("hertz", "--approach", "40"), ("hertz", "--resolutions", "x"), ("hertz", "--on", "wall"),
+    ("hertz", "--sampling", "spiral"), ("hertz", "--stiffness", "9"),
     ("piston", "--speed", "0"), ("piston", "--K", "1e3"), ("piston", "--rule", "x"),
     ("spinning_block", "--dts", "2e-3,nan"), ("spinning_block", "--transfer", "pic"),
     ("spinning_block", "--newton-tol", "1"), ("spinning_block", "--omega", "0"),
