@@ -53,6 +53,7 @@ import functools
 import numpy as np
 import warp as wp
 
+from .elastic_contact import make_coulomb_spring
 from .launch import warp_kernel
 from .stepping.status import StepControl, StepStatus
 from .types import Types
@@ -88,6 +89,18 @@ def make_body_springs(t: Types):
     to P2G's body force (module docstring)."""
     S, vec = t.scalar, t.vec
     vec3 = wp.types.vector(3, S)
+
+    tangential = make_coulomb_spring(t)
+
+    @wp.func
+    def under(xq: vec, n: vec, s: S, top: S, mq: S):
+        """The weight s - l of a particle of b at x_p - xq in p's column (lateral
+        distance l < s) and b's top layer (height within s / 2 of ``top``); 0 elsewhere."""
+        along = wp.dot(xq, n)
+        lat = wp.length(xq - along * n)
+        if mq > S(0.0) and lat < s and along < top + S(0.5) * s:
+            return s - lat
+        return S(0.0)
 
     @wp.func
     def inside(x: vec, a: vec, b: vec):
@@ -156,13 +169,10 @@ def make_body_springs(t: Types):
                 query = wp.hash_grid_query(grid, P, reach, bb)
                 while wp.hash_grid_query_next(query, q):
                     xq = xp - x[q]
-                    along = wp.dot(xq, n)
-                    lat = wp.length(xq - along * n)
-                    if mass[q] > S(0.0) and lat < s and along < top + S(0.5) * s:
-                        wq = s - lat
-                        ws += wq
-                        h += wq * along
-                        u = u + wq * v[q]
+                    wq = under(xq, n, s, top, mass[q])
+                    ws += wq
+                    h += wq * wp.dot(xq, n)
+                    u = u + wq * v[q]
                 if ws > S(0.0):
                     h = h / ws
                     u = u / ws
@@ -180,24 +190,14 @@ def make_body_springs(t: Types):
                         wp.atomic_add(status.elastic, 0, wp.float64(S(0.5) * k * stored * stored))
                     if d > S(0.0):
                         fn = k * d
-                        st = w[p] + (vr - wp.dot(vr, n) * n) * dt
-                        st = st - wp.dot(st, n) * n
-                        ft = -k * st
-                        cap = friction[a * n_bodies + bb] * fn
-                        lt = wp.length(ft)
-                        if lt > cap:
-                            ft = ft * (cap / lt)
-                            st = -ft / k
-                        travel = st
+                        ft, travel = tangential(w[p], vr, n, dt, k, friction[a * n_bodies + bb] * fn)
                         f = fn * n + ft
                         wp.atomic_add(body_force, p, f / m)  # pyright: ignore[reportArgumentType]
                         query = wp.hash_grid_query(grid, P, reach, bb)
                         while wp.hash_grid_query_next(query, q):
-                            xq = xp - x[q]
-                            along = wp.dot(xq, n)
-                            lat = wp.length(xq - along * n)
-                            if mass[q] > S(0.0) and lat < s and along < top + S(0.5) * s:
-                                wp.atomic_add(body_force, q, -((s - lat) / ws / mass[q]) * f)
+                            wq = under(xp - x[q], n, s, top, mass[q])
+                            if wq > S(0.0):
+                                wp.atomic_add(body_force, q, -(wq / ws / mass[q]) * f)
         if sampled >= S(0.0):
             overlap = wp.min(sampled, overlap)
         lap[p] = overlap

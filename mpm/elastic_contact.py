@@ -93,6 +93,28 @@ SPRINGS = BOUNDARIES.index(ELASTIC)
 
 
 @functools.cache
+def make_coulomb_spring(t: Types):
+    """wp.func (w, vr, n, dt, k, cap) -> (f_t, w'): a particle's tangential
+    spring of stiffness k [N/m] on its travel w along the surface of normal
+    n, moved by the relative velocity vr over dt, its force capped at ``cap``
+    (mu |f_n|) where it slides, the travel then shortened to the cap."""
+    S, vec = t.scalar, t.vec
+
+    @wp.func
+    def coulomb_spring(w: vec, vr: vec, n: vec, dt: S, k: S, cap: S):
+        s = w + (vr - wp.dot(vr, n) * n) * dt
+        s = s - wp.dot(s, n) * n
+        ft = -k * s
+        lt = wp.length(ft)
+        if lt > cap:
+            ft = ft * (cap / lt)
+            s = -ft / k
+        return ft, s
+
+    return coulomb_spring
+
+
+@functools.cache
 def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
     """Kernel: every particle's spring force from the elastic colliders, as
     the body force of P2G (added to the external loads' with ``loads``:
@@ -103,6 +125,7 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
     kinds = elastic_kinds
     place, centre = make_place(t, kinds), make_centre(t)
     add_impulse, add_torque = make_add_impulse(t), make_add_torque(t)
+    tangential = make_coulomb_spring(t)
 
     @warp_kernel
     def springs(x: wp.array(dtype=vec), v: wp.array(dtype=vec), C: wp.array(dtype=t.mat),
@@ -144,15 +167,7 @@ def make_springs(t: Types, elastic_kinds: tuple[str, ...], loads: bool):
                     # the dashpot: 2 zeta sqrt(k m_p), at most m_p / dt (module docstring); never pulls
                     eta = wp.min(S(2.0) * c.damping * wp.sqrt(kp * m), m / dt)
                     fn = wp.max(S(0.0), kp * d - eta * wp.dot(vr, n))
-                    s = w[p] + (vr - wp.dot(vr, n) * n) * dt
-                    s = s - wp.dot(s, n) * n
-                    ft = -kp * s
-                    cap = c.friction * fn
-                    lt = wp.length(ft)
-                    if lt > cap:
-                        ft = ft * (cap / lt)
-                        s = -ft / kp
-                    travel = s
+                    ft, travel = tangential(w[p], vr, n, dt, kp, c.friction * fn)
                     f = fn * n + ft
                     b = b + f / m
                     J = (grids * dt) * f  # the rows sum every kernel grid's, as the grid rule's do
