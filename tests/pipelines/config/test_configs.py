@@ -257,7 +257,13 @@ def assert_conserved(scene, spec, steps: int, device: str):
     centre of mass change by round-off only, at most 4 eps32 per step of
     their scales sum m |v| and sum m (|x - c| |v| + |A|) (P2G and G2P
     conserve both exactly; their float32 sums round, measured up to 1.3 eps32
-    per step over the scenes); returns the first and last diagnostics."""
+    per step over the scenes); returns the first and last diagnostics. With
+    elastic contact between the bodies (mpm.body_springs) only the momentum:
+    a spring's reaction acts at the particles under it, not on its line of
+    action, and its tangential part is a couple over the height between them,
+    so the angular momentum changes by the contact's discretisation (the
+    rolling slab's box, 6.0 eps32 per step; two disks, 1.5e-5 of its scale
+    over their strike, RESULTS.md)."""
     model, state = mpm.build(scene, spec.kernel, "float32", device, spec.seed)
     solver = mpm.Solver(model, mpm.EMPM(), mpm.SolverOptions(transfer=spec.transfer))
     solver.prepare(state)
@@ -271,7 +277,7 @@ def assert_conserved(scene, spec, steps: int, device: str):
     d1 = solver.measure(state, elastic=True)
     np.testing.assert_array_equal(model.mass.numpy(), mass)
     assert d1[names.index("mass")] == d0[names.index("mass")]
-    for kind in ("momentum", "angular_momentum"):
+    for kind in ("momentum",) if scene.contact == "elastic" else ("momentum", "angular_momentum"):
         idx = [i for i, n in enumerate(names) if n.startswith(kind) and not n.endswith("scale")]
         scale = max(d0[names.index(f"{kind}_scale")], d1[names.index(f"{kind}_scale")])
         change = np.linalg.norm(d1[idx] - d0[idx])
