@@ -9,13 +9,18 @@ the bodies' initial pose. ``type``:
 * ``revolute``: a hinge, one rotation about the ``axis`` through the anchor
   (2D: about z, ``axis`` null; 3D: ``axis`` a direction in world
   coordinates at the initial pose, carried with the parent);
-* ``ball`` (3D): the anchor held, any rotation about it.
+* ``ball`` (3D): the anchor held, any rotation about it;
+* ``prismatic``: a slider, one translation along ``axis`` (``dim``
+  numbers, a direction in world coordinates at the initial pose, carried
+  with the parent), no rotation relative to the parent;
+* ``fixed``: the child welded to its parent (or held still in the world).
 
 ``Scene.joints`` lists them (default none). The joints form trees: each body
 is the child of at most one joint and no chain of parents comes back to
 itself. A child's initial ``velocity`` follows from its parent's motion and
-must be left out; its ``angular_velocity`` is its rate relative to the
-parent (revolute: along the axis; ball: any).
+must be left out (prismatic: its rate relative to the parent, along the
+axis); its ``angular_velocity`` is its rate relative to the parent
+(revolute: along the axis; ball: any; prismatic and fixed: none).
 
 A scene with joints builds a Newton model with one articulation per tree
 (mpm.joints.articulated_model): each joint's child a link of its parent;
@@ -45,27 +50,30 @@ from typing import Sequence
 
 import numpy as np
 
-JOINT_TYPES = ("revolute", "ball")
+JOINT_TYPES = ("revolute", "ball", "prismatic", "fixed")
 """the kinds of joint (ball: 3D only)"""
+AXIAL = ("revolute", "prismatic")
+"""the kinds with an ``axis`` (revolute: in 3D only; in 2D about z)"""
 
 
 @dataclass(frozen=True)
 class Joint:
     """One joint (module docstring): ``child`` and ``parent`` a rigid body's
     index or name (parent None: the world), ``anchor`` [m] in world
-    coordinates at the initial pose, ``axis`` the 3D revolute axis (a
-    direction in world coordinates at the initial pose; 2D and ball: None)."""
+    coordinates at the initial pose, ``axis`` the 3D revolute's or the
+    prismatic's direction (world coordinates at the initial pose; else None)."""
 
     child: int | str
     """the rigid body the joint holds (an index in Scene.rigid_bodies, or a name)"""
     anchor: Sequence[float]
     """the joint's point [m], world coordinates at the initial pose"""
     type: str = "revolute"
-    """revolute or ball (3D)"""
+    """revolute, ball (3D), prismatic or fixed (JOINT_TYPES)"""
     parent: int | str | None = None
     """the rigid body it is held to (index or name); None: the world"""
     axis: Sequence[float] | None = None
-    """3D revolute: the hinge's direction (3 numbers, any length > 0); else None"""
+    """3D revolute: the hinge's direction (3 numbers, any length > 0); prismatic: the slide's (dim
+    numbers); else None"""
     name: str = ""
     """a name for reports"""
 
@@ -114,7 +122,7 @@ def scene_problems(scene) -> list[tuple[str, str]]:
     names = [b.name or f"rigid{i}" for i, b in enumerate(bodies)]
     which = (f"a rigid body's index (0 to {len(bodies) - 1}) or name ({', '.join(names)})" if bodies
              else "a rigid body, but the scene has none (rigid_bodies)")
-    kinds = JOINT_TYPES if dim == 3 else JOINT_TYPES[:1]
+    kinds = JOINT_TYPES if dim == 3 else tuple(k for k in JOINT_TYPES if k != "ball")
     box = " x ".join(f"[0, {L:g}]" for L in scene.domain)
     out: list[tuple[str, str]] = []
     held: dict[int, int] = {}  # child -> its joint
@@ -148,23 +156,36 @@ def scene_problems(scene) -> list[tuple[str, str]]:
             out.append((f"{key}.anchor", f"{j.anchor!r}; accepted: {dim} finite numbers [m]"))
         elif not all(0.0 <= x <= L for x, L in zip(anchor, scene.domain)):
             out.append((f"{key}.anchor", f"{list(j.anchor)} lies outside the domain; accepted: a point in {box} [m]"))
-        if dim == 2 or j.type == "ball":
+        slide = j.type == "prismatic"
+        if not (slide or (j.type == "revolute" and dim == 3)):
             if j.axis is not None:
-                out.append((f"{key}.axis", f"{j.axis!r}; accepted: null ({'about z in 2D' if dim == 2 else 'a ball'})"))
+                why = {"ball": "a ball", "fixed": "a fixed joint"}.get(j.type, "about z in 2D")
+                out.append((f"{key}.axis", f"{j.axis!r}; accepted: null ({why})"))
         else:
-            axis = _vector(j.axis, 3) if j.axis is not None else None
+            axis = _vector(j.axis, dim) if j.axis is not None else None
             if axis is None or not np.linalg.norm(axis) > 0.0:
-                out.append((f"{key}.axis", f"{j.axis!r}; accepted: 3 finite numbers, not all 0 (the hinge's "
-                                           "direction)"))
-            elif child is not None and child < len(bodies) and bodies[child].angular_velocity is not None:
+                out.append((f"{key}.axis", f"{j.axis!r}; accepted: {dim} finite numbers, not all 0 (the "
+                                           f"{'slide' if slide else 'hinge'}'s direction)"))
+            elif slide and child is not None and child < len(bodies) and bodies[child].velocity is not None:
+                v = np.asarray(bodies[child].velocity, float)
+                if np.linalg.norm(v - (v @ axis) / (axis @ axis) * axis) > 1e-9 * max(np.linalg.norm(v), 1.0):
+                    out.append((f"rigid_bodies[{child}].velocity",
+                                f"{bodies[child].velocity!r} is not along joints[{i}].axis; accepted: a multiple "
+                                "of the axis (the rate along the slide), or null"))
+            elif not slide and child is not None and child < len(bodies) and bodies[child].angular_velocity is not None:
                 w = np.asarray(bodies[child].spin(dim), float)
                 if np.linalg.norm(np.cross(w, axis)) > 1e-9 * max(np.linalg.norm(w), 1.0) * np.linalg.norm(axis):
                     out.append((f"rigid_bodies[{child}].angular_velocity",
                                 f"{bodies[child].angular_velocity!r} is not along joints[{i}].axis; accepted: a "
                                 "multiple of the axis (the rate about the hinge)"))
-        if child is not None and bodies[child].velocity is not None:
+        if child is not None and child < len(bodies) and bodies[child].velocity is not None and not slide:
             out.append((f"rigid_bodies[{child}].velocity", f"{bodies[child].velocity!r} on the child of joints[{i}]; "
                                                            "accepted: null (it follows from the parent's motion)"))
+        if (child is not None and child < len(bodies) and j.type in ("prismatic", "fixed")
+                and bodies[child].angular_velocity is not None and np.any(bodies[child].spin(dim) != 0.0)):
+            out.append((f"rigid_bodies[{child}].angular_velocity",
+                        f"{bodies[child].angular_velocity!r} on the child of a {j.type} joints[{i}]; accepted: "
+                        "null (it turns with its parent)"))
     for child in links:  # a chain of parents must reach the world or a body no joint holds
         seen, b = {child}, links[child]
         while b in links:
@@ -232,6 +253,16 @@ def articulated_model(scene, device):
         anchor = np.pad(np.asarray(j.anchor, float), (0, 3 - dim))
         pf, cf, label = frame(parent, anchor), frame(child, anchor), j.name or f"joint{k}"
         w = bodies[child].spin(dim)
+        if j.type == "fixed":
+            return builder.add_joint_fixed(parent, child, parent_xform=pf, child_xform=cf, label=label)
+        if j.type == "prismatic":
+            axis = np.pad(np.asarray(j.axis, float), (0, 3 - dim))
+            axis = axis / np.linalg.norm(axis)
+            v = np.pad(np.asarray(bodies[child].velocity or (0.0,) * dim, float), (0, 3 - dim))
+            q.append(0.0)
+            qd.append(float(v @ axis))
+            return builder.add_joint_prismatic(parent, child, axis=wp.vec3(*axis), parent_xform=pf, child_xform=cf,
+                                               label=label)
         if j.type == "ball":
             q.extend((0.0, 0.0, 0.0, 1.0))
             qd.extend(w)

@@ -264,17 +264,19 @@ class JointConfig:
     """A joint holding a rigid body to the world or to another rigid body,
     enforced by Newton (mpm.joints): its ``child`` and ``parent`` (null: the
     world) a rigid body's index or name, its ``anchor`` a point in world
-    coordinates at the initial pose, ``axis`` the 3D revolute's direction."""
+    coordinates at the initial pose, ``axis`` the 3D revolute's or the prismatic's direction."""
 
     name: str = setting("", "a name for reports")
-    type: str = setting("revolute", "revolute (2D: about z) or ball (3D)", choices=mpm.JOINT_TYPES)
+    type: str = setting("revolute", "revolute (2D: about z), ball (3D), prismatic (a slide along axis) or fixed",
+                        choices=mpm.JOINT_TYPES)
     child: Any = setting(None, "the rigid body it holds: its index or name", parse=_rigid_ref, required=True)
     parent: Any = setting(None, "the rigid body it holds the child to: its index or name; null: the world",
                           parse=_rigid_ref)
     anchor: Optional[List[float]] = setting(None, "the joint's point [m], world coordinates at the initial pose",
                                             size="dim", required=True)
-    axis: Optional[List[float]] = setting(None, "3D revolute: the hinge's direction (3 numbers), world coordinates "
-                                                "at the initial pose; null in 2D (about z) and for a ball", size=3)
+    axis: Optional[List[float]] = setting(None, "3D revolute: the hinge's direction, prismatic: the slide's (dim "
+                                                "numbers), world coordinates at the initial pose; null in 2D "
+                                                "revolute (about z), for a ball and fixed", size="dim")
 
     def build(self, key: str, ctx: Context) -> mpm.Joint:
         return mpm.Joint(child=self.child, anchor=tuple(given(self.anchor)), type=self.type, parent=self.parent,

@@ -384,9 +384,13 @@ def _hinged(dim=2, **change):
     (2, dict(child=3), "joints[0].child: 3 is no rigid body; accepted: a rigid body's index"),
     (2, dict(parent="box"), "joints[0].parent: 'box' is the child itself; accepted: null (the world)"),
     (2, dict(parent="door"), "joints[0].parent: 'door' is no rigid body; accepted: null (the world) or"),
-    (2, dict(type="hinge"), "joints[0].type: 'hinge'; accepted: revolute (in 2D; ball in 3D)"),
-    (2, dict(type="ball"), "joints[0].type: 'ball'; accepted: revolute (in 2D; ball in 3D)"),
-    (3, dict(type="prismatic", axis=(1.0, 0.0, 0.0)), "joints[0].type: 'prismatic'; accepted: revolute, ball"),
+    (2, dict(type="hinge"), "joints[0].type: 'hinge'; accepted: revolute, prismatic, fixed (in 2D; ball in 3D)"),
+    (2, dict(type="ball"), "joints[0].type: 'ball'; accepted: revolute, prismatic, fixed (in 2D; ball in 3D)"),
+    (3, dict(type="slider", axis=(1.0, 0.0, 0.0)), "joints[0].type: 'slider'; accepted: revolute, ball, prismatic, "
+                                                   "fixed"),
+    (2, dict(type="prismatic"), "joints[0].axis: None; accepted: 2 finite numbers, not all 0 (the slide's"),
+    (2, dict(type="prismatic", axis=(1.0, 0.0, 0.0)), "joints[0].axis: (1.0, 0.0, 0.0); accepted: 2 finite numbers"),
+    (3, dict(type="fixed", axis=(1.0, 0.0, 0.0)), "joints[0].axis: (1.0, 0.0, 0.0); accepted: null (a fixed joint)"),
     (2, dict(anchor=(0.5, 1.5)), "joints[0].anchor: [0.5, 1.5] lies outside the domain; accepted: a point in"),
     (2, dict(anchor=(0.5,)), "joints[0].anchor: (0.5,); accepted: 2 finite numbers [m]"),
     (2, dict(axis=(0.0, 0.0, 1.0)), "joints[0].axis: (0.0, 0.0, 1.0); accepted: null (about z in 2D)"),
@@ -398,6 +402,82 @@ def test_bad_joints_are_refused_in_one_line(dim, change, key):
     with pytest.raises(SceneError) as err:
         mpm.build(_hinged(dim, **change), mpm.KERNELS["quadratic"])
     assert str(err.value).startswith(key) and "\n" not in str(err.value), str(err.value)
+
+
+def _slider_and_weld(dim: int, v0: float = 0.2):
+    """A box (density 500) on a prismatic joint to the world along (1, -1[, 0.5]), started at v0 [m/s]
+    along it, and a ball welded to the world by a fixed joint; a block of material far from both."""
+    axis = np.array([1.0, -1.0, 0.5][:dim])
+    a = axis / np.linalg.norm(axis)
+    slider = mpm.RigidBody(Collider.box((0.5, 0.7, 0.5)[:dim], (0.03,) * dim), density=500.0, name="slider",
+                           velocity=tuple(v0 * a))
+    weld = mpm.RigidBody(Collider.sphere((0.3, 0.7, 0.5)[:dim], 0.03), density=500.0, name="weld")
+    scene = mpm.Scene(dim=dim, domain=(1.0,) * dim, resolution=16, gravity=(0.0, -G, 0.0)[:dim],
+                      walls=("slip",) * 2 * dim, bodies=[_block(dim, (0.7,) + (0.3,) * (dim - 1))],
+                      rigid_bodies=[slider, weld],
+                      joints=[mpm.Joint("slider", (0.5, 0.7, 0.5)[:dim], type="prismatic", axis=tuple(axis)),
+                              mpm.Joint("weld", (0.3, 0.7, 0.5)[:dim], type="fixed")])
+    return scene, a
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_prismatic_joint_slides_along_its_axis_and_a_fixed_one_holds(dim):
+    """A box on a prismatic joint along a, started at v0 = 0.2 m/s along it,
+    gravity g: it moves along a only, by the semi-implicit Euler steps' exact
+    sum s_n = v0 t + (1/2) (g . a) t (t + dt) at t = n dt (the closed form
+    (1/2) (g . a) t^2 plus the scheme's first-order (1/2) (g . a) t dt),
+    to the float32 state's rounding (1e-5 m over 0.2 m), without turning;
+    a ball fixed to the world does not move."""
+    scene, a = _slider_and_weld(dim)
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"])
+    solver = mpm.Solver(model, mpm.EMPM())
+    solver.prepare(state)
+    coupler = solver.conditions.rigid
+    p0 = coupler.poses()
+    dt, n = 1.0e-3, 200
+    for _ in range(n):
+        solver.advance(state, dt)
+    p = coupler.poses()
+    t, ga = n * dt, float(np.array([0.0, -G, 0.0][:dim]) @ a)
+    moved = p["position"][0][:dim] - p0["position"][0][:dim]
+    along = float(moved @ a)
+    assert abs(along - (0.2 * t + 0.5 * ga * t * (t + dt))) < 1e-5, (along, 0.2 * t + 0.5 * ga * t * (t + dt))
+    assert np.linalg.norm(moved - along * a) < 1e-6
+    assert np.abs(p["quaternion"][0] - p0["quaternion"][0]).max() < 1e-6
+    assert np.abs(p["position"][1] - p0["position"][1]).max() < 1e-7
+    assert np.abs(p["velocity"][1]).max() < 1e-6
+
+
+def test_a_fixed_joint_welds_a_body_to_its_parent():
+    """A ball welded by a fixed joint to a box hinged to the world, released
+    from 1 rad, 2D, 0.3 s at 1 ms: the ball keeps its place and orientation in
+    the box's frame (float32 state: within 1e-5 m and 1e-5) while the pair
+    swings through a large angle."""
+    box = mpm.RigidBody(Collider.box((0.5, 0.5), (0.05, 0.02)), density=500.0, name="box")
+    ball = mpm.RigidBody(Collider.sphere((0.58, 0.5), 0.02), density=500.0, name="ball")
+    scene = mpm.Scene(dim=2, domain=(1.0, 1.0), resolution=16, gravity=(G * np.sin(1.0), -G * np.cos(1.0)),
+                      walls=("slip",) * 4, bodies=[_block(2, (0.3, 0.3))], rigid_bodies=[box, ball],
+                      joints=[mpm.Joint("box", (0.5, 0.7)), mpm.Joint("ball", (0.58, 0.5), type="fixed",
+                                                                        parent="box")])
+    model, state = mpm.build(scene, mpm.KERNELS["quadratic"])
+    solver = mpm.Solver(model, mpm.EMPM())
+    solver.prepare(state)
+    coupler = solver.conditions.rigid
+
+    def relative(p):
+        """The ball's centre in the box's frame, and the two quaternions' difference."""
+        return quat_rotate(quat_conj(p["quaternion"][0]), p["position"][1] - p["position"][0]), \
+            np.abs(p["quaternion"][1] - p["quaternion"][0]).max()
+
+    r0, _ = relative(coupler.poses())
+    turned = 0.0
+    for _ in range(300):
+        solver.advance(state, 1.0e-3)
+        p = coupler.poses()
+        r, dq = relative(p)
+        assert np.abs(r - r0).max() < 1e-5 and dq < 1e-5, (r - r0, dq)
+        turned = max(turned, abs(2.0 * np.arcsin(p["quaternion"][0][2])))
+    assert turned > 0.5  # it swung
 
 
 def test_joints_that_break_the_tree_or_the_motion_are_refused():
@@ -421,6 +501,18 @@ def test_joints_that_break_the_tree_or_the_motion_are_refused():
     for change, key in cases:
         with pytest.raises(SceneError) as err:
             mpm.build(mpm.Scene(**(base | change)), mpm.KERNELS["quadratic"])
+        assert str(err.value).startswith(key) and "\n" not in str(err.value), str(err.value)
+    slid = [(mpm.RigidBody(a.shape, density=500.0, velocity=(1.0, 0.0), name="a"), "prismatic", (0.0, 1.0),
+             "rigid_bodies[0].velocity: (1.0, 0.0) is not along joints[0].axis; accepted: a multiple of the axis"),
+            (mpm.RigidBody(a.shape, density=500.0, angular_velocity=1.0, name="a"), "prismatic", (0.0, 1.0),
+             "rigid_bodies[0].angular_velocity: 1.0 on the child of a prismatic joints[0]; accepted: null"),
+            (mpm.RigidBody(a.shape, density=500.0, angular_velocity=1.0, name="a"), "fixed", None,
+             "rigid_bodies[0].angular_velocity: 1.0 on the child of a fixed joints[0]; accepted: null")]
+    for body, kind, axis, key in slid:
+        scene = mpm.Scene(**(base | dict(rigid_bodies=[body], joints=[mpm.Joint("a", (0.5, 0.6), type=kind,
+                                                                                axis=axis)])))
+        with pytest.raises(SceneError) as err:
+            mpm.build(scene, mpm.KERNELS["quadratic"])
         assert str(err.value).startswith(key) and "\n" not in str(err.value), str(err.value)
     spun = mpm.RigidBody(Collider.box((0.5, 0.5, 0.5), (0.05,) * 3), density=500.0, angular_velocity=(1.0, 0.0, 0.0))
     scene = mpm.Scene(dim=3, domain=(1.0,) * 3, resolution=16, bodies=[_block(3, (0.3,) * 3)], rigid_bodies=[spun],

@@ -502,10 +502,12 @@ def test_a_joint_is_read_and_its_bad_keys_refused():
             ("scene.joints.0.child=null", "scene.joints[0].child", ""),
             ("scene.joints.0.parent=jelly", "scene.joints[0].parent", "null (the world) or a rigid body's index"),
             ("scene.joints.0.type=hinge", "scene.joints[0].type", "revolute, ball"),
-            ("scene.joints.0.type=ball", "scene.joints[0].type", "accepted: revolute (in 2D; ball in 3D)"),
+            ("scene.joints.0.type=ball", "scene.joints[0].type", "accepted: revolute, prismatic, fixed (in 2D; ball "
+                                                                 "in 3D)"),
             ("scene.joints.0.anchor=[0.5,1.5]", "scene.joints[0].anchor", "a point in [0, 1] x [0, 1] [m]"),
             ("scene.joints.0.anchor=[0.5]", "scene.joints[0].anchor", ""),
-            ("scene.joints.0.axis=[0,0,1]", "scene.joints[0].axis", "null (about z in 2D)")):
+            ("scene.joints.0.axis=[0,0,1]", "scene.joints[0].axis", "a list of 2 numbers"),
+            ("scene.joints.0.axis=[0,1]", "scene.joints[0].axis", "null (about z in 2D)")):
         err = refused(base + [override])
         assert err.key == key and accepted in str(err), (override, str(err))
     assert refused(base + ["run.graph=true"]).key == "run.graph"  # (the step is read back every step)
