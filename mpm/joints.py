@@ -52,8 +52,6 @@ import numpy as np
 
 JOINT_TYPES = ("revolute", "ball", "prismatic", "fixed")
 """the kinds of joint (ball: 3D only)"""
-AXIAL = ("revolute", "prismatic")
-"""the kinds with an ``axis`` (revolute: in 3D only; in 2D about z)"""
 
 
 @dataclass(frozen=True)

@@ -377,8 +377,8 @@ def sample_bodies(scene: Scene, seed: int = 0) -> list[BodySample]:
     hold none (:func:`build` refuses it)."""
     d, dxp = scene.dim, scene.particle_dx
     rng = np.random.default_rng(seed)
-    raw = [sample_body(b.shape, b.sampling, d, dxp, b.ppc or scene.ppc, scene.jitter, rng, scene.lattice_offset)
-           for b in scene.bodies]
+    raw = [sample_body(b.shape, b.sampling, d, dxp, b.ppc or scene.ppc, s, scene.jitter, rng, scene.lattice_offset)
+           for b, s in zip(scene.bodies, scene.spacings())]
     out = []
     for b, (x, layered) in zip(scene.bodies, raw):
         n, cell = len(x), dxp**d / (b.ppc or scene.ppc)

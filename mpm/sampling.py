@@ -72,13 +72,14 @@ def sampling_problem(sampling, shape) -> str | None:
     return None
 
 
-def sample_body(shape, sampling: str, dim: int, dx: float, ppc: int, jitter: float, rng: np.random.Generator,
-                offset=None) -> tuple[np.ndarray, np.ndarray | None]:
-    """A body's particle positions [m] by its ``sampling``, and their volumes
+def sample_body(shape, sampling: str, dim: int, dx: float, ppc: int, spacing: float, jitter: float,
+                rng: np.random.Generator, offset=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """A body's particle positions [m] by its ``sampling`` (``spacing`` [m]:
+    its particles' at sampling, mpm.scene.Scene.spacings), and their volumes
     [m^d] where the sampling sets them (shells), else None (the caller
     shares the shape's volume or the cells')."""
     if sampling == "shells" and isinstance(shape, Sphere):
-        return sample_shells(shape, dim, (dx**dim / ppc) ** (1.0 / dim))
+        return sample_shells(shape, dim, spacing)
     return sample_shape(shape, dim, dx, ppc, jitter, rng, offset), None
 
 

@@ -114,6 +114,10 @@ class Transfers:
             self.springs = Springs(model, launch, buffer, self.body_force, scene_kinds(model.scene), boundary.colliders)
         self.touching = BodySprings(model, launch, buffer, self.body_force) if touching else None  # between bodies
         self.forced = body_force  # a body force at each step's start (apply_forcing)
+        # zeroed first unless a pass writes every particle's: a manufactured solution, or the colliders'
+        # springs without loads (the loads write their particles only; the bodies' springs add to it)
+        self.zero_first = forcing is None and (self.touching is not None or self.springs is not None) \
+            and not (self.springs is not None and self.loads is None)
 
     def kernels(self) -> list:
         return ([k for k, _ in self.p2g] + [self.g2p] + (self.loads.kernels() if self.loads else [])
@@ -123,17 +127,15 @@ class Transfers:
         """The body force of the step: the external loads' at the device's
         step start, or the manufactured solution's at the initial positions
         ``X0`` [m] and ``time`` [s] (host)."""
+        if self.zero_first:
+            self.body_force.zero_()
         if self.loads is not None:
-            if self.springs is not None or self.touching is not None:  # the loads write their particles only
-                self.body_force.zero_()
             self.loads.apply(state)
         if self.forcing is not None:
             b = self.forcing.body_force(X0, time)
             self.body_force.assign(b.astype(np.float32 if self.model.types.precision == "float32" else np.float64))
         if self.springs is not None:
             self.springs.apply(state)
-        elif self.touching is not None and self.loads is None and self.forcing is None:
-            self.body_force.zero_()  # the bodies' springs add theirs
         if self.touching is not None:
             self.touching.apply(state)
 

@@ -97,9 +97,9 @@ class RigidTrack:
         e = self.coupler.energies(s)
         return {f"{k}_energy": e[k] for k in ("kinetic", "rotational", "potential")}
 
-    def energy(self, s: dict[str, np.ndarray]) -> float:
-        """[J] All bodies' energy in a state ``s`` (:meth:`state`)."""
-        return float(sum(np.sum(v) for v in self.energies(s).values()))
+    def energy(self, s: dict[str, np.ndarray], energies: dict[str, np.ndarray] | None = None) -> float:
+        """[J] All bodies' energy in a state ``s`` (:meth:`state`; or its ``energies`` where taken)."""
+        return float(sum(np.sum(v) for v in (energies or self.energies(s)).values()))
 
     def system(self, step: int, material: float) -> dict:
         """The scalar ``system_energy`` [J] at ``step``: the material's total energy ``material`` plus the
@@ -118,7 +118,7 @@ class RigidTrack:
         poses, row = [], {}
         d = self.dim
         energies = self.energies(s)
-        self.at = (step, self.energy(s))
+        self.at = (step, self.energy(s, energies))
         row["rigid_energy"] = self.at[1]
         for i, name in enumerate(self.names):
             row.update({f"rigid/{name}/{k}": float(v[i]) for k, v in energies.items()})
@@ -145,7 +145,7 @@ class RigidTrack:
         out = {}
         d = self.dim
         energies = self.energies(s)
-        self.final = self.energy(s)
+        self.final = self.energy(s, energies)
         for i, name in enumerate(self.names):
             turn = rotation_vector(s["quaternion"][i])
             w, tau = s["angular_velocity"][i], s["torque"][i]
